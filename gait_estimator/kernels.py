@@ -1,0 +1,168 @@
+"""Kernel libraries: the average stride of every locomotion mode.
+
+A kernel is one mode's average stride, N_m samples x 4 channels (CHANNELS order), in degrees,
+starting at right heel strike. A library holds M kernels plus where they came from.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .channels import CHANNELS, N_CHANNELS
+from .errors import LibraryError
+
+
+@dataclass(frozen=True)
+class KernelMode:
+    """One locomotion mode's kernel.
+
+    Attributes:
+        name: Mode name, unique within its library (e.g. ``"Slow"``).
+        samples: Float64 array (N_m, 4), degrees, channels in CHANNELS order; row 0 is right
+            heel strike and the rows cover exactly one stride.
+        sample_rate_hz: Rate (Hz) at which the rows are spaced; stride duration = N_m / rate.
+        mode_id: Optional numeric ID (the reference data's ``ID``; 0 when none).
+        info: Free-form metadata (e.g. training statistics: stride count, duration mean/std).
+    """
+
+    name: str
+    samples: np.ndarray
+    sample_rate_hz: float
+    mode_id: int = 0
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def length(self) -> int:
+        """N_m, the number of samples in one stride."""
+        return int(self.samples.shape[0])
+
+    @property
+    def stride_duration_s(self) -> float:
+        """Stride duration in seconds implied by N_m and the sample rate."""
+        return self.length / self.sample_rate_hz
+
+
+@dataclass(frozen=True)
+class KernelLibrary:
+    """An ordered set of kernels with provenance.
+
+    Attributes:
+        name: Library name (e.g. ``"able_bodied"``).
+        modes: The kernels, in matching order (ties go to the earlier mode).
+        provenance: Where the kernels come from: ``source``, ``license``, ``built_by`` ...
+        path: File the library was read from, if any (for messages only).
+    """
+
+    name: str
+    modes: tuple[KernelMode, ...]
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+    path: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "modes", tuple(self.modes))
+        validate_library(self)
+
+    def __len__(self) -> int:
+        return len(self.modes)
+
+    def __iter__(self) -> Iterator[KernelMode]:
+        return iter(self.modes)
+
+    @property
+    def mode_names(self) -> list[str]:
+        return [m.name for m in self.modes]
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """N_m for every mode, int64 array (M,)."""
+        return np.array([m.length for m in self.modes], dtype=np.int64)
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """The library's sample rate; all modes of one library share it."""
+        return self.modes[0].sample_rate_hz
+
+    def mode(self, name: str) -> KernelMode:
+        for m in self.modes:
+            if m.name == name:
+                return m
+        raise KeyError(f"no mode {name!r} in library {self.name!r} (modes: {', '.join(self.mode_names)})")
+
+    def replicated(self, count: int) -> KernelLibrary:
+        """A library of ``count`` modes made by cycling through this one's (for benchmarks).
+
+        Copies after the first round get a tiny deterministic offset so they are not exact ties.
+        """
+        modes = []
+        for i in range(count):
+            base = self.modes[i % len(self.modes)]
+            rnd = i // len(self.modes)
+            modes.append(
+                KernelMode(
+                    name=base.name if rnd == 0 else f"{base.name}_{rnd}",
+                    samples=base.samples + 1e-3 * rnd,
+                    sample_rate_hz=base.sample_rate_hz,
+                    mode_id=base.mode_id,
+                )
+            )
+        return KernelLibrary(f"{self.name}_x{count}", tuple(modes), dict(self.provenance))
+
+
+def _where(lib: KernelLibrary) -> str:
+    return lib.path or f"library {lib.name!r}"
+
+
+def validate_library(lib: KernelLibrary) -> None:
+    """Raise LibraryError (naming the file and the problem) unless ``lib`` is well formed."""
+    where = _where(lib)
+    if not lib.name:
+        raise LibraryError(f"{where}: missing library name")
+    if not lib.modes:
+        raise LibraryError(f"{where}: library has no modes")
+    seen: set[str] = set()
+    rate = lib.modes[0].sample_rate_hz
+    for m in lib.modes:
+        if not isinstance(m.name, str) or not m.name:
+            raise LibraryError(f"{where}: a mode has no name")
+        if m.name in seen:
+            raise LibraryError(f"{where}: duplicate mode name {m.name!r}")
+        seen.add(m.name)
+        s = m.samples
+        if not isinstance(s, np.ndarray) or s.ndim != 2 or s.shape[1] != N_CHANNELS:
+            shape = getattr(s, "shape", None)
+            raise LibraryError(
+                f"{where}: mode {m.name!r} has shape {shape}, expected (N, {N_CHANNELS}) "
+                f"for channels {', '.join(CHANNELS)}"
+            )
+        if s.dtype != np.float64:
+            raise LibraryError(f"{where}: mode {m.name!r} samples must be float64, got {s.dtype}")
+        if s.shape[0] < 2:
+            raise LibraryError(f"{where}: mode {m.name!r} has N={s.shape[0]} samples, need at least 2")
+        if not np.all(np.isfinite(s)):
+            bad = int(np.argwhere(~np.isfinite(s))[0][0])
+            raise LibraryError(f"{where}: mode {m.name!r} has a non-finite value at sample {bad}")
+        r = m.sample_rate_hz
+        if not (isinstance(r, (int, float)) and np.isfinite(r) and r > 0):
+            raise LibraryError(f"{where}: mode {m.name!r} has invalid sample_rate_hz {r!r}")
+        if abs(r - rate) > 1e-9 * rate:
+            raise LibraryError(
+                f"{where}: mode {m.name!r} sample_rate_hz {r} differs from {rate} "
+                "(all modes of a library share one rate)"
+            )
+
+
+def make_mode(
+    name: str,
+    samples: Any,
+    sample_rate_hz: float,
+    mode_id: int = 0,
+    info: Mapping[str, Any] | None = None,
+) -> KernelMode:
+    """Build a KernelMode, converting ``samples`` to a read-only float64 (N, 4) array."""
+    arr = np.array(samples, dtype=np.float64)
+    arr.setflags(write=False)
+    return KernelMode(str(name), arr, float(sample_rate_hz), int(mode_id), dict(info or {}))

@@ -1,0 +1,53 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "gait_estimator"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    description="Locomotion mode and gait phase estimation by kernel matching (ROS 2 node and offline tools)",
+    long_description=open("README.md", encoding="utf-8").read(),
+    long_description_content_type="text/markdown",
+    license="MIT",
+    python_requires=">=3.10",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config/kernels", glob("config/kernels/*.yaml")),
+    ],
+    install_requires=[
+        "setuptools",
+        "numpy>=1.26",
+        "pyyaml>=6.0",
+        "scipy>=1.11",
+        "matplotlib>=3.6",
+        "rosbags>=0.10",
+    ],
+    extras_require={
+        "ros": [
+            "ros-jazzy-rclpy",
+            "ros-jazzy-common-interfaces",
+            "ros-jazzy-rmw-fastrtps-cpp",
+        ],
+        "test": [
+            "pytest>=7",
+            "hypothesis>=6.80",
+            "ruff>=0.5",
+        ],
+        "colcon": [
+            "colcon-common-extensions",
+            "ros-jazzy-ament-package",
+        ],
+    },
+    zip_safe=True,
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "gait-estimator = gait_estimator.cli:main",
+        ],
+    },
+)
