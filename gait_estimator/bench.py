@@ -5,12 +5,15 @@ from __future__ import annotations
 import os
 import platform
 import sys
+import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .kernels import KernelLibrary
+from .library_io import load_library, save_library
 from .matcher import IncrementalMatcher, NaiveMatcher
 
 
@@ -134,3 +137,21 @@ def drift(library: KernelLibrary, steps: int, seed: int = 1) -> dict[str, Any]:
         "max_absolute_error_deg2": float(np.abs(running[valid] - exact[valid]).max()),
         "seconds": elapsed,
     }
+
+
+def load_times(library: KernelLibrary, modes: int, repeats: int = 3) -> list[dict[str, Any]]:
+    """Seconds to load a ``modes``-mode library from project YAML and NPZ (best of ``repeats``)."""
+    big = library.replicated(modes)
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for suffix in (".yaml", ".npz"):
+            path = save_library(big, Path(tmp) / f"lib{suffix}")
+            best = min(_timed_load(path) for _ in range(repeats))
+            out.append({"modes": modes, "format": suffix[1:], "load_s": best, "file_bytes": path.stat().st_size})
+    return out
+
+
+def _timed_load(path: Path) -> float:
+    t0 = time.perf_counter()
+    load_library(path)
+    return time.perf_counter() - t0

@@ -79,6 +79,7 @@ class _MatcherBase:
         self._valid = np.arange(n)[None, :] < self.lengths[:, None]  # (M, Nmax)
         self._ring = np.zeros((n, N_CHANNELS))
         self._count = 0
+        self._all = np.arange(self.n_modes)
 
     @property
     def steps(self) -> int:
@@ -108,7 +109,7 @@ class _MatcherBase:
 
     def _result(self, e: np.ndarray) -> StepResult:
         best_cols = e.argmin(axis=1)
-        sse = e[np.arange(self.n_modes), best_cols]
+        sse = e[self._all, best_cols]
         phases = ((best_cols + 1) % self.lengths) / self.lengths
         best = int(sse.argmin())
         return StepResult(best, self.mode_names[best], float(phases[best]), sse, phases, self.ready)
@@ -182,7 +183,8 @@ class IncrementalMatcher(_MatcherBase):
 
     Resynchronisation: rounding errors of the running sums are bounded by recomputing
     ``resync_block`` columns from the window every few steps, so that every column is recomputed
-    from scratch at least once per ``resync_period`` steps.
+    from scratch at least once per ``resync_period`` steps (sweeping the diagonals along which
+    errors travel).
 
     Args:
         library: The kernels to match against.
@@ -201,7 +203,6 @@ class IncrementalMatcher(_MatcherBase):
         self._ring_sq = np.zeros(n)
         self._e = np.empty((m, n))
         self._next = np.empty((m, 1, n))  # matmul output; becomes e after the update
-        self._all = np.arange(m)
         total = int(self._valid.sum())
         self._resync_block = max(1, min(int(resync_block), total))
         if resync_period > 0:
@@ -219,10 +220,12 @@ class IncrementalMatcher(_MatcherBase):
 
     def step(self, sample: np.ndarray) -> StepResult:
         """Consume one sample (4,), degrees, CHANNELS order; return the estimate."""
-        d = self._checked(sample)
+        d = np.asarray(sample, dtype=np.float64).reshape(N_CHANNELS)
+        dsq = float(d @ d)
+        if not math.isfinite(dsq):  # also catches overflow of ||d||^2, i.e. |angle| > 1e154
+            raise ValueError(f"sample has non-finite values: {d.tolist()}")
         i = self._count
         n = self.max_length
-        dsq = float(d @ d)
         stale = (i - self.lengths) % n
         if i >= n:  # every window is full: d_{i-N_m} leaves every mode's window
             old = self._ring[stale]
@@ -252,11 +255,14 @@ class IncrementalMatcher(_MatcherBase):
         return self._result(self._e)
 
     def _resync(self) -> None:
+        # Errors travel with the diagonal e[m, j] -> e[m, j + 1], so the sweep runs over the
+        # diagonals r = (j - steps) mod N_m, which stay put, not over the columns j.
         lo = self._resync_cursor
         hi = min(lo + self._resync_block, self._valid.size)
         flat = lo + np.flatnonzero(self._valid.ravel()[lo:hi])
-        rows, cols = np.divmod(flat, self.max_length)
+        rows, diag = np.divmod(flat, self.max_length)
         if flat.size:
+            cols = (diag + self._count) % self.lengths[rows]
             self._e[rows, cols] = self._window_sse(rows, cols)
         self._resync_cursor = 0 if hi >= self._valid.size else hi
 

@@ -1,0 +1,44 @@
+# Everything runs from a local virtual environment (.venv) that the targets create.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+# Run the core (ROS-free) tests also against Ubuntu 24.04's numpy.
+OLD_NUMPY ?= 1.26.4
+OLD_VENV ?= .venv-numpy126
+
+.PHONY: venv test test-core-old-numpy lint demo bench clean
+
+$(BIN)/.installed: setup.py package.xml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[ros,test,colcon]'
+	touch $@
+
+venv: $(BIN)/.installed
+
+lint: venv
+	$(BIN)/ruff check .
+
+test: venv lint test-core-old-numpy
+	ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST $(BIN)/pytest -q test
+
+$(OLD_VENV)/bin/.installed: setup.py
+	$(PYTHON) -m venv $(OLD_VENV)
+	$(OLD_VENV)/bin/python -m pip install -q --upgrade pip
+	$(OLD_VENV)/bin/python -m pip install -q "numpy==$(OLD_NUMPY)" -e '.[test]'
+	touch $@
+
+test-core-old-numpy: $(OLD_VENV)/bin/.installed
+	$(OLD_VENV)/bin/python -c "import numpy; assert numpy.__version__ == '$(OLD_NUMPY)', numpy.__version__"
+	$(OLD_VENV)/bin/pytest -q -p no:cacheprovider test/test_kernels.py test/test_process.py \
+		test/test_matcher.py -k "not million"
+
+demo: venv
+	$(BIN)/gait-estimator process ../shared/data/swge/recordings/Multispeed_Walk_AB.csv --out out/multispeed_predictions.csv
+
+bench: venv
+	mkdir -p out
+	$(BIN)/gait-estimator bench --modes 7,70,700 --json out/bench.json
+
+clean:
+	rm -rf $(VENV) $(OLD_VENV) build install log out *.egg-info

@@ -1,0 +1,167 @@
+"""The incremental matcher against the naive specification, and its long-run accuracy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gait_estimator import IncrementalMatcher, KernelLibrary, NaiveMatcher
+from gait_estimator.kernels import make_mode
+from gait_estimator.recording import read_recording
+
+
+def random_library(rng: np.random.Generator, lengths: list[int], scale: float = 20.0) -> KernelLibrary:
+    modes = tuple(make_mode(f"m{i}", rng.normal(0, scale, (n, 4)), 100.0) for i, n in enumerate(lengths))
+    return KernelLibrary("random", modes)
+
+
+def brute_force(window: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """e[j] = sum_t ||d_{i-t} - k_{(j-t) mod N}||^2 over the window (newest last), written plainly."""
+    n = kernel.shape[0]
+    w = window[-n:]
+    e = np.zeros(n)
+    for j in range(n):
+        for t in range(len(w)):
+            diff = w[len(w) - 1 - t] - kernel[(j - t) % n]
+            e[j] += diff @ diff
+    return e
+
+
+def assert_steps_equal(a, b, rtol: float = 1e-9) -> None:
+    scale = np.maximum(np.abs(b.sse), 1.0)
+    assert np.all(np.abs(a.sse - b.sse) <= rtol * scale), (a.sse, b.sse)
+    assert a.ready == b.ready
+    # Same argmin except where the two best candidates are tied within rounding.
+    order = np.sort(b.sse)
+    if len(order) < 2 or order[1] - order[0] > 1e-9 * max(order[1], 1.0):
+        assert a.mode_index == b.mode_index
+    best = b.mode_index
+    if a.mode_index == best:
+        assert a.phases[best] == pytest.approx(b.phases[best]) or abs(a.sse[best] - b.sse[best]) < 1e-6
+
+
+def test_naive_matches_a_plain_loop() -> None:
+    rng = np.random.default_rng(3)
+    lib = random_library(rng, [5, 7])
+    naive = NaiveMatcher(lib)
+    data = rng.normal(0, 20, (12, 4))
+    for i, d in enumerate(data):
+        r = naive.step(d)
+        for m, mode in enumerate(lib.modes):
+            e = brute_force(data[: i + 1], mode.samples)
+            assert r.sse[m] == pytest.approx(e.min(), rel=1e-12)
+            j = int(e.argmin())
+            assert r.phases[m] == pytest.approx(((j + 1) % mode.length) / mode.length)
+        assert r.ready == (i + 1 >= 7)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    lengths=st.lists(st.integers(min_value=2, max_value=40), min_size=1, max_size=6),
+    steps=st.integers(min_value=1, max_value=120),
+    seed=st.integers(min_value=0, max_value=2**32 - 1),
+    offset=st.floats(min_value=-200, max_value=200),
+)
+def test_incremental_equals_naive_on_random_libraries(lengths: list[int], steps: int, seed: int, offset: float) -> None:
+    rng = np.random.default_rng(seed)
+    lib = random_library(rng, lengths)
+    inc, naive = IncrementalMatcher(lib, resync_period=0), NaiveMatcher(lib)
+    data = rng.normal(offset, 20, (steps, 4))
+    for d in data:
+        assert_steps_equal(inc.step(d), naive.step(d))
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(min_value=0, max_value=2**32 - 1), period=st.integers(min_value=1, max_value=50))
+def test_resynchronisation_keeps_results_equal(seed: int, period: int) -> None:
+    rng = np.random.default_rng(seed)
+    lib = random_library(rng, [13, 4, 21])
+    inc, naive = IncrementalMatcher(lib, resync_period=period, resync_block=3), NaiveMatcher(lib)
+    for d in rng.normal(0, 20, (80, 4)):
+        assert_steps_equal(inc.step(d), naive.step(d))
+
+
+def test_incremental_equals_naive_on_the_shared_recording(multispeed_csv, able_bodied) -> None:
+    rec = read_recording(multispeed_csv)
+    x = rec.angles_deg[3000:3500]  # the fill phase, a full window and beyond
+    inc, naive = IncrementalMatcher(able_bodied), NaiveMatcher(able_bodied)
+    for d in x:
+        assert_steps_equal(inc.step(d), naive.step(d))
+
+
+def test_reset_starts_a_fresh_window(able_bodied) -> None:
+    rng = np.random.default_rng(0)
+    data = rng.normal(0, 20, (500, 4))
+    a = IncrementalMatcher(able_bodied)
+    a.run(data[:450])
+    a.reset()
+    assert a.steps == 0 and not a.ready
+    fresh = IncrementalMatcher(able_bodied)
+    for d in data[450:]:
+        ra, rf = a.step(d), fresh.step(d)
+        np.testing.assert_array_equal(ra.sse, rf.sse)
+
+
+def test_non_finite_sample_is_rejected_without_touching_state(able_bodied) -> None:
+    rng = np.random.default_rng(1)
+    data = rng.normal(0, 20, (400, 4))
+    a, b = IncrementalMatcher(able_bodied), IncrementalMatcher(able_bodied)
+    for i, d in enumerate(data):
+        if i == 200:
+            with pytest.raises(ValueError, match="non-finite"):
+                a.step(np.array([1.0, np.nan, 0.0, 0.0]))
+            with pytest.raises(ValueError, match="non-finite"):
+                a.step([np.inf, 0.0, 0.0, 0.0])
+        ra, rb = a.step(d), b.step(d)
+        np.testing.assert_array_equal(ra.sse, rb.sse)
+    assert a.steps == b.steps == 400
+
+
+def test_ready_after_the_longest_window(able_bodied) -> None:
+    m = IncrementalMatcher(able_bodied)
+    x = np.zeros((392, 4))
+    ready = [m.step(d).ready for d in x]
+    assert not any(ready[:391]) and ready[391]
+
+
+def test_state_memory_is_linear_in_modes(able_bodied) -> None:
+    small = IncrementalMatcher(able_bodied).state_bytes()
+    big = IncrementalMatcher(able_bodied.replicated(700)).state_bytes()
+    assert big < 110 * small  # 100x the modes: ~100x the memory, no N^2 term
+    assert big <= 20e6
+
+
+def test_a_million_steps_stay_exact() -> None:
+    """float64 running sums with resynchronisation equal a recomputation after 10^6 steps."""
+    rng = np.random.default_rng(7)
+    lib = random_library(rng, [9, 14, 11], scale=30.0)
+    m = IncrementalMatcher(lib)
+    block = rng.normal(5.0, 30.0, (10_000, 4))
+    for _ in range(100):
+        for d in block:
+            m.step(d)
+    exact = m.full_sse()
+    ok = np.isfinite(exact)
+    rel = np.abs(m.running_sse()[ok] - exact[ok]) / exact[ok]
+    assert m.steps == 1_000_000
+    assert rel.max() <= 1e-9
+
+
+def test_resynchronisation_repairs_a_corrupted_running_sum() -> None:
+    rng = np.random.default_rng(8)
+    lib = random_library(rng, [9, 14, 11])
+    m = IncrementalMatcher(lib, resync_period=100, resync_block=4)
+    data = rng.normal(0, 20, (400, 4))
+    m.run(data[:200])
+    m._e[m._valid] += 1e-3  # simulate accumulated rounding error
+    m.run(data[200:300])  # one resync period
+    exact = m.full_sse()
+    ok = np.isfinite(exact)
+    assert np.abs(m.running_sse()[ok] - exact[ok]).max() < 1e-9
+    never = IncrementalMatcher(lib, resync_period=0)
+    never.run(data[:200])
+    never._e[never._valid] += 1e-3
+    never.run(data[200:300])
+    assert np.abs(never.running_sse()[ok] - never.full_sse()[ok]).min() > 0.5e-3

@@ -1,0 +1,132 @@
+"""Offline processing: the reference output acceptance test, CSV formats, CLI behaviour."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gait_estimator.cli import main as cli_main
+from gait_estimator.errors import RecordingError
+from gait_estimator.recording import read_recording, write_project_csv
+
+
+def read_predictions(path: Path) -> dict[str, np.ndarray]:
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    return {k: np.array([r[k] for r in rows]) for k in rows[0]}
+
+
+def test_reproduces_the_reference_implementation(tmp_path: Path, swge: Path, multispeed_csv: Path) -> None:
+    """Multispeed 4000..6999 with the able-bodied library vs the reference C++ output."""
+    out = tmp_path / "pred.csv"
+    code = cli_main(["process", str(multispeed_csv), "--kernels", "able_bodied", "--start", "4000", "--stop", "7000",
+                     "--out", str(out), "--quiet"])
+    assert code == 0
+    pred = read_predictions(out)
+    ref = np.loadtxt(swge / "reference_output" / "trick_multispeed_4000_7000.csv", delimiter=",", skiprows=1, usecols=(0, 1))
+    assert len(pred["mode"]) == len(ref) == 3000
+    np.testing.assert_array_equal(pred["sample"].astype(int), np.arange(4000, 7000))
+    ids = {"Slow": 1, "Med": 2, "Fast": 3, "RA": 4, "RD": 5, "SA": 6, "SD": 7}
+    mode_ok = np.array([ids[m] for m in pred["mode"]]) == ref[:, 1].astype(int)
+    assert mode_ok.mean() >= 0.999
+    lengths = {"Slow": 392, "Med": 313, "Fast": 280, "RA": 283, "RD": 286, "SA": 318, "SD": 309}
+    n = np.array([lengths[m] for m in pred["mode"]])
+    d = np.abs(pred["phase"].astype(float) - ref[:, 0])
+    d = np.minimum(d, 1.0 - d)  # the reference writes 1.0 where we write 0.0
+    assert np.mean(d * n <= 1.0 + 1e-4) >= 0.999
+    phase = pred["phase"].astype(float)
+    assert phase.min() >= 0.0 and phase.max() < 1.0
+    assert pred["ready"].astype(int).tolist() == [0] * 391 + [1] * (3000 - 391)
+
+
+def test_prediction_csv_columns_and_times(tmp_path: Path, multispeed_csv: Path) -> None:
+    out = tmp_path / "p.csv"
+    assert cli_main(["process", str(multispeed_csv), "--start", "100", "--stop", "150", "-o", str(out), "-q"]) == 0
+    header = out.read_text().splitlines()[0].split(",")
+    assert header == ["time_s", "sample", "mode", "phase", "ready",
+                      "sse_Slow", "sse_Med", "sse_Fast", "sse_RA", "sse_RD", "sse_SA", "sse_SD"]
+    pred = read_predictions(out)
+    np.testing.assert_allclose(pred["time_s"].astype(float), np.arange(100, 150) / 230.0, atol=1e-6)
+
+
+def test_project_csv_in_radians_gives_the_same_predictions(tmp_path: Path, multispeed_csv: Path) -> None:
+    rec = read_recording(multispeed_csv).slice(5000, 5600)
+    deg_csv = write_project_csv(rec, tmp_path / "deg.csv")
+    rad_csv = tmp_path / "rad.csv"
+    lines = deg_csv.read_text().splitlines()
+    header = lines[0].replace("_deg", "_rad")
+    body = []
+    for line in lines[1:]:
+        v = line.split(",")
+        body.append(",".join([v[0], *(f"{np.radians(float(x)):.12f}" for x in v[1:5])]))
+    rad_csv.write_text("\n".join([header, *body]) + "\n")
+    outs = []
+    for src in (deg_csv, rad_csv):
+        out = tmp_path / f"{src.stem}.pred.csv"
+        assert cli_main(["process", str(src), "-o", str(out), "-q"]) == 0
+        outs.append(read_predictions(out))
+    assert outs[0]["mode"].tolist() == outs[1]["mode"].tolist()
+    np.testing.assert_allclose(outs[0]["phase"].astype(float), outs[1]["phase"].astype(float))
+    np.testing.assert_array_equal(outs[0]["sample"], np.arange(600).astype(str))  # rows of the new file
+
+
+def test_project_csv_labels_heel_strikes_and_extra_columns(tmp_path: Path) -> None:
+    p = tmp_path / "r.csv"
+    p.write_text(
+        "time_s,right_thigh_deg,left_thigh_deg,right_shank_deg,left_shank_deg,right_foot_deg,mode,heel_strike\n"
+        "0.00,1,2,3,4,5,Slow,1\n0.01,1,2,3,4,6,Slow,0\n0.02,1,nan,3,4,7,Med,0\n0.03,1,2,3,4,8,Med,1\n"
+    )
+    rec = read_recording(p)
+    assert len(rec) == 3 and rec.skipped == {"non_finite": 1}
+    assert rec.labels.tolist() == ["Slow", "Slow", "Med"]
+    assert rec.heel_strike.tolist() == [True, False, True]
+    np.testing.assert_array_equal(rec.extra["right_foot_deg"], [5, 6, 8])
+    np.testing.assert_array_equal(rec.index, [0, 1, 3])
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("time_s,a\n0,1\n", "missing angle column"),
+        ("right_thigh_deg\n1\n", "not a recognised recording"),
+        ("time_s,right_thigh_deg,left_thigh_deg,right_shank_deg,left_shank_deg\n0,1,2,3,x\n", ":2:"),
+        ("time_s,right_thigh_deg,left_thigh_deg,right_shank_deg,left_shank_deg\n0,1,2,3,4\n0,1,2,3,4\n",
+         "not strictly increasing"),
+        ("time_s,right_thigh_deg,left_thigh_deg,right_shank_deg,left_shank_deg\n0,1,2,3\n", "expected 5 columns"),
+        ("Dimension:4x3\nA,B,C,D\n1,2,3,4\n", "Dimension says 3 samples but the file has 1 rows"),
+    ],
+)
+def test_bad_recordings_raise_one_line_errors(tmp_path: Path, text: str, message: str) -> None:
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(RecordingError) as err:
+        read_recording(p)
+    assert message in str(err.value) and str(p) in str(err.value)
+
+
+def test_cli_usage_and_input_errors_exit_2(tmp_path: Path, multispeed_csv: Path) -> None:
+    def run(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "gait_estimator.cli", *args], capture_output=True, text=True)
+
+    missing = run("process", str(tmp_path / "nope.csv"))
+    assert missing.returncode == 2 and "no such file" in missing.stderr
+    empty = run("process", str(multispeed_csv), "--start", "20000")
+    assert empty.returncode == 2 and "no samples" in empty.stderr
+    order = run("process", str(multispeed_csv), "--start", "10", "--stop", "5")
+    assert order.returncode == 2 and "--stop" in order.stderr
+    usage = run("process")
+    assert usage.returncode == 2 and "usage" in usage.stderr
+    badlib = run("process", str(multispeed_csv), "--kernels", str(tmp_path / "x.yaml"))
+    assert badlib.returncode == 2 and "x.yaml" in badlib.stderr
+
+
+def test_summary_lists_mode_segments(multispeed_csv: Path, capsys) -> None:
+    assert cli_main(["process", str(multispeed_csv), "--start", "4000", "--stop", "7000"]) == 0
+    out = capsys.readouterr().out
+    assert "segments:" in out and "Slow" in out and "Med" in out
+    assert "no time stamps" in out
