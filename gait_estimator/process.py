@@ -8,18 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
+from .estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator
 from .kernels import KernelLibrary
-from .matcher import IncrementalMatcher, MatchTrace
 from .recording import Recording
 
 
 @dataclass(frozen=True)
 class Predictions:
-    """Matcher output aligned with the recording samples it came from."""
+    """Estimator output aligned with the recording samples it came from."""
 
-    time_s: np.ndarray  # (T,) seconds, the input samples' times
-    sample: np.ndarray  # (T,) index of each sample in the source recording
-    trace: MatchTrace
+    time_s: np.ndarray  # (T,) seconds: the input samples' times (or the resampling grid)
+    sample: np.ndarray  # (T,) index in the source recording of the (latest) input sample
+    trace: EstimateTrace
 
 
 @dataclass(frozen=True)
@@ -32,30 +32,40 @@ class Segment:
     samples: int
 
 
-def predict(recording: Recording, library: KernelLibrary) -> Predictions:
-    """Run a fresh IncrementalMatcher over every sample of ``recording``."""
-    matcher = IncrementalMatcher(library)
-    trace = matcher.run(recording.angles_deg)
-    return Predictions(recording.time_s, np.asarray(recording.index), trace)
+def predict(recording: Recording, library: KernelLibrary, config: EstimatorConfig | None = None) -> Predictions:
+    """Run a fresh Estimator (default: the paper's algorithm) over every sample of ``recording``."""
+    trace = run_estimator(Estimator(library, config), recording.time_s, recording.angles_deg, recording.index)
+    return Predictions(trace.time_s, trace.sample, trace)
+
+
+PREDICTION_COLUMNS = ("time_s", "sample", "mode", "phase", "ready")
+"""First columns of the predictions CSV; then sse_<mode> per mode, then EXTRA_COLUMNS."""
+EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode")
 
 
 def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
-    """Write ``time_s, sample, mode, phase, ready, sse_<mode>...`` (SSE in deg^2)."""
+    """Write ``time_s, sample, mode, phase, ready, sse_<mode>..., confidence, fit_rms_deg, held,
+    phase_rate, raw_mode`` (SSE in deg^2, fit in deg, phase rate in strides/s)."""
     p = Path(path)
     tr = pred.trace
-    names = np.asarray(tr.mode_names, dtype=object)[tr.mode_index]
+    names = np.asarray(tr.mode_names, dtype=object)
     with p.open("w", encoding="utf-8", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["time_s", "sample", "mode", "phase", "ready", *(f"sse_{m}" for m in tr.mode_names)])
+        w.writerow([*PREDICTION_COLUMNS, *(f"sse_{m}" for m in tr.mode_names), *EXTRA_COLUMNS])
         for i in range(len(pred.time_s)):
             w.writerow(
                 [
                     f"{pred.time_s[i]:.6f}",
                     int(pred.sample[i]),
-                    names[i],
+                    names[tr.mode_index[i]],
                     f"{tr.phase[i]:.9f}",
                     int(tr.ready[i]),
                     *(f"{v:.9g}" for v in tr.sse[i]),
+                    f"{tr.confidence[i]:.6g}",
+                    f"{tr.fit_rms_deg[i]:.6g}",
+                    int(tr.held[i]),
+                    f"{tr.phase_rate[i]:.6g}",
+                    names[tr.raw_mode_index[i]],
                 ]
             )
     return p

@@ -165,3 +165,85 @@ def test_resynchronisation_repairs_a_corrupted_running_sum() -> None:
     never._e[never._valid] += 1e-3
     never.run(data[200:300])
     assert np.abs(never.running_sse()[ok] - never.full_sse()[ok]).min() > 0.5e-3
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    lengths=st.lists(st.integers(min_value=2, max_value=30), min_size=1, max_size=5),
+    fraction=st.floats(min_value=0.05, max_value=1.0),
+    weights=st.lists(st.sampled_from([0.0, 0.5, 1.0, 2.0]), min_size=4, max_size=4).filter(any),
+    subsample=st.booleans(),
+    seed=st.integers(min_value=0, max_value=2**32 - 1),
+)
+def test_options_match_the_naive_specification(lengths, fraction, weights, subsample, seed) -> None:
+    rng = np.random.default_rng(seed)
+    lib = random_library(rng, lengths)
+    opts = {"window_fraction": fraction, "channel_weights": weights, "subsample": subsample}
+    inc = IncrementalMatcher(lib, resync_period=37, resync_block=2, **opts)
+    naive = NaiveMatcher(lib, **opts)
+    for d in rng.normal(0, 20, (90, 4)):
+        a, b = inc.step(d), naive.step(d)
+        assert_steps_equal(a, b)
+        if a.mode_index == b.mode_index and np.ptp(np.sort(b.sse)[:2]) > 1e-6:
+            assert a.phase == pytest.approx(b.phase, abs=1e-9)
+
+
+def test_window_fraction_compares_only_the_newest_samples() -> None:
+    rng = np.random.default_rng(11)
+    lib = random_library(rng, [20, 10])
+    naive = NaiveMatcher(lib, window_fraction=0.5)
+    assert list(naive.windows) == [10, 5]
+    data = rng.normal(0, 20, (40, 4))
+    r = None
+    for d in data:
+        r = naive.step(d)
+    for m, mode in enumerate(lib.modes):
+        w = int(naive.windows[m])
+        e = [sum(float(np.sum((data[-1 - t] - mode.samples[(j - t) % mode.length]) ** 2)) for t in range(w))
+             for j in range(mode.length)]
+        assert r.sse[m] == pytest.approx(min(e))
+    assert r.ready and not NaiveMatcher(lib, window_fraction=0.5).step(data[0]).ready
+
+
+def test_zero_weight_removes_a_channel() -> None:
+    rng = np.random.default_rng(12)
+    lib = random_library(rng, [15, 12])
+    data = rng.normal(0, 20, (60, 4))
+    noisy = data.copy()
+    noisy[:, 1] += rng.normal(0, 500, 60)  # garbage on left_thigh only
+    w = [1.0, 0.0, 1.0, 1.0]
+    a = IncrementalMatcher(lib, channel_weights=w).run(data)
+    b = IncrementalMatcher(lib, channel_weights=w).run(noisy)
+    np.testing.assert_allclose(a.sse, b.sse, rtol=1e-9, atol=1e-9)
+
+
+def test_subsample_phase_recovers_a_fractional_shift() -> None:
+    """A kernel sampled half-way between columns is located half-way by the interpolation."""
+    n = 200
+    t = np.arange(n) / n
+    kernel = np.stack([30 * np.sin(2 * np.pi * t), 20 * np.cos(2 * np.pi * t), 10 * np.sin(4 * np.pi * t),
+                       5 * np.cos(2 * np.pi * t)], axis=1)
+    lib = KernelLibrary("sine", (make_mode("s", kernel, 100.0),))
+    tt = (np.arange(3 * n) + 0.5) / n  # the stream lags the kernel grid by half a sample
+    stream = np.stack([30 * np.sin(2 * np.pi * tt), 20 * np.cos(2 * np.pi * tt), 10 * np.sin(4 * np.pi * tt),
+                       5 * np.cos(2 * np.pi * tt)], axis=1)
+    coarse = IncrementalMatcher(lib).run(stream)
+    fine = IncrementalMatcher(lib, subsample=True).run(stream)
+    truth = ((np.arange(3 * n) + 0.5 + 1) % n) / n  # the reference convention: (j + 1) / N
+    def err(p):
+        d = np.abs(p - truth)
+        return np.minimum(d, 1 - d)[n:].max() * n
+    assert err(coarse.phase) == pytest.approx(0.5, abs=1e-6)
+    assert err(fine.phase) < 0.05
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"window_fraction": 0.0}, "window_fraction"),
+    ({"window_fraction": 1.5}, "window_fraction"),
+    ({"channel_weights": [1, 1, 1]}, "needs 4 values"),
+    ({"channel_weights": [0, 0, 0, 0]}, "not all 0"),
+    ({"channel_weights": [1, -1, 1, 1]}, ">= 0"),
+])
+def test_invalid_options(able_bodied, kwargs, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        IncrementalMatcher(able_bodied, **kwargs)

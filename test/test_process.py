@@ -48,8 +48,9 @@ def test_prediction_csv_columns_and_times(tmp_path: Path, multispeed_csv: Path) 
     out = tmp_path / "p.csv"
     assert cli_main(["process", str(multispeed_csv), "--start", "100", "--stop", "150", "-o", str(out), "-q"]) == 0
     header = out.read_text().splitlines()[0].split(",")
-    assert header == ["time_s", "sample", "mode", "phase", "ready",
-                      "sse_Slow", "sse_Med", "sse_Fast", "sse_RA", "sse_RD", "sse_SA", "sse_SD"]
+    assert header[:12] == ["time_s", "sample", "mode", "phase", "ready",
+                          "sse_Slow", "sse_Med", "sse_Fast", "sse_RA", "sse_RD", "sse_SA", "sse_SD"]
+    assert header[12:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode"]
     pred = read_predictions(out)
     np.testing.assert_allclose(pred["time_s"].astype(float), np.arange(100, 150) / 230.0, atol=1e-6)
 

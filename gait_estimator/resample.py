@@ -1,0 +1,51 @@
+"""Putting an irregular sample stream onto the uniform clock the kernels were built at."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class UniformResampler:
+    """Linear interpolation of a time-stamped stream onto t0 + k / rate_hz.
+
+    The first sample after construction or ``reset`` starts the grid (t0 = its stamp); every
+    later sample emits the grid points in (previous stamp, its stamp].
+
+    Args:
+        rate_hz: Output rate (Hz), e.g. the kernel library's sample rate.
+    """
+
+    def __init__(self, rate_hz: float) -> None:
+        if not (math.isfinite(rate_hz) and rate_hz > 0):
+            raise ValueError(f"resampling rate must be a positive number of Hz, got {rate_hz!r}")
+        self.rate_hz = float(rate_hz)
+        self.reset()
+
+    def reset(self) -> None:
+        self._t0: float | None = None
+        self._k = 0
+        self._prev_t = 0.0
+        self._prev_x = np.zeros(0)
+
+    def push(self, time_s: float, sample: np.ndarray) -> list[tuple[float, np.ndarray]]:
+        """Add one sample (stamps strictly increasing); returns the grid samples it completes."""
+        x = np.asarray(sample, dtype=np.float64)
+        if self._t0 is None:
+            self._t0, self._k = time_s, 1
+            self._prev_t, self._prev_x = time_s, x
+            return [(time_s, x)]
+        if time_s <= self._prev_t:
+            raise ValueError(f"stamps must increase: {time_s} after {self._prev_t}")
+        out = []
+        while True:
+            t = self._t0 + self._k / self.rate_hz
+            if t > time_s + 1e-12:
+                break
+            a = (t - self._prev_t) / (time_s - self._prev_t)
+            out.append((t, self._prev_x + a * (x - self._prev_x)))
+            self._k += 1
+        self._prev_t, self._prev_x = time_s, x
+        return out
+

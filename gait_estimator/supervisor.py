@@ -1,0 +1,219 @@
+"""Supervision of the matcher's raw choice: confidence, holding, dwell, allowed transitions,
+phase rate.
+
+The matcher picks argmin_m SSE every sample. The supervisor turns that into the reported
+estimate:
+
+1. allowed transitions: from the current mode only the modes its table row lists (and itself)
+   are candidates (the paper's suggested state-machine supervision);
+2. confidence: margin = (SSE of the best other mode - SSE of the candidate) / SSE of the
+   candidate; fit quality = RMS error per sample and channel, degrees;
+3. hold: below ``min_confidence`` the last confident mode stays reported, flagged ``held``;
+4. dwell (hysteresis): a new mode is reported only after it has been the candidate for
+   ``min_dwell_samples`` consecutive samples and ``min_dwell_s`` seconds;
+5. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
+
+Every option off (the defaults) reports the matcher's choice unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .errors import GaitEstimatorError
+from .matcher import StepResult
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What the estimator reports for one (matcher) sample.
+
+    Attributes:
+        time_s: Time of the sample, seconds (the input stamp, or the resampling grid time).
+        mode_index: Reported mode (index into the library's modes).
+        mode: Reported mode name.
+        phase: Gait phase of the reported mode, [0, 1), 0 = right heel strike.
+        ready: The matcher's windows are full.
+        sse: Per-mode minimum SSE, deg^2 (weighted by channel weights), shape (M,).
+        phases: Per-mode phase at the best shift, shape (M,).
+        raw_mode_index: The matcher's own argmin (before supervision).
+        confidence: Margin of the candidate over the best other mode, relative to its SSE (>= 0
+            when the candidate is the argmin; inf with a single mode).
+        fit_rms_deg: RMS error per sample and channel of the reported mode, degrees.
+        held: True while the reported mode is held (low confidence or dwell pending).
+        phase_rate: Smoothed phase velocity, strides per second; nan until known.
+    """
+
+    time_s: float
+    mode_index: int
+    mode: str
+    phase: float
+    ready: bool
+    sse: np.ndarray
+    phases: np.ndarray
+    raw_mode_index: int
+    confidence: float
+    fit_rms_deg: float
+    held: bool
+    phase_rate: float
+
+
+def load_transitions(path: str | Path, mode_names: Sequence[str]) -> np.ndarray:
+    """Read an allowed-transitions YAML into an (M, M) bool matrix, allowed[from, to].
+
+    Format: ``allowed_transitions: {FROM: [TO, ...], ...}``. Staying in a mode is always allowed;
+    a mode without an entry may change to any mode.
+    """
+    p = Path(path)
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise GaitEstimatorError(f"{p}: cannot read transitions file ({exc})") from None
+    except yaml.YAMLError:
+        raise GaitEstimatorError(f"{p}: invalid YAML") from None
+    table = doc.get("allowed_transitions") if isinstance(doc, dict) else None
+    if not isinstance(table, dict):
+        raise GaitEstimatorError(f"{p}: expected a mapping 'allowed_transitions: {{MODE: [MODE, ...]}}'")
+    return transitions_matrix(table, mode_names, str(p))
+
+
+def transitions_matrix(table: Mapping[str, Sequence[str]], mode_names: Sequence[str], where: str = "transitions") -> np.ndarray:
+    """(M, M) allowed[from, to] from a {from: [to, ...]} table; see load_transitions."""
+    index = {m: i for i, m in enumerate(mode_names)}
+    allowed = np.ones((len(mode_names), len(mode_names)), dtype=bool)
+    for src, targets in table.items():
+        if src not in index:
+            raise GaitEstimatorError(f"{where}: unknown mode {src!r} (library modes: {', '.join(mode_names)})")
+        if not isinstance(targets, (list, tuple)):
+            raise GaitEstimatorError(f"{where}: entry for {src!r} must be a list of modes")
+        row = np.zeros(len(mode_names), dtype=bool)
+        for t in targets:
+            if t not in index:
+                raise GaitEstimatorError(f"{where}: unknown mode {t!r} in the entry for {src!r}")
+            row[index[t]] = True
+        row[index[src]] = True
+        allowed[index[src]] = row
+    return allowed
+
+
+class Supervisor:
+    """Turns matcher results into reported estimates (see the module docstring).
+
+    Args:
+        mode_names: The library's mode names.
+        active_channels: Channels with non-zero weight (for the RMS fit quality).
+        min_confidence: Hold the last confident mode below this margin; 0 = off.
+        min_dwell_samples: Samples a new mode must win before it is reported; <= 1 = off.
+        min_dwell_s: Seconds a new mode must win before it is reported; 0 = off.
+        allowed: (M, M) allowed[from, to] matrix, or None for no restriction.
+        phase_rate_tau_s: Time constant of the phase-rate smoothing, seconds.
+    """
+
+    def __init__(
+        self,
+        mode_names: Sequence[str],
+        active_channels: int = 4,
+        min_confidence: float = 0.0,
+        min_dwell_samples: int = 0,
+        min_dwell_s: float = 0.0,
+        allowed: np.ndarray | None = None,
+        phase_rate_tau_s: float = 0.2,
+    ) -> None:
+        self.mode_names = list(mode_names)
+        self.active_channels = active_channels
+        self.min_confidence = float(min_confidence)
+        self.min_dwell_samples = int(min_dwell_samples)
+        self.min_dwell_s = float(min_dwell_s)
+        self.allowed = allowed
+        self.phase_rate_tau_s = float(phase_rate_tau_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self._current: int | None = None
+        self._pending: int | None = None
+        self._pending_count = 0
+        self._pending_since = 0.0
+        self._last: tuple[float, int, float] | None = None  # time, mode, phase
+        self._rate = math.nan
+
+    def update(self, time_s: float, result: StepResult) -> Estimate:
+        """Supervise one matcher result at ``time_s`` (seconds)."""
+        sse = result.sse
+        candidate = result.mode_index
+        if self._current is not None and self.allowed is not None:
+            masked = np.where(self.allowed[self._current], sse, np.inf)
+            candidate = int(masked.argmin())
+        confidence = _margin(sse, candidate, result.mode_index)
+        held = False
+        if not result.ready:
+            reported = candidate
+        else:
+            reported, held = self._choose(time_s, candidate, confidence)
+        window = max(int(result.window[reported]), 1)
+        fit_rms = math.sqrt(max(float(sse[reported]), 0.0) / (window * self.active_channels))
+        phase = float(result.phases[reported])
+        rate = self._phase_rate(time_s, reported, phase) if result.ready else math.nan
+        return Estimate(
+            time_s=time_s,
+            mode_index=reported,
+            mode=self.mode_names[reported],
+            phase=phase,
+            ready=result.ready,
+            sse=sse,
+            phases=result.phases,
+            raw_mode_index=result.mode_index,
+            confidence=confidence,
+            fit_rms_deg=fit_rms,
+            held=held,
+            phase_rate=rate,
+        )
+
+    def _choose(self, time_s: float, candidate: int, confidence: float) -> tuple[int, bool]:
+        if self._current is None:
+            self._current = candidate
+            return candidate, confidence < self.min_confidence
+        if confidence < self.min_confidence:
+            self._pending = None
+            return self._current, True
+        if candidate == self._current:
+            self._pending = None
+            return candidate, False
+        if candidate != self._pending:
+            self._pending, self._pending_count, self._pending_since = candidate, 0, time_s
+        self._pending_count += 1
+        if self._pending_count >= self.min_dwell_samples and time_s - self._pending_since >= self.min_dwell_s - 1e-9:
+            self._current, self._pending = candidate, None
+            return candidate, False
+        return self._current, True
+
+    def _phase_rate(self, time_s: float, mode: int, phase: float) -> float:
+        last = self._last
+        self._last = (time_s, mode, phase)
+        if last is None or last[1] != mode or time_s <= last[0]:
+            return self._rate
+        dt = time_s - last[0]
+        dphi = (phase - last[2] + 0.5) % 1.0 - 0.5
+        inst = dphi / dt
+        if math.isnan(self._rate):
+            self._rate = inst
+        else:
+            alpha = 1.0 - math.exp(-dt / self.phase_rate_tau_s) if self.phase_rate_tau_s > 0 else 1.0
+            self._rate += alpha * (inst - self._rate)
+        return self._rate
+
+
+def _margin(sse: np.ndarray, candidate: int, argmin: int) -> float:
+    """(SSE of the best mode other than ``candidate`` - SSE of ``candidate``) / SSE of ``candidate``."""
+    if sse.size < 2:
+        return math.inf
+    best_other = float(np.partition(sse, 1)[1]) if candidate == argmin else float(sse[argmin])
+    own = float(sse[candidate])
+    if own <= 0.0:
+        return math.inf if best_other > 0 else 0.0
+    return (best_other - own) / own
