@@ -75,6 +75,10 @@ class Recording:
             keep &= idx >= start
         if stop is not None:
             keep &= idx < stop
+        return self.select(keep)
+
+    def select(self, keep: np.ndarray, skipped: dict[str, int] | None = None) -> Recording:
+        """The samples where ``keep`` (bool, (T,)) is true; ``skipped`` replaces the counts."""
         return Recording(
             time_s=self.time_s[keep],
             angles_deg=self.angles_deg[keep],
@@ -82,8 +86,8 @@ class Recording:
             heel_strike=None if self.heel_strike is None else self.heel_strike[keep],
             extra={k: v[keep] for k, v in self.extra.items()},
             source=self.source,
-            index=idx[keep],
-            skipped=dict(self.skipped),
+            index=self.index[keep],
+            skipped=dict(self.skipped if skipped is None else skipped),
             time_from_rate=self.time_from_rate,
         )
 
@@ -258,18 +262,7 @@ def _drop_non_finite(rec: Recording) -> Recording:
     ok = np.isfinite(rec.time_s) & np.isfinite(rec.angles_deg).all(axis=1)
     if ok.all():
         return rec
-    rec = Recording(
-        time_s=rec.time_s[ok],
-        angles_deg=rec.angles_deg[ok],
-        labels=None if rec.labels is None else rec.labels[ok],
-        heel_strike=None if rec.heel_strike is None else rec.heel_strike[ok],
-        extra={k: v[ok] for k, v in rec.extra.items()},
-        source=rec.source,
-        index=rec.index[ok],
-        skipped={**rec.skipped, "non_finite": int((~ok).sum())},
-        time_from_rate=rec.time_from_rate,
-    )
-    return rec
+    return rec.select(ok, {**rec.skipped, "non_finite": int((~ok).sum())})
 
 
 def write_project_csv(rec: Recording, path: str | Path) -> Path:
