@@ -337,8 +337,9 @@ class IncrementalMatcher(_MatcherBase):
             np.matmul((-2.0 * (d[None, :] - old))[:, None, :], self._kernels, out=nxt3)
         nxt = nxt3.reshape(self._e.shape)
         e = self._e
-        nxt[:, 1:] += e[:, :-1]  # e[m, j-1]: the window and the kernel slide together
-        nxt[:, 0] += e[self._all, self._last]  # circular: column 0 follows column N_m - 1
+        first = nxt[:, 0] + e[self._all, self._last]  # circular: column 0 follows column N_m - 1
+        nxt.ravel()[1:] += e.ravel()[:-1]  # e[m, j-1]: the window and the kernel slide together
+        nxt[:, 0] = first
         nxt[self._pad_rows, self._pad_cols] = np.inf
         nxt += base[:, None]
         if full is None:
