@@ -1,0 +1,66 @@
+"""Evidence for experiments/lg2_ramp_labels.csv: foot-flat angle of every stride of LG_2_Ramp.
+
+For each stride (right heel strike to the next, detected as in `gait-estimator train`), prints
+the median right- and left-foot angle over the samples where that foot is flat (angular speed
+below 15 deg/s): the slope of the ground under it plus the sensor's standing offset. As a
+cross-check it also prints the bundled able-bodied kernel nearest to the stride (RMS over the
+4 input angles after time-normalising the stride to the kernel's length, at 230 Hz).
+
+Usage: python experiments/lg2_foot_flat.py [path/to/LG_2_Ramp_AB_Sample.csv]
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from gait_estimator import load_library
+from gait_estimator.labels import labels_from_ranges, read_label_ranges
+from gait_estimator.recording import read_recording
+from gait_estimator.strides import heel_strikes, normalise_strides, resample_uniform, stride_bounds
+
+HERE = Path(__file__).resolve().parent
+DEFAULT = HERE.parent.parent / "shared" / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.csv"
+FLAT_DEG_PER_S = 15.0
+STANDING_S = (3.0, 4.9)
+
+
+def main(path: Path) -> None:
+    rec = read_recording(path)
+    uni = resample_uniform(rec, rec.median_rate_hz)
+    hs = heel_strikes(rec, "right_foot")
+    bounds, others = stride_bounds(hs.times_s)
+    ranges = read_label_ranges(HERE / "lg2_ramp_labels.csv")
+    lib = load_library("able_bodied")
+    ref = resample_uniform(rec, lib.sample_rate_hz)
+    still = (uni.time_s >= STANDING_S[0]) & (uni.time_s < STANDING_S[1])
+    print(f"{path.name}: heel strikes from {hs.method}")
+    print(
+        f"standing {STANDING_S[0]:g}-{STANDING_S[1]:g} s: right foot {np.median(uni.extra['right_foot_deg'][still]):+.1f} deg, "
+        f"left foot {np.median(uni.extra['left_foot_deg'][still]):+.1f} deg"
+    )
+    print(f"{'start_s':>8} {'end_s':>7} {'dur_s':>6} {'R_flat':>7} {'L_flat':>7}  {'label':<6} nearest bundled kernel (RMS deg)")
+    for a, b in bounds:
+        inside = (uni.time_s >= a) & (uni.time_s < b)
+        cells = []
+        for col in ("right_foot_deg", "left_foot_deg"):
+            x = uni.extra[col]
+            flat = inside & (np.abs(np.gradient(x, uni.time_s)) < FLAT_DEG_PER_S)
+            cells.append(f"{np.median(x[flat]):+7.1f}" if flat.any() else "    n/a")
+        rms = {
+            m.name: float(np.sqrt(np.mean((normalise_strides(ref.time_s, ref.angles_deg, np.array([[a, b]]), m.length)[0]
+                                           - m.samples) ** 2)))
+            for m in lib.modes
+        }
+        best = sorted(rms, key=rms.__getitem__)[:2]
+        mid = labels_from_ranges(np.array([0.5 * (a + b)]), ranges)[0] or "-"
+        near = ", ".join(f"{n} {rms[n]:.1f}" for n in best)
+        print(f"{a:8.3f} {b:7.3f} {b - a:6.3f} {cells[0]} {cells[1]}  {mid:<6} {near}")
+    for a, b in others:
+        print(f"not a stride: {a:.3f}-{b:.3f} s ({b - a:.2f} s)")
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT)

@@ -1,0 +1,162 @@
+"""Synthetic gait recordings with exact truth, generated from a kernel library.
+
+Model: a sequence of strides, each in one mode. Stride k of mode m lasts
+``N_m / rate * (1 + duration_cv * z_k)`` seconds (z ~ N(0, 1)); its angles at phase phi in [0, 1)
+are
+
+    mean_m + a(t) * (K_m(phi) - mean_m) + o(t) + blend(t) + noise
+
+with K_m the kernel interpolated periodically in phase, mean_m its per-channel mean, a(t) and
+o(t) per-channel amplitude factors (1 + amplitude_cv * z) and offsets (offset_sd_deg * z) drawn
+per heel strike and interpolated linearly in time (so strides join continuously), blend(t) a
+cosine fade over the first ``blend`` of a stride after a mode change that removes the jump from
+the previous mode's end to the new mode's start, and white Gaussian sensor noise. A right foot
+angle with one sharp maximum exactly at every right heel strike (phase 0) is added as
+``extra['right_foot_deg']`` for heel-strike detection.
+
+Sampling is uniform at ``rate_hz`` (stride durations are then whole numbers of samples, so every
+heel strike is a sample) or jittered (intervals uniform in [(1 - jitter), (1 + jitter)] / rate,
+with every heel strike inserted as a sample). Truth is exact: per-sample mode labels, heel-strike
+flags and the phase (time since the heel strike / stride duration).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from gait_estimator.kernels import KernelLibrary, KernelMode
+from gait_estimator.recording import Recording
+
+FOOT_SHARPNESS = 10.0
+"""Concentration of the foot-angle bump at heel strike (von Mises shape; larger = sharper)."""
+
+
+@dataclass(frozen=True)
+class SyntheticConfig:
+    """Variability and sampling of a synthetic recording (degrees, seconds, Hz)."""
+
+    duration_cv: float = 0.025
+    amplitude_cv: float = 0.05
+    offset_sd_deg: float = 0.5
+    noise_sd_deg: float = 0.3
+    rate_hz: float | None = None  # default: the library's rate
+    jitter: float = 0.0  # 0 = uniform sampling
+    blend: float = 0.25
+    foot_amplitude_deg: float = 80.0
+    foot_noise_sd_deg: float = 0.3
+
+
+@dataclass(frozen=True)
+class Synthetic:
+    """A generated recording and its exact truth.
+
+    Attributes:
+        recording: Angles (T, 4) deg, ``labels``, ``heel_strike`` flags, ``extra['right_foot_deg']``.
+        heel_strikes_s: Exact right heel-strike times (S + 1,), s; the last one ends the last stride.
+        phase: Exact phase [0, 1) of every sample, (T,).
+        stride_modes: Mode of each stride, (S,).
+        stride_durations_s: Duration of each stride, (S,), s.
+    """
+
+    recording: Recording
+    heel_strikes_s: np.ndarray
+    phase: np.ndarray
+    stride_modes: list[str]
+    stride_durations_s: np.ndarray
+
+
+def _kernel_at(mode: KernelMode, phi: np.ndarray) -> np.ndarray:
+    """Kernel angles (len(phi), 4) at phases ``phi`` (periodic linear interpolation)."""
+    k = mode.samples
+    n = k.shape[0]
+    x = np.mod(phi, 1.0) * n
+    i0 = np.floor(x).astype(np.int64) % n
+    f = (x - np.floor(x))[:, None]
+    return (1.0 - f) * k[i0] + f * k[(i0 + 1) % n]
+
+
+def generate(
+    library: KernelLibrary,
+    segments: Sequence[tuple[str, int]],
+    config: SyntheticConfig | None = None,
+    seed: int = 0,
+    duration_scale: Mapping[int, float] | None = None,
+    source: str = "synthetic",
+) -> Synthetic:
+    """Generate a recording walking ``segments`` = [(mode name, number of strides), ...].
+
+    Args:
+        library: Kernels to walk with (names as in ``segments``).
+        segments: Modes and stride counts in order.
+        config: Variability and sampling.
+        seed: Random seed (same seed, same recording).
+        duration_scale: Optional extra factor on the duration of given stride numbers (0-based,
+            counted over the whole recording), e.g. to plant an outlier.
+        source: ``Recording.source`` text.
+    """
+    cfg = config or SyntheticConfig()
+    rng = np.random.default_rng(seed)
+    rate = float(cfg.rate_hz or library.sample_rate_hz)
+    modes = [library.mode(name) for name, count in segments for _ in range(count)]
+    s = len(modes)
+    if s == 0:
+        raise ValueError("no strides requested")
+    nominal = np.array([m.length / library.sample_rate_hz for m in modes])
+    dur = nominal * np.maximum(0.5, 1.0 + cfg.duration_cv * rng.standard_normal(s))
+    for k, f in (duration_scale or {}).items():
+        dur[k] *= f
+    if cfg.jitter == 0:
+        n_samples = np.maximum(2, np.round(dur * rate)).astype(np.int64)
+        hs_index = np.r_[0, np.cumsum(n_samples)]
+        dur = n_samples / rate
+        hs = hs_index / rate
+    else:
+        hs = np.r_[0.0, np.cumsum(dur)]
+    amp = 1.0 + cfg.amplitude_cv * rng.standard_normal((s + 1, 4))
+    off = cfg.offset_sd_deg * rng.standard_normal((s + 1, 4))
+
+    if cfg.jitter == 0:
+        t = np.arange(hs_index[-1] + 1) / rate
+        heel = np.isin(np.arange(t.size), hs_index)
+    else:
+        lo, hi = (1.0 - cfg.jitter) / rate, (1.0 + cfg.jitter) / rate
+        steps = rng.uniform(lo, hi, int(hs[-1] * rate / (1.0 - cfg.jitter)) + 10)
+        t = np.cumsum(np.r_[0.0, steps])
+        t = t[t < hs[-1]]
+        near_hs = np.abs(t[:, None] - hs[None, :]).min(axis=1) < 0.25 / rate
+        t = np.union1d(t[~near_hs], hs)
+        heel = np.isin(t, hs)
+
+    k = np.clip(np.searchsorted(hs, t, side="right") - 1, 0, s - 1)
+    frac = (t - hs[k]) / dur[k]  # in [0, 1]; 1 only for the final heel strike
+    angles = np.empty((t.size, 4))
+    for m in library.modes:
+        rows = np.flatnonzero(np.array([modes[j].name == m.name for j in range(s)])[k])
+        if rows.size == 0:
+            continue
+        mean = m.samples.mean(axis=0)
+        a = (1 - frac[rows, None]) * amp[k[rows]] + frac[rows, None] * amp[k[rows] + 1]
+        o = (1 - frac[rows, None]) * off[k[rows]] + frac[rows, None] * off[k[rows] + 1]
+        angles[rows] = mean + a * (_kernel_at(m, frac[rows]) - mean) + o
+    for j in range(1, s):
+        if modes[j].name == modes[j - 1].name:
+            continue
+        prev, new = modes[j - 1], modes[j]
+        pm, nm = prev.samples.mean(axis=0), new.samples.mean(axis=0)
+        end_prev = pm + amp[j] * (_kernel_at(prev, np.array([1.0]))[0] - pm)
+        start_new = nm + amp[j] * (_kernel_at(new, np.array([0.0]))[0] - nm)
+        rows = np.flatnonzero((k == j) & (frac < cfg.blend))
+        w = 0.5 * (1.0 + np.cos(np.pi * frac[rows] / cfg.blend))
+        angles[rows] += w[:, None] * (end_prev - start_new)
+    angles += cfg.noise_sd_deg * rng.standard_normal(angles.shape)
+
+    foot = cfg.foot_amplitude_deg * (np.exp(FOOT_SHARPNESS * (np.cos(2 * np.pi * frac) - 1.0)) - 0.6)
+    foot += cfg.foot_noise_sd_deg * rng.standard_normal(t.size)
+    labels = np.array([modes[j].name for j in k], dtype=object)
+    rec = Recording(
+        time_s=t, angles_deg=angles, labels=labels, heel_strike=heel, extra={"right_foot_deg": foot}, source=source
+    )
+    return Synthetic(rec, hs, np.mod(frac, 1.0), [m.name for m in modes], dur)
