@@ -115,6 +115,8 @@ def read_recording(path: str | Path, **options: Any) -> Recording:
     Raises:
         RecordingError: one line naming the file and what is wrong.
     """
+    from . import bag  # noqa: F401  (registers the rosbag2 reader; imported here: bag imports this module)
+
     p = Path(path)
     if not p.exists():
         raise RecordingError(f"{p}: no such file or directory")
