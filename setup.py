@@ -48,6 +48,7 @@ setup(
     entry_points={
         "console_scripts": [
             "gait-estimator = gait_estimator.cli:main",
+            "estimator_node = gait_estimator.node:main",
         ],
     },
 )

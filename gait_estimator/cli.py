@@ -17,7 +17,7 @@ from .errors import GaitEstimatorError
 from .library_io import load_library, save_library
 from .resources import DEFAULT_LIBRARY
 
-COMMAND_MODULES: tuple[str, ...] = ()
+COMMAND_MODULES: tuple[str, ...] = ("gait_estimator.node_tools", "gait_estimator.bag_cli", "gait_estimator.analysis_cli")
 """Further modules contributing subcommands (kept ROS-free at import time)."""
 
 PROG = "gait-estimator"
@@ -83,27 +83,37 @@ def cmd_kernels_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_process(args: argparse.Namespace) -> int:
+    from . import bag  # noqa: F401  (registers the rosbag2 reader)
+    from .bag_cli import finish_process
+    from .estimator import config_from_args
     from .process import format_summary, predict, write_predictions_csv
     from .recording import read_recording
 
     lib = load_library(args.kernels)
     options = {"rate_hz": lib.sample_rate_hz}
     options.update(getattr(args, "reader_options", {}) or {})
+    try:
+        config = config_from_args(args, max_gap_s=options.get("max_gap_s"))
+    except ValueError as exc:
+        raise GaitEstimatorError(str(exc)) from None
     rec = read_recording(args.recording, **options)
     if args.start is not None and args.stop is not None and args.stop <= args.start:
         raise GaitEstimatorError(f"--stop ({args.stop}) must be greater than --start ({args.start})")
     rec = rec.slice(args.start, args.stop)
     if len(rec) == 0:
         raise GaitEstimatorError(f"{args.recording}: no samples in the selected range")
-    pred = predict(rec, lib)
+    pred = predict(rec, lib, config)  # restarts the window at gaps > max_gap_s, like the node
     if args.out:
         write_predictions_csv(pred, args.out)
+    bag_lines = finish_process(args, rec, pred)  # --out-bag; notes on bag stamps and gaps
     if not args.quiet:
         print(format_summary(pred, lib, str(args.recording)))
         if rec.time_from_rate:
             print(f"note: {args.recording} has no time stamps; time = sample / {lib.sample_rate_hz:g} Hz")
         for reason, count in rec.skipped.items():
             print(f"skipped {count} sample(s): {reason}")
+        for line in bag_lines:
+            print(line)
         if args.out:
             print(f"wrote {args.out}")
     return 0
@@ -114,10 +124,11 @@ def cmd_process(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from .bench import bench, drift
+    from .bench import bench, drift, load_times
 
     lib = load_library(args.kernels)
     report = bench(lib, args.modes, steps=args.steps, naive_max_modes=args.naive_max_modes)
+    report["library_load"] = load_times(lib, max(args.modes))
     if args.drift_steps:
         report["drift"] = drift(lib, args.drift_steps)
     for r in report["results"]:
@@ -126,6 +137,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
             f"p99 {r['step_us_p99']:9.1f} us  state {r['state_bytes'] / 1e6:7.2f} MB"
             + (f"  offline {r['offline_samples_per_s']:9.0f} samples/s" if "offline_samples_per_s" in r else "")
         )
+    for r in report["library_load"]:
+        print(f"load {r['modes']}-mode library from {r['format']:<4}: {r['load_s']:.3f} s ({r['file_bytes'] / 1e6:.1f} MB)")
     if "drift" in report:
         d = report["drift"]
         print(f"drift after {d['steps']} steps (M={d['modes']}): max relative error {d['max_relative_error']:.2e}")
@@ -158,12 +171,18 @@ def build_parser() -> argparse.ArgumentParser:
     conv.set_defaults(func=cmd_kernels_convert)
 
     proc = sub.add_parser("process", help="run the estimator over a recording, write predictions CSV")
-    proc.add_argument("recording", help="recording: project CSV or reference Dimension:4xT CSV")
+    proc.add_argument("recording", help="recording: project CSV, reference Dimension:4xT CSV, or rosbag2 bag "
+                      "(directory, .mcap or .db3 file)")
     _kernels_arg(proc)
     proc.add_argument("--start", type=int, help="first sample index (inclusive); state starts fresh here")
     proc.add_argument("--stop", type=int, help="last sample index (exclusive)")
     proc.add_argument("--out", "-o", help="predictions CSV: time_s, sample, mode, phase, ready, sse_<mode>...")
     proc.add_argument("--quiet", "-q", action="store_true", help="no summary on stdout")
+    from .bag_cli import add_process_options
+    from .estimator import add_estimator_arguments
+
+    add_process_options(proc)
+    add_estimator_arguments(proc)
     proc.set_defaults(func=cmd_process)
 
     b = sub.add_parser("bench", help="benchmark the matcher (per-step time, memory, drift)")

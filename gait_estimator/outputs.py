@@ -5,6 +5,9 @@ from these, so a recorded result is identical to what the node publishes.
 
 Topics (relative names, so namespaces and remapping apply):
 
+``mode``, ``phase`` and ``sse`` are published once the matcher is ready, ``estimate`` for every
+estimate (with ``ready`` = 0 while the window fills):
+
 * ``mode``  std_msgs/String: name of the estimated mode;
 * ``phase`` std_msgs/Float64: gait phase in [0, 1), 0 = right heel strike;
 * ``sse``   std_msgs/Float64MultiArray: per-mode minimum SSE (deg^2), in library order;
@@ -40,6 +43,22 @@ def mode_names_from_sse_label(label: str) -> list[str]:
     return label[len(SSE_LABEL_PREFIX) :].split(",")
 
 
+def estimate_names(mode_names: Sequence[str]) -> list[str]:
+    """Keys of the ``estimate`` message (JointState ``name``), fixed for a library.
+
+    In order: ``mode_index`` (index into the library's modes), ``phase`` ([0, 1)), ``ready``
+    (1.0 or 0.0), then ``sse/<mode>`` (deg^2) and ``phase/<mode>`` for every mode in library order.
+    """
+    return ["mode_index", "phase", "ready", *(f"sse/{m}" for m in mode_names), *(f"phase/{m}" for m in mode_names)]
+
+
+def estimate_array(result: StepResult) -> np.ndarray:
+    """Values of the ``estimate`` message (JointState ``position``), float64 (3 + 2M,), in the
+    order of ``estimate_names``; built without a Python loop over modes (the node's hot path)."""
+    head = np.array([result.mode_index, result.phase, 1.0 if result.ready else 0.0], dtype=np.float64)
+    return np.concatenate((head, np.asarray(result.sse, dtype=np.float64), np.asarray(result.phases, dtype=np.float64)))
+
+
 def estimate_values(result: StepResult, mode_names: Sequence[str]) -> tuple[list[str], list[float]]:
     """Key/value pairs of the ``estimate`` message (JointState ``name``/``position``).
 
@@ -47,10 +66,4 @@ def estimate_values(result: StepResult, mode_names: Sequence[str]) -> tuple[list
     ``ready`` (1.0 or 0.0), then ``sse/<mode>`` (deg^2) and ``phase/<mode>`` for every mode in
     library order.
     """
-    names = ["mode_index", "phase", "ready"]
-    values = [float(result.mode_index), float(result.phase), 1.0 if result.ready else 0.0]
-    names += [f"sse/{m}" for m in mode_names]
-    values += np.asarray(result.sse, dtype=np.float64).tolist()
-    names += [f"phase/{m}" for m in mode_names]
-    values += np.asarray(result.phases, dtype=np.float64).tolist()
-    return names, values
+    return estimate_names(mode_names), estimate_array(result).tolist()

@@ -4,7 +4,8 @@ Shared by the live node and offline bag processing so both treat input identical
 
 * ``angles_from_named`` / ``angles_from_array`` extract the four angles (degrees, CHANNELS order)
   from the fields of a ``sensor_msgs/JointState`` or ``std_msgs/Float64MultiArray``, raising
-  ``SampleRejected`` with a reason code for bad input;
+  ``SampleRejected`` with a reason code for bad input (including finite but absurd angles,
+  ``out_of_range``, which would otherwise swamp the matcher's running sums);
 * ``StreamGuard`` checks time stamps (non-increasing -> rejected; a gap longer than
   ``max_gap_s`` -> the matcher window must restart) and counts rejections by reason.
 """
@@ -28,7 +29,12 @@ NON_FINITE = "non_finite"
 MISSING_JOINT = "missing_joint"
 WRONG_LENGTH = "wrong_length"
 NON_INCREASING_STAMP = "non_increasing_stamp"
-REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP)
+OUT_OF_RANGE = "out_of_range"
+REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP, OUT_OF_RANGE)
+
+MAX_ABS_ANGLE_DEG = 1.0e4
+"""Largest accepted |angle| (degrees, after unit conversion). Far beyond any segment angle, far
+below values whose squares would swamp the matcher's running sums (or overflow to inf)."""
 
 
 class SampleRejected(ValueError):
@@ -41,10 +47,14 @@ class SampleRejected(ValueError):
 
 def _to_degrees(values: np.ndarray, units: str) -> np.ndarray:
     if units == "rad":
-        return np.degrees(values)
-    if units == "deg":
-        return values
-    raise ValueError(f"units must be one of {UNITS}, got {units!r}")
+        deg = np.degrees(values)
+    elif units == "deg":
+        deg = values
+    else:
+        raise ValueError(f"units must be one of {UNITS}, got {units!r}")
+    if not (np.abs(deg) <= MAX_ABS_ANGLE_DEG).all():
+        raise SampleRejected(OUT_OF_RANGE, f"angle(s) {values.tolist()} {units} beyond +-{MAX_ABS_ANGLE_DEG:g} deg")
+    return deg
 
 
 def angles_from_named(

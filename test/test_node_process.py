@@ -1,0 +1,212 @@
+"""estimator_node as a separate process through its installed entry point, and the demo and
+bench-node commands: real DDS on loopback (domain IDs 21..28, LOCALHOST discovery)."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from ros_helpers import (
+    REPO,
+    as_node_sees,
+    assert_same_trace,
+    check_against_offline,
+    load_multispeed,
+    lockstep,
+    offline,
+    stamps_ns,
+    unique_suffix,
+    wait_all_answered,
+)
+from sensor_msgs.msg import JointState
+
+from gait_estimator.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
+from gait_estimator.stream import REASONS
+
+
+@pytest.fixture(scope="module")
+def entry_point() -> str:
+    """The ``estimator_node`` console script installed beside this interpreter (pip install)."""
+    exe = shutil.which("estimator_node", path=str(Path(sys.executable).parent))
+    if exe is None:
+        pytest.fail(f"no estimator_node script in {Path(sys.executable).parent}: pip install -e . first")
+    return exe
+
+
+@pytest.fixture
+def local_ros(monkeypatch):
+    """Confine this process's ROS traffic to localhost (clients are created in-process)."""
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
+
+
+class Running:
+    """estimator_node in a child process under a unique namespace, plus a client for it."""
+
+    def __init__(self, domain_id: int, exe: str | None, ros_args: list[str], **client_kwargs: object) -> None:
+        self.namespace = f"/gait_proc_{unique_suffix()}"
+        args = ["-r", f"__ns:={self.namespace}", "-r", "__node:=estimator", *ros_args]
+        self.node = NodeProcess(node_command(args, exe), local_ros_environment(domain_id))
+        self.client = EstimatorClient(
+            domain_id, namespace=self.namespace, estimator_name=f"{self.namespace}/estimator", **client_kwargs
+        )
+        ok = self.client.wait_for_node(timeout_s=30.0, settle_s=0.5)
+        if not ok:
+            self.close()
+            pytest.fail(f"estimator_node did not come up; its output:\n{self.node.output()}")
+
+    def stop(self, sig: int) -> tuple[int, str]:
+        code = self.node.stop(sig)
+        return code, self.node.output()
+
+    def close(self) -> None:
+        self.client.close()
+        self.node.close()
+
+
+def _clean_exit(code: int, log: str) -> None:
+    assert code == 0, log
+    assert "Traceback" not in log and "Error" not in log, log
+
+
+def test_entry_point_joint_state_equals_offline_then_bad_input_and_sigint(
+    entry_point, local_ros, multispeed_csv: Path, able_bodied
+) -> None:
+    """The installed entry point, 1500 Multispeed samples as JointState (rad) at 230 Hz from a
+    best-effort publisher: every estimate equals offline predict on the samples it answered."""
+    run = Running(21, entry_point, [])
+    try:
+        client = run.client
+        rec = load_multispeed(multispeed_csv, 1500, 3000)
+        stamps = stamps_ns(rec)
+        client.stream(np.radians(rec.angles_deg), stamps, 230.0)
+        wait_all_answered(client, len(rec))
+        idx = check_against_offline(client.received, stamps, rec.angles_deg, "rad", able_bodied, min_fraction=0.98)
+        ref = offline(as_node_sees(rec.angles_deg[idx], "rad"), able_bodied)
+        assert len(set(ref.modes)) >= 2  # Med -> Slow at ~9.9 s
+
+        # Bad input: dropped, counted, one throttled warning per reason naming it.
+        names = ["right_thigh", "left_thigh", "right_shank", "left_shank"]
+        for k in range(20):
+            msg = JointState(name=names, position=[math.nan, 0.0, 0.0, 0.0])
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamps[-1]) + (k + 1) * 1000, 10**9)
+            client.publisher.publish(msg)
+            msg = JointState(name=names[1:], position=[0.0, 0.0, 0.0])
+            client.publisher.publish(msg)
+            client.spin_once(0.005)
+        before = len(client.received.diagnostics)
+        assert client.spin_until(
+            lambda: len(client.received.diagnostics) > before
+            and client.received.diagnostics[-1]["rejected_missing_joint"] != "0"
+            and int(client.received.diagnostics[-1]["samples_rejected"]) >= 38,
+            5.0,
+        ), client.received.diagnostics[-1:]
+        diag = client.received.diagnostics[-1]
+        assert diag["samples_accepted"] == str(idx.size)
+        assert int(diag["rejected_non_finite"]) >= 19 and int(diag["rejected_missing_joint"]) >= 19
+        assert set(REASONS) <= {k[len("rejected_") :] for k in diag if k.startswith("rejected_")}
+        code, log = run.stop(signal.SIGINT)
+    finally:
+        run.close()
+    _clean_exit(code, log)
+    warnings = [line for line in log.splitlines() if "dropped sample" in line]
+    assert sum(": non_finite: " in w for w in warnings) == 1, warnings
+    assert sum(": missing_joint: " in w for w in warnings) == 1, warnings
+
+
+def test_params_file_float64_multi_array_degrees_and_sigterm(
+    entry_point, local_ros, multispeed_csv: Path, able_bodied, tmp_path: Path
+) -> None:
+    params = yaml.safe_load((REPO / "config" / "estimator.yaml").read_text(encoding="utf-8"))
+    params["/**"]["ros__parameters"].update(input_type="float64_multi_array", input_units="deg")
+    file = tmp_path / "params.yaml"
+    file.write_text(yaml.safe_dump(params), encoding="utf-8")
+    run = Running(22, entry_point, ["--params-file", str(file)], input_type="float64_multi_array")
+    try:
+        rec = load_multispeed(multispeed_csv, 9000, 9450)
+        lockstep(run.client, rec.angles_deg, 230.0)
+        got = run.client.received
+        ref = offline(rec.angles_deg, able_bodied)
+        assert_same_trace(got.trace(able_bodied.mode_names), ref)
+        assert got.modes == [ref.mode_names[i] for i in ref.mode_index[ref.ready]] and got.modes
+        code, log = run.stop(signal.SIGTERM)
+    finally:
+        run.close()
+    _clean_exit(code, log)
+
+
+@pytest.mark.parametrize(("sig", "domain_id"), [(signal.SIGINT, 23), (signal.SIGTERM, 24)])
+def test_idle_node_shuts_down_cleanly(entry_point, local_ros, sig: int, domain_id: int) -> None:
+    run = Running(domain_id, entry_point, [])
+    try:
+        diag = run.client.latest_diagnostics(3.0)
+        assert diag is not None and diag["ready"] == "false" and diag["library"] == "able_bodied"
+        assert run.client.received.diagnostics_message[-1].startswith("no input")
+        code, log = run.stop(sig)
+    finally:
+        run.close()
+    _clean_exit(code, log)
+
+
+def test_unusable_parameters_exit_nonzero_with_one_line(entry_point, tmp_path: Path) -> None:
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("format: gait_estimator/kernel_library\nformat_version: 1\nname: [\n", encoding="utf-8")
+    env = local_ros_environment(25)
+    cases = [
+        (["-p", f"kernels:={tmp_path / 'missing.yaml'}"], "missing.yaml: no such file or directory"),
+        (["-p", f"kernels:={broken}"], "broken.yaml: invalid YAML"),
+        (["-p", "input_units:=furlong"], "input_units"),
+        (["-p", "max_gap_s:=abc"], "max_gap_s"),
+    ]
+    for ros_args, text in cases:
+        proc = subprocess.run(
+            node_command(ros_args, entry_point), env=env, capture_output=True, text=True, timeout=60, check=False
+        )
+        lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
+        assert proc.returncode == 1, (ros_args, proc.stdout, proc.stderr)
+        assert len(lines) == 1 and lines[0].startswith("estimator_node: error: ") and text in lines[0], lines
+
+
+def _gait_estimator(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "gait_estimator.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+        env=local_ros_environment(0),  # the commands set their own domain and LOCALHOST discovery
+    )
+
+
+def test_demo_command(multispeed_csv: Path) -> None:
+    proc = _gait_estimator("demo", str(multispeed_csv), "--stop", "800", "--speed", "4", "--domain-id", "27",
+                           "--echo-every", "40")
+    out = proc.stdout
+    assert proc.returncode == 0, out + proc.stderr
+    assert "mode: data: Fast" in out and "phase: data: 0." in out
+    assert "summary of what the node published" in out and "segments:" in out
+    line = next(line for line in out.splitlines() if line.startswith("same mode as offline"))
+    same, total = line.rsplit(" ", 1)[1].split("/")
+    assert same == total and int(total) >= 780
+    assert "exit code 0" in out
+
+
+def test_bench_node_command(tmp_path: Path) -> None:
+    report = tmp_path / "bench.json"
+    proc = _gait_estimator("bench-node", "--samples", "200", "--rates", "400", "--seconds", "0.5",
+                           "--domain-id", "28", "--json", str(report))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "latency at 230 Hz" in proc.stdout and "highest input rate sustained without drops" in proc.stdout
+    data = json.loads(report.read_text(encoding="utf-8"))
+    lat = data["latency"]
+    assert lat["samples"] == 200 and lat["answered"] >= 190 and 0 < lat["p50_ms"] <= lat["p99_ms"]
+    assert data["modes"] == 7 and data["node_exit_code"] == 0
+    assert data["throughput"]["steps"][0]["rate_hz"] == 400
