@@ -33,8 +33,10 @@ test-core-old-numpy: $(OLD_VENV)/bin/.installed
 	$(OLD_VENV)/bin/pytest -q -p no:cacheprovider test/test_kernels.py test/test_process.py \
 		test/test_matcher.py -k "not million"
 
+# The main job: start estimator_node, stream the Multispeed recording into it at its real rate
+# (230 Hz, about 62 s) and print what `ros2 topic echo mode/phase` would show, then a summary.
 demo: venv
-	$(BIN)/gait-estimator process ../shared/data/swge/recordings/Multispeed_Walk_AB.csv --out out/multispeed_predictions.csv
+	$(BIN)/gait-estimator demo
 
 bench: venv
 	mkdir -p out

@@ -30,7 +30,7 @@ from .bag import (
 )
 from .channels import CHANNELS, N_CHANNELS
 from .errors import GaitEstimatorError
-from .outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names, sse_label
+from .outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_array, estimate_names, sse_label
 from .process import Predictions
 from .recording import Recording
 
@@ -234,8 +234,7 @@ def write_output_bag(
     ns = normalize_topic(namespace).rstrip("/") + "/"
     label = sse_label(tr.mode_names)
     keys = estimate_names(tr.mode_names)
-    # estimate_array for every step at once: mode_index, phase, ready, sse/<mode>..., phase/<mode>...
-    values = np.column_stack([tr.mode_index.astype(np.float64), tr.phase, tr.ready.astype(np.float64), tr.sse, tr.phases])
+    values = estimate_array(tr)  # every step at once
     serialize = ts.serialize_cdr
     estimate = _ArrayTemplate(
         lambda i: serialize(joint_state_msg(ts, int(stamps[i]), keys, values[i]), JOINT_STATE), values, tail=8, stamped=True

@@ -459,7 +459,7 @@ class EstimatorNode(Node):
         if self._estimate_pub.get_subscription_count():
             msg = self._estimate_msg
             msg.header.stamp = stamp
-            msg.position = _double_array(estimate_array(e))  # an Estimate has the StepResult fields used
+            msg.position = _double_array(estimate_array(e))
             self._estimate_pub.publish(msg)
 
     def _reject(self, exc: SampleRejected) -> None:
@@ -596,7 +596,8 @@ class EstimatorNode(Node):
 def main(args: Sequence[str] | None = None) -> int:
     """Entry point of ``estimator_node`` (``ros2 run gait_estimator estimator_node``).
 
-    Returns 0 after SIGINT/SIGTERM or an external shutdown, 1 if the node cannot start.
+    Returns 0 after SIGINT/SIGTERM or an external shutdown, 2 if it cannot start (an invalid
+    parameter or an unreadable library: usage/input errors, as for the CLI).
     """
     rclpy.init(args=args)
     node: EstimatorNode | None = None
@@ -610,7 +611,7 @@ def main(args: Sequence[str] | None = None) -> int:
         pass
     except StartupError as exc:
         print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
-        code = 1
+        code = 2
     finally:
         if node is not None:
             node.destroy_node()

@@ -34,7 +34,7 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .channels import CHANNELS
 from .matcher import MatchTrace
-from .outputs import ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
+from .outputs import ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
 
 DIAGNOSTICS_TOPIC = "/diagnostics"
 NODE_MODULE = "gait_estimator.node"
@@ -147,19 +147,19 @@ class Received:
             getattr(self, name).clear()
 
     def estimates(self) -> np.ndarray:
-        """Received estimate values, (K, 3 + 2M)."""
+        """Received estimate values, (K, len(estimate_names))."""
         return np.array(self.estimate_values) if self.estimate_values else np.empty((0, 0))
 
     def trace(self, mode_names: Sequence[str]) -> MatchTrace:
         """The received estimates as a MatchTrace (as offline ``predict`` returns)."""
         m = len(mode_names)
-        v = self.estimates().reshape(-1, 3 + 2 * m)
+        v = self.estimates().reshape(-1, len(estimate_names(mode_names)))
         return MatchTrace(
             list(mode_names),
             v[:, 0].astype(np.int64),
             v[:, 1].copy(),
             v[:, 3 : 3 + m].copy(),
-            v[:, 3 + m :].copy(),
+            v[:, 3 + m : 3 + 2 * m].copy(),
             v[:, 2] > 0.5,
         )
 

@@ -13,7 +13,7 @@ estimate (with ``ready`` = 0 while the window fills):
 * ``sse``   std_msgs/Float64MultiArray: per-mode minimum SSE (deg^2), in library order;
   ``layout.dim[0]`` = {label: ``SSE_LABEL_PREFIX`` + comma-separated mode names, size: M, stride: M};
 * ``estimate`` sensor_msgs/JointState used as stamped named values: ``header.stamp`` = the input
-  sample's stamp, ``name[k]``/``position[k]`` = key/value (see ``estimate_values``).
+  sample's stamp, ``name[k]``/``position[k]`` = key/value (see ``estimate_names``).
 """
 
 from __future__ import annotations
@@ -22,7 +22,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .matcher import StepResult
+from .estimator import EstimateTrace
+from .supervisor import Estimate
 
 INPUT_TOPIC = "segment_angles"
 MODE_TOPIC = "mode"
@@ -43,27 +44,31 @@ def mode_names_from_sse_label(label: str) -> list[str]:
     return label[len(SSE_LABEL_PREFIX) :].split(",")
 
 
+ESTIMATE_HEAD = ("mode_index", "phase", "ready")
+ESTIMATE_TAIL = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode_index")
+
+
 def estimate_names(mode_names: Sequence[str]) -> list[str]:
     """Keys of the ``estimate`` message (JointState ``name``), fixed for a library.
 
-    In order: ``mode_index`` (index into the library's modes), ``phase`` ([0, 1)), ``ready``
-    (1.0 or 0.0), then ``sse/<mode>`` (deg^2) and ``phase/<mode>`` for every mode in library order.
+    In order: ``mode_index`` (reported mode, index into the library's modes), ``phase`` ([0, 1)),
+    ``ready`` (1.0 or 0.0), ``sse/<mode>`` (deg^2) and ``phase/<mode>`` for every mode in library
+    order, then ``confidence`` (margin over the best other mode, relative to its SSE),
+    ``fit_rms_deg`` (RMS error per sample and channel, degrees), ``held`` (1.0 while the reported
+    mode is held), ``phase_rate`` (strides/s, nan until known) and ``raw_mode_index`` (the
+    matcher's own choice before supervision).
     """
-    return ["mode_index", "phase", "ready", *(f"sse/{m}" for m in mode_names), *(f"phase/{m}" for m in mode_names)]
+    return [*ESTIMATE_HEAD, *(f"sse/{m}" for m in mode_names), *(f"phase/{m}" for m in mode_names), *ESTIMATE_TAIL]
 
 
-def estimate_array(result: StepResult) -> np.ndarray:
-    """Values of the ``estimate`` message (JointState ``position``), float64 (3 + 2M,), in the
-    order of ``estimate_names``; built without a Python loop over modes (the node's hot path)."""
-    head = np.array([result.mode_index, result.phase, 1.0 if result.ready else 0.0], dtype=np.float64)
-    return np.concatenate((head, np.asarray(result.sse, dtype=np.float64), np.asarray(result.phases, dtype=np.float64)))
-
-
-def estimate_values(result: StepResult, mode_names: Sequence[str]) -> tuple[list[str], list[float]]:
-    """Key/value pairs of the ``estimate`` message (JointState ``name``/``position``).
-
-    Keys, in order: ``mode_index`` (index into the library's modes), ``phase`` ([0, 1)),
-    ``ready`` (1.0 or 0.0), then ``sse/<mode>`` (deg^2) and ``phase/<mode>`` for every mode in
-    library order.
-    """
-    return estimate_names(mode_names), estimate_array(result).tolist()
+def estimate_array(est: Estimate | EstimateTrace) -> np.ndarray:
+    """Values of the ``estimate`` message (JointState ``position``) in the order of
+    ``estimate_names``: float64 (K,) for one Estimate, (T, K) for a whole EstimateTrace.
+    No Python loop over modes (the node's hot path)."""
+    head = [np.asarray(getattr(est, k), dtype=np.float64) for k in ESTIMATE_HEAD]
+    tail = [np.asarray(getattr(est, k), dtype=np.float64) for k in ESTIMATE_TAIL]
+    sse = np.asarray(est.sse, dtype=np.float64)
+    phases = np.asarray(est.phases, dtype=np.float64)
+    if sse.ndim == 1:
+        return np.concatenate((np.array(head), sse, phases, np.array(tail)))
+    return np.column_stack((*head, sse, phases, *tail))

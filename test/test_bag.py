@@ -178,7 +178,13 @@ def test_out_bag_round_trip(tmp_path, ramp, csv_pred, storage, capsys):
     np.testing.assert_array_equal(values[:, 1], tr.phase)
     np.testing.assert_array_equal(values[:, 2], tr.ready.astype(float))
     np.testing.assert_allclose(values[:, 3 : 3 + m], tr.sse, rtol=1e-10, atol=1e-9)
-    np.testing.assert_array_equal(values[:, 3 + m :], tr.phases)
+    np.testing.assert_array_equal(values[:, 3 + m : 3 + 2 * m], tr.phases)
+    tail = values[:, 3 + 2 * m :]
+    np.testing.assert_allclose(tail[:, 0], tr.confidence, rtol=1e-10)
+    np.testing.assert_allclose(tail[:, 1], tr.fit_rms_deg, rtol=1e-10)
+    np.testing.assert_array_equal(tail[:, 2], tr.held.astype(float))
+    np.testing.assert_allclose(tail[:, 3], tr.phase_rate, rtol=1e-9)  # nan until known, in both; stamps are ns
+    np.testing.assert_array_equal(tail[:, 4], tr.raw_mode_index)
     # mode, phase, sse: only once ready, as the node publishes them
     for topic in ("/mode", "/phase", "/sse"):
         assert [log for log, _ in got[topic]] == stamps[ready].tolist(), topic

@@ -171,7 +171,7 @@ def test_unusable_parameters_exit_nonzero_with_one_line(entry_point, tmp_path: P
             node_command(ros_args, entry_point), env=env, capture_output=True, text=True, timeout=60, check=False
         )
         lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
-        assert proc.returncode == 1, (ros_args, proc.stdout, proc.stderr)
+        assert proc.returncode == 2, (ros_args, proc.stdout, proc.stderr)
         assert len(lines) == 1 and lines[0].startswith("estimator_node: error: ") and text in lines[0], lines
 
 
