@@ -175,10 +175,11 @@ class Supervisor:
         )
 
     def _choose(self, time_s: float, candidate: int, confidence: float) -> tuple[int, bool]:
+        low = self.min_confidence > 0 and confidence < self.min_confidence
         if self._current is None:
             self._current = candidate
-            return candidate, confidence < self.min_confidence
-        if confidence < self.min_confidence:
+            return candidate, low
+        if low:
             self._pending = None
             return self._current, True
         if candidate == self._current:

@@ -234,3 +234,20 @@ def test_cli_process_with_options(tmp_path: Path, multispeed_csv: Path) -> None:
 def test_supervisor_without_options_is_transparent() -> None:
     sup = Supervisor(["a", "b"])
     assert sup.min_confidence == 0 and sup.allowed is None
+
+
+def test_transitions_table_reports_the_best_allowed_mode() -> None:
+    """With min_confidence 0 (off) nothing is held: a table only narrows the candidates."""
+    names = ["A", "B", "C"]
+    sup = Supervisor(names, allowed=transitions_matrix({"A": ["C"]}, names))
+
+    def result(sse):
+        from gait_estimator.matcher import StepResult
+
+        sse = np.array(sse, dtype=float)
+        return StepResult(int(sse.argmin()), names[int(sse.argmin())], 0.0, sse, np.zeros(3), True, np.full(3, 10))
+
+    assert sup.update(0.0, result([1, 5, 5])).mode == "A"
+    est = sup.update(0.01, result([5, 1, 2]))
+    assert est.mode == "C" and not est.held and est.raw_mode_index == 1
+    assert est.confidence == pytest.approx((1 - 2) / 2)
