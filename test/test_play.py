@@ -214,7 +214,7 @@ def test_play_csv_into_live_node_equals_offline(ramp, able_bodied, tmp_path, ros
     np.testing.assert_array_equal(values[:, 1], offline.phase)
     np.testing.assert_array_equal(values[:, 2], offline.ready)
     np.testing.assert_allclose(values[:, 3 : 3 + m], offline.sse, rtol=1e-10, atol=1e-9)
-    np.testing.assert_array_equal(values[:, 3 + m :], offline.phases)
+    np.testing.assert_array_equal(values[:, 3 + m : 3 + 2 * m], offline.phases)
     modes = [msg.data for msg in collector_msgs["mode"]]
     assert modes == [offline.mode_names[i] for i in offline.mode_index[offline.ready]]
 
