@@ -271,7 +271,7 @@ class IncrementalMatcher(_MatcherBase):
         window_fraction: float = 1.0,
         channel_weights: Sequence[float] | None = None,
         subsample: bool = False,
-        resync_period: int = 65536,
+        resync_period: int = 1 << 20,
         resync_block: int = 64,
     ) -> None:
         super().__init__(library, window_fraction, channel_weights, subsample)
