@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from .cli_args import positive_float
 from .errors import GaitEstimatorError
 from .recording import DEFAULT_REFERENCE_RATE_HZ, Recording, read_recording, write_project_csv
 from .strides import (
@@ -24,16 +25,6 @@ from .strides import (
     resample_uniform,
     stride_bounds,
 )
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return v
 
 
 def _window(text: str) -> tuple[float, float]:
@@ -56,16 +47,16 @@ def _label_args(p: argparse.ArgumentParser) -> None:
 
 
 def _detection_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--min-stride-s", type=_positive_float, default=MIN_STRIDE_S,
+    p.add_argument("--min-stride-s", type=positive_float, default=MIN_STRIDE_S,
                    help="shortest stride / minimum heel-strike spacing in seconds (default %(default)s)")
-    p.add_argument("--max-stride-s", type=_positive_float, default=MAX_STRIDE_S,
+    p.add_argument("--max-stride-s", type=positive_float, default=MAX_STRIDE_S,
                    help="longest stride in seconds; longer intervals are not strides (default %(default)s)")
-    p.add_argument("--prominence", type=_positive_float, default=MIN_PROMINENCE_DEG,
+    p.add_argument("--prominence", type=positive_float, default=MIN_PROMINENCE_DEG,
                    help="minimum heel-strike peak prominence in degrees (default %(default)s)")
 
 
 def _time_rate_arg(p: argparse.ArgumentParser, default: float | None = DEFAULT_REFERENCE_RATE_HZ) -> None:
-    p.add_argument("--time-rate", type=_positive_float, default=default, metavar="HZ",
+    p.add_argument("--time-rate", type=positive_float, default=default, metavar="HZ",
                    help="time base of recordings without time stamps (reference Dimension CSV): time = "
                    f"sample / HZ (default {default if default is not None else 'the library rate'})")
 
@@ -240,11 +231,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--out", "-o", required=True, help="library file to write (.yaml or .npz)")
     _label_args(t)
     t.add_argument("--heel-strikes", choices=HEEL_STRIKE_SOURCES, default="auto", help=hs_help)
-    t.add_argument("--rate", type=_positive_float, metavar="HZ",
+    t.add_argument("--rate", type=positive_float, metavar="HZ",
                    help="uniform rate to resample to and store in the library (default: median rate of the recordings)")
     t.add_argument("--name", help="library name (default: the output file's stem)")
     t.add_argument("--min-strides", type=int, default=3, help="fewest usable strides per mode (default %(default)s)")
-    t.add_argument("--duration-tolerance", type=_positive_float, default=0.10,
+    t.add_argument("--duration-tolerance", type=positive_float, default=0.10,
                    help="never reject strides within this fraction of the median duration (default %(default)s)")
     _detection_args(t)
     _time_rate_arg(t)
@@ -268,7 +259,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     r = sub.add_parser("resample", help="resample a recording to a uniform rate (with labels and heel strikes)")
     r.add_argument("recording", help="recording: project CSV or reference Dimension CSV")
     r.add_argument("--out", "-o", required=True, help="project CSV to write")
-    r.add_argument("--rate", type=_positive_float, metavar="HZ", help="target rate (default: the recording's median rate)")
+    r.add_argument("--rate", type=positive_float, metavar="HZ", help="target rate (default: the recording's median rate)")
     _label_args(r)
     r.add_argument("--heel-strikes", choices=(*HEEL_STRIKE_SOURCES, "none"), default="none",
                    help="add a heel_strike column found this way (default %(default)s)")
@@ -281,7 +272,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     ls.add_argument("--kernels", "-k", default="able_bodied", metavar="LIB", help="library giving N_m / rate per mode")
     ls.add_argument("--modes", metavar="A,B,...", help="modes to choose from (default: all of the library)")
     ls.add_argument("--heel-strikes", choices=HEEL_STRIKE_SOURCES, default="auto", help=hs_help)
-    ls.add_argument("--tolerance", type=_positive_float, default=0.15,
+    ls.add_argument("--tolerance", type=positive_float, default=0.15,
                     help="largest relative difference from the nearest kernel duration (default %(default)s)")
     ls.add_argument("--all-strides", action="store_true",
                     help="label every stride within --tolerance, not only steady ones (harsher: includes speed changes)")

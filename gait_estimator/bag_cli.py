@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import statistics
 import tempfile
 import time
@@ -26,6 +25,7 @@ from .bag import (
     read_bag,
 )
 from .channels import CHANNELS, N_CHANNELS
+from .cli_args import positive_float, seconds
 from .errors import GaitEstimatorError
 from .process import Predictions, predict
 from .recording import Recording, read_recording, write_project_csv
@@ -44,25 +44,6 @@ def _joint_names(text: str) -> tuple[str, ...]:
     return names
 
 
-def _seconds(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
-    if math.isnan(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"expected seconds >= 0, got {text!r}")
-    return v
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return v
-
 
 class _ReaderOption(argparse.Action):
     """Stores the value and also into ``namespace.reader_options[dest]`` (read_recording kwargs)."""
@@ -80,7 +61,7 @@ def _bag_reading_options(p: Any, action: type[argparse.Action] | str = "store", 
         help="JointState names of right_thigh,left_thigh,right_shank,left_shank (default: those names)",
     )
     (max_gap or p).add_argument(
-        "--max-gap", dest="max_gap_s", type=_seconds, action=action, metavar="SECONDS",
+        "--max-gap", dest="max_gap_s", type=seconds, action=action, metavar="SECONDS",
         help=f"a gap between sample times longer than this restarts the window, as in the node (default "
         f"{DEFAULT_MAX_GAP_S:g}; 0 disables; any recording)",
     )
@@ -284,7 +265,7 @@ def add_commands(sub: Any) -> None:
         help="stamp of the first sample in seconds since the epoch (default: now); bag sources keep their stamps",
     )
     conv.add_argument(
-        "--sample-rate", type=_positive_float, default=230.0, metavar="HZ",
+        "--sample-rate", type=positive_float, default=230.0, metavar="HZ",
         help="time base of a reference CSV without time column (default %(default)g)",
     )
     conv.set_defaults(func=cmd_convert)
@@ -296,7 +277,7 @@ def add_commands(sub: Any) -> None:
         "DDS settings come from the environment: set ROS_DOMAIN_ID (and ROS_AUTOMATIC_DISCOVERY_RANGE) as for any node.",
     )
     play.add_argument("source", help="bag directory / .mcap / .db3 file, or a project/reference CSV")
-    play.add_argument("--rate", type=_positive_float, default=1.0, help="playback speed factor (default %(default)g)")
+    play.add_argument("--rate", type=positive_float, default=1.0, help="playback speed factor (default %(default)g)")
     play.add_argument(
         "--topic", action="append",
         help="bag: topic to play (repeat for several; default all); CSV: topic to publish on (default segment_angles, "
@@ -309,9 +290,9 @@ def add_commands(sub: Any) -> None:
     )
     play.add_argument("--units", choices=UNITS, default="rad", help="CSV: angle units published (default %(default)s)")
     play.add_argument("--joint-names", type=_joint_names, metavar="A,B,C,D", help="CSV: JointState joint names")
-    play.add_argument("--sample-rate", type=_positive_float, default=230.0, metavar="HZ", help="reference CSV time base")
+    play.add_argument("--sample-rate", type=positive_float, default=230.0, metavar="HZ", help="reference CSV time base")
     play.add_argument(
-        "--wait-for-subscribers", type=_seconds, default=0.0, metavar="SECONDS",
+        "--wait-for-subscribers", type=seconds, default=0.0, metavar="SECONDS",
         help="first wait up to SECONDS until every topic has a subscriber (default 0: start at once)",
     )
     play.add_argument("--qos-depth", type=int, default=1000, help="publisher history depth, reliable (default %(default)s)")

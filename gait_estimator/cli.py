@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from .cli_args import int_list, positive_int
 from .errors import GaitEstimatorError
 from .library_io import load_library, save_library
 from .resources import DEFAULT_LIBRARY
@@ -31,21 +32,6 @@ def _kernels_arg(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _positive_int(text: str) -> int:
-    v = int(text)
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return v
-
-
-def _int_list(text: str) -> list[int]:
-    try:
-        values = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
-    if not values or any(v <= 0 for v in values):
-        raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
-    return values
 
 
 # ---------------------------------------------------------------------------------------------
@@ -187,8 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="benchmark the matcher (per-step time, memory, drift)")
     _kernels_arg(b)
-    b.add_argument("--modes", type=_int_list, default=[7, 700], help="mode counts, e.g. 7,70,700 (default 7,700)")
-    b.add_argument("--steps", type=_positive_int, default=5000, help="timed steps per mode count (default 5000)")
+    b.add_argument("--modes", type=int_list, default=[7, 700], help="mode counts, e.g. 7,70,700 (default 7,700)")
+    b.add_argument("--steps", type=positive_int, default=5000, help="timed steps per mode count (default 5000)")
     b.add_argument("--naive-max-modes", type=int, default=7, help="also time the naive matcher up to this M (default 7)")
     b.add_argument("--drift-steps", type=int, default=0, help="also run this many steps and report drift vs recomputation")
     b.add_argument("--json", help="write the report as JSON")

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .cli_args import positive_float
 from .errors import GaitEstimatorError
 from .resources import DEFAULT_LIBRARY
 
@@ -34,12 +35,6 @@ def _domain_id(text: str) -> int:
         raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
     return v
 
-
-def _positive_float(text: str) -> float:
-    v = float(text)
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return v
 
 
 def _rates(text: str) -> list[float]:
@@ -373,7 +368,7 @@ def add_commands(sub: Any) -> None:
         "../shared/data/swge/recordings/Multispeed_Walk_AB.csv beside the repository",
     )
     d.add_argument("--kernels", "-k", default=DEFAULT_LIBRARY, metavar="LIB", help="kernel library (default %(default)s)")
-    d.add_argument("--speed", type=_positive_float, default=1.0, help="playback speed factor (default 1 = real time)")
+    d.add_argument("--speed", type=positive_float, default=1.0, help="playback speed factor (default 1 = real time)")
     d.add_argument("--start", type=int, help="first sample index (inclusive)")
     d.add_argument("--stop", type=int, help="last sample index (exclusive)")
     d.add_argument("--echo-every", type=int, default=23, metavar="N",
@@ -391,11 +386,11 @@ def add_commands(sub: Any) -> None:
         "at which every input is answered. LOCALHOST discovery, its own ROS_DOMAIN_ID.",
     )
     b.add_argument("--kernels", "-k", default=DEFAULT_LIBRARY, metavar="LIB", help="kernel library (default %(default)s)")
-    b.add_argument("--rate", type=_positive_float, default=230.0, help="rate of the latency run, Hz (default 230)")
+    b.add_argument("--rate", type=positive_float, default=230.0, help="rate of the latency run, Hz (default 230)")
     b.add_argument("--samples", type=int, default=2300, help="samples in the latency run (default 2300 = 10 s)")
     b.add_argument("--rates", type=_rates, default=list(DEFAULT_RATES),
                    help="input rates to try, Hz (default " + ",".join(str(r) for r in DEFAULT_RATES) + ")")
-    b.add_argument("--seconds", type=_positive_float, default=2.0, help="duration of each rate step (default 2 s)")
+    b.add_argument("--seconds", type=positive_float, default=2.0, help="duration of each rate step (default 2 s)")
     b.add_argument("--domain-id", type=_domain_id, default=BENCH_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
     b.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.node)")
     b.add_argument("--json", help="write the report as JSON")
