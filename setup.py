@@ -1,8 +1,19 @@
+import os
 from glob import glob
 
 from setuptools import find_packages, setup
 
 package_name = "gait_estimator"
+
+
+def data_tree(top: str) -> list[tuple[str, list[str]]]:
+    """(share/gait_estimator/<dir>, [files]) for every directory below ``top`` (bundled data)."""
+    return [
+        (os.path.join("share", package_name, root), [os.path.join(root, f) for f in sorted(files)])
+        for root, _, files in sorted(os.walk(top))
+        if files
+    ]
+
 
 setup(
     name=package_name,
@@ -18,6 +29,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/kernels", glob("config/kernels/*.yaml")),
+        *data_tree("data"),
     ],
     install_requires=[
         "setuptools",
@@ -37,18 +49,18 @@ setup(
             "pytest>=7",
             "hypothesis>=6.80",
             "ruff>=0.5",
+            "wheel",
         ],
         "colcon": [
             "colcon-common-extensions",
             "ros-jazzy-ament-package",
         ],
     },
-    zip_safe=True,
-    tests_require=["pytest"],
+    zip_safe=False,
     entry_points={
         "console_scripts": [
             "gait-estimator = gait_estimator.cli:main",
-            "estimator_node = gait_estimator.node:main",
+            "estimator_node = gait_estimator.ros.node:main",
         ],
     },
 )

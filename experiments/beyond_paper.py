@@ -6,12 +6,12 @@ Every number and table of that README section comes from this script:
     python experiments/beyond_paper.py                      # -> experiments/results/beyond/
     python experiments/beyond_paper.py --out DIR --seeds 5 --jobs 2
 
-Run from anywhere with gait_estimator importable; the shared data are read from ../shared beside
-the repository (or $GAIT_ESTIMATOR_SHARED). Writes ``summary.json`` (all metrics),
+Run from anywhere with gait_estimator importable; the recordings are the project's bundled
+data/swge. Writes ``summary.json`` (all metrics),
 ``tables.md`` (the README tables) and two figures into the output directory. Runtime ≈ 2-3 min on
 2 cores.
 
-Data sets (all evaluated with ``gait_estimator.evaluate.evaluate``, the code behind
+Data sets (all evaluated with ``gait_estimator.analysis.evaluate.evaluate``, the code behind
 ``gait-estimator evaluate``; predictions come from ``Estimator``, the code behind ``process``):
 
 * ``MS``: Multispeed_Walk_AB, bundled able_bodied kernels, every stride within 15 % of a kernel
@@ -50,13 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from gait_estimator.estimator import EstimateTrace, Estimator, EstimatorConfig, trace_from_estimates
-from gait_estimator.evaluate import PredictionTable, circular_error, evaluate, settle_time, time_in_run
-from gait_estimator.kernels import KernelLibrary
-from gait_estimator.labels import duration_labels, merge_steady, read_label_ranges, with_ranges
-from gait_estimator.library_io import load_library
-from gait_estimator.recording import Recording, read_recording, write_project_csv
-from gait_estimator.strides import (
+from gait_estimator.analysis.evaluate import PredictionTable, circular_error, evaluate, settle_time, time_in_run
+from gait_estimator.analysis.labels import duration_labels, merge_steady, read_label_ranges, with_ranges
+from gait_estimator.analysis.strides import (
     DetectionOptions,
     HeelStrikes,
     heel_strikes,
@@ -64,7 +60,12 @@ from gait_estimator.strides import (
     resample_uniform,
     stride_bounds,
 )
-from gait_estimator.train import TrainOptions, train_library
+from gait_estimator.analysis.train import TrainOptions, train_library
+from gait_estimator.core.estimator import EstimateTrace, Estimator, EstimatorConfig, trace_from_estimates
+from gait_estimator.core.kernels import KernelLibrary
+from gait_estimator.io.library_io import load_library
+from gait_estimator.io.readers import read_recording
+from gait_estimator.io.recording import Recording, write_project_csv
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "test"))
@@ -109,9 +110,9 @@ class Dataset:
     table: str = ""  # allowed-transitions YAML for this library ('' = none)
 
 
-def shared_dir() -> Path:
-    env = os.environ.get("GAIT_ESTIMATOR_SHARED")
-    return Path(env) if env else REPO.parent / "shared"
+def data_root() -> Path:
+    """The project root: the paper's data are bundled under data/swge."""
+    return REPO
 
 
 def multispeed(shared: Path, ab: KernelLibrary) -> Dataset:
@@ -854,7 +855,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def compute(args: argparse.Namespace, out: Path) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
     """Run every experiment; returns (summary, the default runs' raw confidence data)."""
     start = time.perf_counter()
-    shared = shared_dir()
+    shared = data_root()
     ab = load_library("able_bodied")
 
     for ds in (multispeed(shared, ab), lg2_able_bodied(shared, ab), lg2_own(shared, out), synthetic(ab, args.seeds),

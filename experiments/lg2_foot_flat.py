@@ -17,12 +17,12 @@ from pathlib import Path
 import numpy as np
 
 from gait_estimator import load_library
-from gait_estimator.labels import labels_from_ranges, read_label_ranges
-from gait_estimator.recording import read_recording
-from gait_estimator.strides import heel_strikes, normalise_strides, resample_uniform, stride_bounds
+from gait_estimator.analysis.labels import labels_from_ranges, read_label_ranges
+from gait_estimator.analysis.strides import heel_strikes, normalise_strides, resample_uniform, stride_bounds
+from gait_estimator.io.readers import read_recording
 
 HERE = Path(__file__).resolve().parent
-DEFAULT = HERE.parent.parent / "shared" / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.csv"
+DEFAULT = HERE.parent / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.csv"
 FLAT_DEG_PER_S = 15.0
 STANDING_S = (3.0, 4.9)
 

@@ -2,12 +2,11 @@
 # Reproduces every number in the README section "Training and evaluating".
 # Usage (with gait-estimator installed; paths are relative to the repository root):
 #     sh experiments/run.sh [OUT_DIR]        # default OUT_DIR: experiments/results
-# Needs the shared data (../shared beside the checkout, or GAIT_ESTIMATOR_SHARED=/path/to/shared).
+# Uses the recordings bundled in data/swge.
 set -eu
 cd "$(dirname "$0")/.."  # repository root: paths below (and in the outputs) are relative to it
 HERE=experiments
-SHARED=${GAIT_ESTIMATOR_SHARED:-../shared}
-REC=$SHARED/data/swge/recordings
+REC=data/swge/recordings
 OUT=${1:-$HERE/results}
 GE=${GAIT_ESTIMATOR:-gait-estimator}
 mkdir -p "$OUT"

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 
-from gait_estimator.labels import LabelRange, read_label_ranges, write_label_ranges
+from gait_estimator.analysis.labels import LabelRange, read_label_ranges, write_label_ranges
 
 
 def main(src: str, train: str, test: str) -> None:

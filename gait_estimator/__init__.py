@@ -1,15 +1,24 @@
 """gait_estimator: locomotion mode and gait phase by kernel matching (Posh, Li, Wensing).
 
-Data flow: kernels (libraries of average strides) -> matcher (per-sample SSE against every
-kernel shift) -> node (ROS 2) or offline tools (process, bench, ...). Nothing here imports rclpy
-except ``gait_estimator.node``.
+Architecture (data flows left to right; a subpackage imports only those to its left):
+
+    core  ->  io  ->  analysis  ->  ros  ->  cli
+
+* ``core``: kernels, matcher, resampling, supervision, the estimator pipeline (numpy only);
+* ``io``: kernel library and recording formats (CSV, rosbag2), stream input checks, output
+  layouts, bundled data;
+* ``analysis``: strides, labels, training, evaluation, figures, benchmarks;
+* ``ros``: the node, its client, the bag player: the only place that imports rclpy;
+* ``cli``: the ``gait-estimator`` argparse front ends.
+
+``test/test_architecture.py`` enforces these rules. See docs/architecture.md.
 """
 
-from .channels import CHANNELS
-from .errors import GaitEstimatorError, LibraryError, RecordingError
-from .kernels import KernelLibrary, KernelMode
-from .library_io import load_library, save_library
-from .matcher import IncrementalMatcher, NaiveMatcher, StepResult
+from .core.channels import CHANNELS
+from .core.errors import GaitEstimatorError, LibraryError, RecordingError
+from .core.kernels import KernelLibrary, KernelMode
+from .core.matcher import IncrementalMatcher, NaiveMatcher, StepResult
+from .io.library_io import load_library, save_library
 
 __version__ = "0.1.0"
 

@@ -1,23 +1,19 @@
-"""Shared test fixtures: the ../shared data beside the checkout, bundled libraries."""
+"""Test fixtures: the project's bundled data (data/swge) and kernel libraries."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("GAIT_ESTIMATOR_SHARED", REPO.parent / "shared")).resolve()
-SWGE = SHARED / "data" / "swge"
+SWGE = REPO / "data" / "swge"
 
 
 @pytest.fixture(scope="session")
 def swge() -> Path:
-    """The paper's data directory (../shared/data/swge); fails loudly when it is missing."""
-    if not (SWGE / "recordings").is_dir():
-        pytest.fail(f"shared data not found at {SWGE}: clone the project with ../shared beside it "
-                    "or set GAIT_ESTIMATOR_SHARED")
+    """The paper's data bundled with the project (data/swge)."""
+    assert (SWGE / "recordings").is_dir(), f"bundled data missing: {SWGE}"
     return SWGE
 
 

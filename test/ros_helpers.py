@@ -18,11 +18,12 @@ import rclpy
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 
-from gait_estimator.kernels import KernelLibrary
-from gait_estimator.node import EstimatorNode
-from gait_estimator.node_client import EstimatorClient, Received
-from gait_estimator.process import predict
-from gait_estimator.recording import Recording, read_recording
+from gait_estimator.core.kernels import KernelLibrary
+from gait_estimator.io.process import predict
+from gait_estimator.io.readers import read_recording
+from gait_estimator.io.recording import Recording
+from gait_estimator.ros.node import EstimatorNode
+from gait_estimator.ros.node_client import EstimatorClient, Received
 
 REPO = Path(__file__).resolve().parents[1]
 RATE_HZ = 230.0

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gait_estimator.kernels import KernelLibrary, KernelMode
-from gait_estimator.recording import Recording
+from gait_estimator.core.kernels import KernelLibrary, KernelMode
+from gait_estimator.io.recording import Recording
 
 FOOT_SHARPNESS = 10.0
 """Concentration of the foot-angle bump at heel strike (von Mises shape; larger = sharper)."""

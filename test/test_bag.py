@@ -12,7 +12,10 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
-from gait_estimator.bag import (
+from gait_estimator.cli.app import main
+from gait_estimator.core.channels import CHANNELS
+from gait_estimator.core.errors import RecordingError
+from gait_estimator.io.bag import (
     FLOAT64_MULTI_ARRAY,
     JOINT_STATE,
     UNDECODABLE,
@@ -20,19 +23,17 @@ from gait_estimator.bag import (
     read_bag,
     typestore,
 )
-from gait_estimator.bag_write import (
+from gait_estimator.io.bag_write import (
     joint_state_msg,
     offered_qos,
     recording_stamps,
     write_input_bag,
     write_output_bag,
 )
-from gait_estimator.channels import CHANNELS
-from gait_estimator.cli import main
-from gait_estimator.errors import RecordingError
-from gait_estimator.outputs import estimate_names, mode_names_from_sse_label, sse_label
-from gait_estimator.process import predict
-from gait_estimator.recording import Recording, read_recording, write_project_csv
+from gait_estimator.io.outputs import estimate_names, mode_names_from_sse_label, sse_label
+from gait_estimator.io.process import predict
+from gait_estimator.io.readers import read_recording
+from gait_estimator.io.recording import Recording, write_project_csv
 
 START_NS = 1_700_000_000_123_456_789
 N = 1000  # samples of the ramp recording used by most tests (window: 392 samples)
@@ -211,7 +212,7 @@ def test_out_bag_with_resampling_stamps_the_grid(tmp_path, ramp, capsys):
 
 
 def test_fast_output_serialization_is_byte_identical_to_rosbags():
-    from gait_estimator.bag_write import _ArrayTemplate, multi_array_msg
+    from gait_estimator.io.bag_write import _ArrayTemplate, multi_array_msg
 
     ts = typestore()
     rng = np.random.default_rng(0)

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 from ros_helpers import REPO, lockstep, unique_suffix
 
-from gait_estimator.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
+from gait_estimator.ros.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
 
 DOMAIN_ID = 29
+FIND_DEMO_RECORDING = "from gait_estimator.io.resources import DEMO_RECORDING, data_path; print(data_path(DEMO_RECORDING))"
 IGNORED = shutil.ignore_patterns(
     ".git", ".venv*", "build", "install", "log", "out", "test", "experiments", "__pycache__", "*.egg-info",
     ".ruff_cache", ".pytest_cache", ".hypothesis", "*.pyc",
@@ -74,13 +75,21 @@ def test_colcon_list_and_build_then_run_like_ros2_run(workspace: Path, monkeypat
     share = Path(get_package_share_directory("gait_estimator"))
     assert (share / "config" / "estimator.yaml").is_file()
     assert (share / "config" / "kernels" / "able_bodied.yaml").is_file()
+    assert (share / "data" / "swge" / "LICENSE").is_file()
+    demo_rec = share / "data" / "swge" / "recordings" / "Multispeed_Walk_AB.csv"
+    assert demo_rec.is_file()
 
     env = local_ros_environment(DOMAIN_ID)
     where = subprocess.run(
-        [sys.executable, "-c", "import gait_estimator.node as n; print(n.__file__)"],
+        [sys.executable, "-c", "import gait_estimator.ros.node as n; print(n.__file__)"],
         env=env, cwd=ws, capture_output=True, text=True, timeout=60, check=True,
     )
     assert where.stdout.strip().startswith(str(site)), where.stdout
+    found = subprocess.run(
+        [sys.executable, "-c", FIND_DEMO_RECORDING],
+        env=env, cwd=ws, capture_output=True, text=True, timeout=60, check=True,
+    )
+    assert Path(found.stdout.strip()) == demo_rec, found.stdout  # what `gait-estimator demo` streams by default
 
     ns = f"/gait_colcon_{unique_suffix()}"
     node = NodeProcess(node_command(["-r", f"__ns:={ns}", "-r", "__node:=estimator"], str(exe)), env)

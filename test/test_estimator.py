@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from gait_estimator import IncrementalMatcher, KernelLibrary
-from gait_estimator.cli import main as cli_main
-from gait_estimator.errors import GaitEstimatorError
-from gait_estimator.estimator import Estimator, EstimatorConfig, run_estimator
-from gait_estimator.kernels import make_mode
-from gait_estimator.recording import read_recording
-from gait_estimator.resample import UniformResampler
-from gait_estimator.supervisor import Supervisor, transitions_matrix
+from gait_estimator.cli.app import main as cli_main
+from gait_estimator.core.errors import GaitEstimatorError
+from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
+from gait_estimator.core.kernels import make_mode
+from gait_estimator.core.resample import UniformResampler
+from gait_estimator.core.supervisor import Supervisor, transitions_matrix
+from gait_estimator.io.readers import read_recording
 
 
 @pytest.fixture(scope="module")
@@ -242,7 +242,7 @@ def test_transitions_table_reports_the_best_allowed_mode() -> None:
     sup = Supervisor(names, allowed=transitions_matrix({"A": ["C"]}, names))
 
     def result(sse):
-        from gait_estimator.matcher import StepResult
+        from gait_estimator.core.matcher import StepResult
 
         sse = np.array(sse, dtype=float)
         return StepResult(int(sse.argmin()), names[int(sse.argmin())], 0.0, sse, np.zeros(3), True, np.full(3, 10))

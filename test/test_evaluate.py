@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 from synthetic import SyntheticConfig, generate
 
-from gait_estimator.cli import main
-from gait_estimator.evaluate import (
+from gait_estimator.analysis.evaluate import (
     PredictionTable,
     circular_error,
     evaluate,
@@ -18,9 +17,10 @@ from gait_estimator.evaluate import (
     phase_truth,
     read_predictions_csv,
 )
-from gait_estimator.labels import parse_label_map, read_label_ranges
-from gait_estimator.recording import write_project_csv
-from gait_estimator.strides import HeelStrikes
+from gait_estimator.analysis.labels import parse_label_map, read_label_ranges
+from gait_estimator.analysis.strides import HeelStrikes
+from gait_estimator.cli.app import main
+from gait_estimator.io.recording import write_project_csv
 
 
 def _table(time_s, mode, phase, ready=None, modes=("Slow", "Med", "Fast")) -> PredictionTable:

@@ -11,9 +11,9 @@ import pytest
 import yaml
 
 from gait_estimator import KernelLibrary, LibraryError, load_library, save_library
-from gait_estimator.cli import main as cli_main
-from gait_estimator.kernels import make_mode
-from gait_estimator.library_io import DEFAULT_REFERENCE_RATE_HZ
+from gait_estimator.cli.app import main as cli_main
+from gait_estimator.core.kernels import make_mode
+from gait_estimator.io.library_io import DEFAULT_REFERENCE_RATE_HZ
 
 
 def _same(a: KernelLibrary, b: KernelLibrary, atol: float = 0.0) -> None:
@@ -77,7 +77,7 @@ def test_large_library_npz_round_trip(tmp_path: Path, able_bodied: KernelLibrary
 
 def _write_doc(tmp_path: Path, mutate) -> Path:
     lib = KernelLibrary("t", (make_mode("A", np.ones((5, 4)), 100.0), make_mode("B", np.zeros((4, 4)), 100.0)))
-    from gait_estimator.library_io import library_to_doc
+    from gait_estimator.io.library_io import library_to_doc
 
     doc = library_to_doc(lib)
     for m in doc["modes"]:

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gait_estimator import IncrementalMatcher, KernelLibrary, NaiveMatcher
-from gait_estimator.kernels import make_mode
-from gait_estimator.recording import read_recording
+from gait_estimator.core.kernels import make_mode
+from gait_estimator.io.readers import read_recording
 
 
 def random_library(rng: np.random.Generator, lengths: list[int], scale: float = 20.0) -> KernelLibrary:

@@ -31,8 +31,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from gait_estimator import load_library
-from gait_estimator.node import DEFAULTS, DESCRIPTIONS, EstimatorNode, StartupError
-from gait_estimator.stream import REASONS
+from gait_estimator.io.stream import REASONS
+from gait_estimator.ros.node import DEFAULTS, DESCRIPTIONS, EstimatorNode, StartupError
 
 PERIOD_NS = round(1e9 / 230.0)
 

@@ -28,8 +28,8 @@ from ros_helpers import (
 )
 from sensor_msgs.msg import JointState
 
-from gait_estimator.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
-from gait_estimator.stream import REASONS
+from gait_estimator.io.stream import REASONS
+from gait_estimator.ros.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
 
 
 @pytest.fixture(scope="module")
@@ -186,11 +186,12 @@ def _gait_estimator(*args: str, timeout: float = 120) -> subprocess.CompletedPro
     )
 
 
-def test_demo_command(multispeed_csv: Path) -> None:
-    proc = _gait_estimator("demo", str(multispeed_csv), "--stop", "800", "--speed", "4", "--domain-id", "27",
+def test_demo_command_streams_the_bundled_recording() -> None:
+    proc = _gait_estimator("demo", "--stop", "800", "--speed", "4", "--domain-id", "27",
                            "--echo-every", "40")
     out = proc.stdout
     assert proc.returncode == 0, out + proc.stderr
+    assert "Multispeed_Walk_AB.csv" in out
     assert "mode: data: Fast" in out and "phase: data: 0." in out
     assert "summary of what the node published" in out and "segments:" in out
     line = next(line for line in out.splitlines() if line.startswith("same mode as offline"))

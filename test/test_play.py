@@ -18,12 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gait_estimator.bag_write import write_input_bag
-from gait_estimator.cli import main
-from gait_estimator.outputs import estimate_names
-from gait_estimator.player import load_playlist, playlist_from_bag, playlist_from_recording, stamp_of, with_stamp
-from gait_estimator.process import predict
-from gait_estimator.recording import Recording, read_recording, write_project_csv
+from gait_estimator.cli.app import main
+from gait_estimator.io.bag_write import write_input_bag
+from gait_estimator.io.outputs import estimate_names
+from gait_estimator.io.process import predict
+from gait_estimator.io.readers import read_recording
+from gait_estimator.io.recording import Recording, write_project_csv
+from gait_estimator.ros.player import load_playlist, playlist_from_bag, playlist_from_recording, stamp_of, with_stamp
 
 START_NS = 1_700_000_000_000_000_000
 PLAY_NODE_DOMAIN = 47
@@ -173,7 +174,7 @@ def test_play_csv_into_live_node_equals_offline(ramp, able_bodied, tmp_path, ros
     offline = predict(rec, able_bodied).trace
 
     node = subprocess.Popen(
-        [sys.executable, "-m", "gait_estimator.node"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        [sys.executable, "-m", "gait_estimator.ros.node"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
         text=True, start_new_session=True,
     )
     collector = Collector(PLAY_NODE_DOMAIN, {"estimate": JointState, "mode": String})

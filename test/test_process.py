@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gait_estimator.cli import main as cli_main
-from gait_estimator.errors import RecordingError
-from gait_estimator.recording import read_recording, write_project_csv
+from gait_estimator.cli.app import main as cli_main
+from gait_estimator.core.errors import RecordingError
+from gait_estimator.io.readers import read_recording
+from gait_estimator.io.recording import write_project_csv
 
 
 def read_predictions(path: Path) -> dict[str, np.ndarray]:

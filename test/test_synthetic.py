@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from synthetic import SyntheticConfig, generate
 
-from gait_estimator.strides import heel_strikes
+from gait_estimator.analysis.strides import heel_strikes
 
 QUIET = SyntheticConfig(duration_cv=0.0, amplitude_cv=0.0, offset_sd_deg=0.0, noise_sd_deg=0.0, foot_noise_sd_deg=0.0)
 

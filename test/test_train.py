@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 from synthetic import SyntheticConfig, generate
 
-from gait_estimator.cli import main
-from gait_estimator.errors import GaitEstimatorError
-from gait_estimator.labels import read_label_ranges, with_mode, with_ranges
-from gait_estimator.library_io import load_library
-from gait_estimator.recording import read_recording, write_project_csv
-from gait_estimator.strides import normalise_strides
-from gait_estimator.train import OutlierRule, TrainOptions, reject_outliers, train_library
+from gait_estimator.analysis.labels import read_label_ranges, with_mode, with_ranges
+from gait_estimator.analysis.strides import normalise_strides
+from gait_estimator.analysis.train import OutlierRule, TrainOptions, reject_outliers, train_library
+from gait_estimator.cli.app import main
+from gait_estimator.core.errors import GaitEstimatorError
+from gait_estimator.io.library_io import load_library
+from gait_estimator.io.readers import read_recording
+from gait_estimator.io.recording import write_project_csv
 
 MODES = ("Slow", "Med", "Fast", "RA")
 

@@ -1,0 +1,393 @@
+"""``gait-estimator demo`` and ``gait-estimator bench-node``: the ROS 2 node at work.
+
+Both start ``estimator_node`` as a child process and talk to it over real DDS restricted to
+this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, a domain ID of their own). rclpy is
+imported only when a command runs, so the offline CLI works without ROS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.errors import GaitEstimatorError
+from ..io.resources import DEFAULT_LIBRARY
+from ..ros import require_ros
+from .args import positive_float
+
+DEMO_DOMAIN_ID = 77
+BENCH_DOMAIN_ID = 78
+DEFAULT_RATES = (500, 1000, 1500, 2000, 3000, 4000, 6000, 8000)
+KEEP_UP_MS = 10.0
+"""bench-node: a rate is sustained only if the median input->estimate latency stays below this."""
+
+
+def _domain_id(text: str) -> int:
+    v = int(text)
+    if not 0 <= v <= 232:
+        raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
+    return v
+
+
+
+def _rates(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated rates in Hz, got {text!r}") from None
+    if not values or any(not (math.isfinite(v) and v > 0) for v in values):
+        raise argparse.ArgumentTypeError(f"expected positive rates, got {text!r}")
+    return values
+
+
+def _start_node(domain_id: int, kernels: str, extra_ros_args: list[str], node_cmd: str | None) -> Any:
+    from ..ros.node_client import NodeProcess, local_ros_environment, node_command
+
+    ros_args = ["-p", f"kernels:={kernels}", *extra_ros_args]
+    return NodeProcess(node_command(ros_args, node_cmd), local_ros_environment(domain_id))
+
+
+def _wait_node(client: Any, node: Any, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not client.wait_for_node(timeout_s=0.2, settle_s=0.5):
+        if node.poll() is not None:
+            out = node.output().strip().splitlines()
+            raise GaitEstimatorError(f"estimator_node exited with code {node.poll()}: {out[-1] if out else '(no output)'}")
+        if time.monotonic() > deadline:
+            raise GaitEstimatorError(f"estimator_node did not connect within {timeout_s:g} s")
+
+
+def _percentiles(values_ms: np.ndarray) -> dict[str, float]:
+    if values_ms.size == 0:
+        return {}
+    p50, p90, p99 = np.percentile(values_ms, [50, 90, 99])
+    return {"p50_ms": float(p50), "p90_ms": float(p90), "p99_ms": float(p99), "max_ms": float(values_ms.max())}
+
+
+# ---------------------------------------------------------------------------------------------
+# demo
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from ..io.library_io import load_library
+    from ..io.process import Predictions, format_summary, predict
+    from ..io.readers import read_recording
+    from ..io.recording import Recording
+    from ..io.resources import DEMO_RECORDING, data_path
+    from ..ros.node_client import use_local_ros
+
+    try:
+        path = Path(args.recording) if args.recording else data_path(DEMO_RECORDING)
+    except FileNotFoundError as exc:
+        raise GaitEstimatorError(f"{exc} (pass a recording: gait-estimator demo RECORDING)") from None
+    if not path.exists():
+        raise GaitEstimatorError(f"{path}: recording not found")
+    lib = load_library(args.kernels)
+    rec = read_recording(path, rate_hz=lib.sample_rate_hz).slice(args.start, args.stop)
+    if len(rec) == 0:
+        raise GaitEstimatorError(f"{path}: no samples in the selected range")
+    rate = (rec.median_rate_hz if len(rec) > 1 else lib.sample_rate_hz) * args.speed
+    due_s = (rec.time_s - rec.time_s[0]) / args.speed  # the recording's own timing
+    use_local_ros(args.domain_id)
+    require_ros()
+    from ..ros.node_client import EstimatorClient
+
+    kernels = lib.path or args.kernels
+    print(
+        f"starting estimator_node (library '{lib.name}', {len(lib)} modes; ROS_DOMAIN_ID={args.domain_id}, "
+        "discovery LOCALHOST)",
+        flush=True,
+    )
+    node = _start_node(args.domain_id, kernels, [], args.node_cmd)
+    client = EstimatorClient(args.domain_id, reliable=args.reliable)
+    code = 0
+    try:
+        _wait_node(client, node, args.timeout)
+        echo_every = max(1, args.echo_every)
+        state = {"mode": None, "n_mode": 0, "n_phase": 0}
+
+        def on_mode(mode: str) -> None:
+            state["n_mode"] += 1
+            changed = mode != state["mode"]
+            if changed or state["n_mode"] % echo_every == 0:
+                print(f"mode: data: {mode}" + ("   <- mode change" if changed and state["mode"] else ""), flush=True)
+            state["mode"] = mode
+
+        def on_phase(phase: float) -> None:
+            state["n_phase"] += 1
+            if state["n_phase"] % echo_every == 0:
+                print(f"phase: data: {phase:.4f}", flush=True)
+
+        client.on_mode, client.on_phase = on_mode, on_phase
+        print(
+            f"streaming {len(rec)} samples of {path.name} into segment_angles (sensor_msgs/JointState, rad) "
+            f"at {rate:.0f} Hz (x{args.speed:g}, recorded timing); echoing 1 in {echo_every} mode/phase messages "
+            "and every mode change",
+            flush=True,
+        )
+        base_ns = time.time_ns()
+        stamps = base_ns + np.round((rec.time_s - rec.time_s[0]) * 1e9).astype(np.int64)
+        t0 = time.monotonic()
+        sent = client.stream(np.radians(rec.angles_deg), stamps, rate, due_s=due_s)
+        client.spin_until(lambda: client.estimate_count >= len(rec), 3.0)
+        wall = time.monotonic() - t0
+        diag = client.latest_diagnostics(timeout_s=2.5)
+        stop_code = node.stop(signal.SIGINT)
+
+        got = client.received
+        stamp_index = {int(s): i for i, s in enumerate(stamps)}
+        idx = np.array([stamp_index.get(s, -1) for s in got.estimate_stamp_ns], dtype=np.int64)
+        live = Predictions(rec.time_s[idx], np.asarray(rec.index)[idx], got.trace(lib.mode_names))
+        print()
+        print("summary of what the node published:")
+        print(format_summary(live, lib, f"{path.name} via estimator_node"))
+        print(
+            f"sent {len(rec)} samples in {wall:.1f} s; received {client.estimate_count} estimates, "
+            f"{client.mode_count} mode and {client.phase_count} phase messages"
+        )
+        answered = Recording(time_s=rec.time_s[idx], angles_deg=rec.angles_deg[idx], index=np.asarray(rec.index)[idx])
+        offline = predict(answered, lib).trace
+        same = int((offline.mode_index == live.trace.mode_index).sum())
+        print(f"same mode as offline 'gait-estimator process' on the same samples: {same}/{idx.size}")
+        if idx.size < len(rec):
+            missing = np.setdiff1d(np.arange(len(rec)), idx)
+            print(f"{len(rec) - idx.size} input samples were not answered (best-effort input; try --reliable): {missing[:10]}")
+        if same != idx.size:
+            code = 1
+        lat = (np.array(got.estimate_recv_ns, dtype=np.int64) - sent[idx]) / 1e6
+        if lat.size:
+            p = _percentiles(lat)
+            print(f"input -> estimate latency: p50 {p['p50_ms']:.2f} ms, p99 {p['p99_ms']:.2f} ms")
+        if diag:
+            rejected = {k[len("rejected_") :]: v for k, v in diag.items() if k.startswith("rejected_") and v != "0"}
+            print(
+                f"node diagnostics: processing time mean {diag['processing_time_mean_ms']} ms, "
+                f"max {diag['processing_time_max_ms']} ms (last second); accepted {diag['samples_accepted']}, "
+                f"rejected {diag['samples_rejected']}" + (f" {rejected}" if rejected else "")
+            )
+        print(f"estimator_node stopped with SIGINT: exit code {stop_code}")
+        if stop_code != 0:
+            code = 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        code = 130
+    finally:
+        client.close()
+        node.close()
+    return code
+
+
+# ---------------------------------------------------------------------------------------------
+# bench-node
+
+
+def bench_node(
+    kernels: str = DEFAULT_LIBRARY,
+    latency_samples: int = 2300,
+    rate_hz: float = 230.0,
+    rates: list[float] | tuple[float, ...] = DEFAULT_RATES,
+    rate_seconds: float = 2.0,
+    domain_id: int = BENCH_DOMAIN_ID,
+    node_cmd: str | None = None,
+    log: Any = print,
+) -> dict[str, Any]:
+    """Measure estimator_node in a child process over DDS on this machine.
+
+    1. Latency: ``latency_samples`` inputs at ``rate_hz``; latency = arrival of the ``estimate``
+       message carrying an input's stamp - publication of that input (same clock, this process).
+    2. Throughput: for each rate in ``rates`` (ascending), ``rate_seconds`` of input; sustained =
+       the node processed every input (its diagnostics ``samples_received``, so nothing was lost in
+       its best-effort input queue), the input went out at >= 95% of the requested rate, and the
+       median latency stayed below KEEP_UP_MS (no growing backlog). Stops at the first rate that
+       fails twice.
+
+    Input: JointState (rad) of synthetic strides of the library's kernels with noise, stamped on
+    the library's time base, published reliably; this process subscribes to ``estimate`` (like a
+    controller) and ``/diagnostics`` only.
+    """
+    from ..analysis.bench import machine_info, synthetic_walk
+    from ..io.library_io import load_library
+    from ..io.outputs import ESTIMATE_TOPIC
+    from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient, use_local_ros
+
+    lib = load_library(kernels)
+    use_local_ros(domain_id)
+    node = _start_node(domain_id, lib.path or kernels, [], node_cmd)
+    client = EstimatorClient(domain_id, reliable=True, record=False, outputs=(ESTIMATE_TOPIC, DIAGNOSTICS_TOPIC))
+    report: dict[str, Any] = {
+        "machine": machine_info(),
+        "library": lib.name,
+        "modes": len(lib),
+        "node_cmd": node.cmd,
+        "domain_id": domain_id,
+    }
+    next_stamp = [time.time_ns()]
+
+    def node_received() -> int:
+        d = client.latest_diagnostics(timeout_s=3.0)
+        if d is None:
+            raise GaitEstimatorError("no diagnostics from estimator_node")
+        return int(d["samples_received"])
+
+    def run(n: int, rate: float) -> dict[str, Any]:
+        x = np.radians(synthetic_walk(lib, n, seed=n))
+        period = int(1e9 / lib.sample_rate_hz)  # stamps keep the library's time base
+        stamps = next_stamp[0] + period * np.arange(1, n + 1, dtype=np.int64)
+        next_stamp[0] = int(stamps[-1])
+        before = node_received()
+        n_diag = len(client.received.diagnostics)
+        got = client.received
+        got.clear()
+        first = client.estimate_count
+        sent = client.stream(x, stamps, rate)
+        achieved = (n - 1) / max((sent[-1] - sent[0]) / 1e9, 1e-9) if n > 1 else rate
+        last, last_change = client.estimate_count, time.monotonic()
+        while client.estimate_count - first < n and time.monotonic() - last_change < 0.5:
+            client.spin_once(0.05)
+            if client.estimate_count != last:
+                last, last_change = client.estimate_count, time.monotonic()
+        processed = node_received() - before
+        index = {int(s): i for i, s in enumerate(stamps)}
+        idx = np.array([index.get(s, -1) for s in got.estimate_stamp_ns], dtype=np.int64)
+        ok = idx >= 0
+        lat = (np.array(got.estimate_recv_ns, dtype=np.int64)[ok] - sent[idx[ok]]) / 1e6
+        busy = [d for d in client.received.diagnostics[n_diag:] if float(d["input_rate_hz"]) > 0]
+        out: dict[str, Any] = {
+            "rate_hz": rate,
+            "samples": n,
+            "achieved_rate_hz": float(achieved),
+            "node_processed": processed,
+            "input_drops": n - processed,
+            "answered": int(ok.sum()),
+            **_percentiles(lat),
+        }
+        if busy:
+            out["node_processing_mean_ms"] = float(np.mean([float(d["processing_time_mean_ms"]) for d in busy]))
+            out["node_processing_max_ms"] = float(max(float(d["processing_time_max_ms"]) for d in busy))
+        return out
+
+    try:
+        _wait_node(client, node, 30.0)
+        run(int(lib.lengths.max()) + 50, rate_hz)  # warm-up: fill the window, first-call costs
+        lt = run(latency_samples, rate_hz)
+        report["latency"] = lt
+        log(
+            f"latency at {rate_hz:g} Hz: {lt['samples']} samples, {lt['answered']} answered: "
+            f"p50 {lt.get('p50_ms', math.nan):.3f} ms, p90 {lt.get('p90_ms', math.nan):.3f} ms, "
+            f"p99 {lt.get('p99_ms', math.nan):.3f} ms, max {lt.get('max_ms', math.nan):.3f} ms; node processing "
+            f"mean {lt.get('node_processing_mean_ms', math.nan):.3f} ms, max {lt.get('node_processing_max_ms', math.nan):.3f} ms"
+        )
+        steps = []
+        best = 0.0
+        ok = True
+        for rate in sorted(rates):
+            n = max(500, int(rate * rate_seconds))
+            for attempt in (1, 2):  # one retry: the machine is noisy
+                step = run(n, rate)
+                step["attempt"] = attempt
+                keeps_up = step.get("p50_ms", math.inf) < KEEP_UP_MS
+                ok = step["input_drops"] == 0 and step["achieved_rate_hz"] >= 0.95 * rate and keeps_up
+                step["sustained"] = ok
+                steps.append(step)
+                log(
+                    f"rate {rate:6.0f} Hz (attempt {attempt}): sent {n} at {step['achieved_rate_hz']:6.0f} Hz, node processed "
+                    f"{step['node_processed']}, estimates received {step['answered']}"
+                    + (f", latency p50 {step['p50_ms']:.3f} ms p99 {step['p99_ms']:.3f} ms" if "p50_ms" in step else "")
+                    + (
+                        ""
+                        if ok
+                        else "  <- input drops"
+                        if step["input_drops"]
+                        else "  <- falling behind"
+                        if not keeps_up
+                        else "  <- publisher too slow"
+                    )
+                )
+                if ok:
+                    break
+            if not ok:
+                break
+            best = rate
+        report["throughput"] = {"steps": steps, "max_sustained_rate_hz": best, "rates_tried": sorted(rates)}
+        log(f"highest input rate sustained without drops: {best:g} Hz" + (" (the highest tried)" if ok else ""))
+        report["node_exit_code"] = node.stop(signal.SIGINT)
+    finally:
+        client.close()
+        node.close()
+    return report
+
+
+def cmd_bench_node(args: argparse.Namespace) -> int:
+    require_ros()
+    report = bench_node(
+        kernels=args.kernels,
+        latency_samples=args.samples,
+        rate_hz=args.rate,
+        rates=args.rates,
+        rate_seconds=args.seconds,
+        domain_id=args.domain_id,
+        node_cmd=args.node_cmd,
+    )
+    m = report["machine"]
+    print(f"machine: {m['processor']}, {m['cpus']} CPUs, Python {m['python']}; "
+          f"library {report['library']} ({report['modes']} modes)")
+    if args.json:
+        Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {args.json}")
+    return 0 if report.get("node_exit_code") == 0 else 1
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def add_commands(sub: Any) -> None:
+    """Register ``demo`` and ``bench-node`` on the ``gait-estimator`` subparsers."""
+    d = sub.add_parser(
+        "demo",
+        help="run estimator_node on a recording streamed over ROS 2 and echo mode/phase",
+        description="Start estimator_node, stream a recording into segment_angles at its real rate, print the "
+        "mode and phase messages as they arrive (like 'ros2 topic echo'), then a summary. Uses "
+        "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and its own ROS_DOMAIN_ID.",
+    )
+    d.add_argument(
+        "recording",
+        nargs="?",
+        help="recording (reference Dimension:4xT CSV, project CSV or rosbag2); default: the bundled "
+        "data/swge/recordings/Multispeed_Walk_AB.csv",
+    )
+    d.add_argument("--kernels", "-k", default=DEFAULT_LIBRARY, metavar="LIB", help="kernel library (default %(default)s)")
+    d.add_argument("--speed", type=positive_float, default=1.0, help="playback speed factor (default 1 = real time)")
+    d.add_argument("--start", type=int, help="first sample index (inclusive)")
+    d.add_argument("--stop", type=int, help="last sample index (exclusive)")
+    d.add_argument("--echo-every", type=int, default=23, metavar="N",
+                   help="print every Nth mode/phase message, and every mode change (default 23, ~10 lines/s; 1 = all)")
+    d.add_argument("--reliable", action="store_true", help="publish the input reliably (default best effort)")
+    d.add_argument("--domain-id", type=_domain_id, default=DEMO_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
+    d.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the node to connect")
+    d.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
+    d.set_defaults(func=cmd_demo)
+
+    b = sub.add_parser(
+        "bench-node",
+        help="benchmark estimator_node over ROS 2: latency and highest sustained input rate",
+        description="Start estimator_node, measure input->estimate latency at --rate, then the highest of --rates "
+        "at which every input is answered. LOCALHOST discovery, its own ROS_DOMAIN_ID.",
+    )
+    b.add_argument("--kernels", "-k", default=DEFAULT_LIBRARY, metavar="LIB", help="kernel library (default %(default)s)")
+    b.add_argument("--rate", type=positive_float, default=230.0, help="rate of the latency run, Hz (default 230)")
+    b.add_argument("--samples", type=int, default=2300, help="samples in the latency run (default 2300 = 10 s)")
+    b.add_argument("--rates", type=_rates, default=list(DEFAULT_RATES),
+                   help="input rates to try, Hz (default " + ",".join(str(r) for r in DEFAULT_RATES) + ")")
+    b.add_argument("--seconds", type=positive_float, default=2.0, help="duration of each rate step (default 2 s)")
+    b.add_argument("--domain-id", type=_domain_id, default=BENCH_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
+    b.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
+    b.add_argument("--json", help="write the report as JSON")
+    b.set_defaults(func=cmd_bench_node)

@@ -1,0 +1,353 @@
+"""Reading the driver topic of a rosbag2 recording (mcap or sqlite3) into a Recording.
+
+Pure Python (the ``rosbags`` library, imported lazily): no ROS install needed. Messages become
+samples exactly as the live node turns them into samples (``stream.py``):
+
+* ``sensor_msgs/msg/JointState``: the four angles by joint name (``joint_names``, default
+  CHANNELS; other joints ignored), ``input_units`` ``rad`` (default, REP 103) or ``deg``; the
+  sample time is ``header.stamp``, or the bag's receive (log) time when the stamp is zero;
+* ``std_msgs/msg/Float64MultiArray``: ``data`` = the four angles in CHANNELS order; it has no
+  header, so the sample time is the bag's receive (log) time;
+* bad messages (non-finite values, missing joints, wrong length, undecodable data, a stamp not
+  after the previous one) are skipped and counted in ``Recording.skipped``;
+* sample times are kept as integer stamps (``BagRecording.stamp_ns``, for ``--out-bag``) and as
+  ``time_s`` = seconds since the first accepted sample; a gap longer than ``max_gap_s`` restarts
+  the matcher window, which ``process.predict`` does from ``time_s`` (as the node does from its
+  stamps); the reader counts such gaps for the summary.
+
+A bag path is a rosbag2 directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3``
+storage file, which is read on its own (its own schema/topic tables; no metadata.yaml needed).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.errors import RecordingError
+from .recording import Recording
+from .stream import UNITS, SampleRejected, StreamGuard, angles_from_array, angles_from_named
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+INPUT_MSGTYPES = {"joint_state": JOINT_STATE, "float64_multi_array": FLOAT64_MULTI_ARRAY}
+"""``--type`` / ``input_type`` names of the supported input message types."""
+
+DEFAULT_TOPIC = "/segment_angles"
+DEFAULT_MAX_GAP_S = 0.5
+STORAGE_SUFFIXES = (".mcap", ".db3")
+
+UNDECODABLE = "undecodable"
+"""Skip reason for a message whose serialized data cannot be decoded as its declared type."""
+
+
+@lru_cache(maxsize=1)
+def typestore() -> Any:
+    """The rosbags type store for ROS 2 Jazzy message definitions."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def normalize_topic(topic: str) -> str:
+    """Absolute topic name as stored in bags: ``segment_angles`` -> ``/segment_angles``."""
+    topic = topic.strip()
+    return topic if topic.startswith("/") else "/" + topic
+
+
+def stamp_to_ns(sec: int, nanosec: int) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds since the epoch."""
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
+def ns_to_stamp(ns: int) -> tuple[int, int]:
+    """Integer nanoseconds -> (sec, nanosec) of builtin_interfaces/Time."""
+    sec, nanosec = divmod(int(ns), 1_000_000_000)
+    return sec, nanosec
+
+
+# ---------------------------------------------------------------------------------------------
+# The recording
+
+
+@dataclass
+class BagRecording(Recording):
+    """A Recording read from one topic of a bag; keeps the original time stamps.
+
+    ``time_s`` is seconds since the first accepted sample's stamp (so summaries and CSVs start
+    at 0); the integer stamps below are what ``--out-bag`` stamps its outputs with.
+
+    Attributes:
+        stamp_ns: Sample time stamps used, ns since the epoch (header stamp, or the log time
+            when the stamp was zero or the type has no header), int64 (T,).
+        log_time_ns: The bag's receive (log) time of every sample, ns since the epoch, int64 (T,).
+        bag: The bag path.
+        topic: The topic read.
+        msgtype: Its message type, e.g. ``sensor_msgs/msg/JointState``.
+        messages: Messages on the topic (accepted + skipped).
+        stamp_fallbacks: Accepted samples whose time is the log time because their header stamp
+            was zero.
+        resets: Gaps longer than ``max_gap_s`` (the matcher window restarts there).
+        max_gap_s: The gap threshold used, seconds.
+    """
+
+    stamp_ns: np.ndarray | None = None
+    log_time_ns: np.ndarray | None = None
+    bag: str = ""
+    topic: str = ""
+    msgtype: str = ""
+    messages: int = 0
+    stamp_fallbacks: int = 0
+    resets: int = 0
+    max_gap_s: float = DEFAULT_MAX_GAP_S
+
+    @property
+    def notes(self) -> list[str]:
+        """One-line remarks for the user: time-stamp fallbacks and window restarts."""
+        out = []
+        if self.msgtype == FLOAT64_MULTI_ARRAY:
+            out.append(f"{self.topic} is {FLOAT64_MULTI_ARRAY} (no header): sample times are the bag's receive times")
+        elif self.stamp_fallbacks:
+            out.append(
+                f"{self.stamp_fallbacks} message(s) on {self.topic} had a zero header stamp: "
+                "used the bag's receive time for them"
+            )
+        if self.resets:
+            out.append(
+                f"{self.resets} gap(s) longer than {self.max_gap_s:g} s on {self.topic}: "
+                "the matcher window restarted there (as in the live node)"
+            )
+        return out
+
+    def select(self, keep: np.ndarray, skipped: dict[str, int] | None = None) -> BagRecording:
+        """The samples where ``keep`` is true, with their stamps (``slice`` uses this too)."""
+        base = super().select(keep, skipped)
+        return BagRecording(
+            **{f: getattr(base, f) for f in Recording.__dataclass_fields__},
+            stamp_ns=None if self.stamp_ns is None else self.stamp_ns[keep],
+            log_time_ns=None if self.log_time_ns is None else self.log_time_ns[keep],
+            bag=self.bag,
+            topic=self.topic,
+            msgtype=self.msgtype,
+            messages=self.messages,
+            stamp_fallbacks=self.stamp_fallbacks,
+            resets=self.resets,
+            max_gap_s=self.max_gap_s,
+        )
+
+
+# ---------------------------------------------------------------------------------------------
+# Opening bags, with one-line errors
+
+
+def is_bag_path(p: Path) -> bool:
+    """True for what looks like a bag: a directory with metadata.yaml or .mcap/.db3 files, or
+    such a storage file itself."""
+    if p.is_dir():
+        return (p / "metadata.yaml").is_file() or any(f.suffix in STORAGE_SUFFIXES for f in p.iterdir())
+    return p.is_file() and p.suffix.lower() in STORAGE_SUFFIXES
+
+
+@contextmanager
+def open_bag(path: str | Path, topic: str | None = None) -> Iterator[Any]:
+    """Open a bag with rosbags; every failure (while opening or reading inside the ``with``
+    block) becomes a one-line RecordingError naming the bag and the topic asked for."""
+    from rosbags.rosbag2 import Reader
+
+    p = Path(path)
+    where = f"{p} (topic {topic or DEFAULT_TOPIC + ' by default'})"
+    if p.is_dir() and not (p / "metadata.yaml").is_file():
+        files = sorted(f.name for f in p.iterdir() if f.suffix in STORAGE_SUFFIXES)
+        hint = f"; to read a storage file on its own, pass it instead: {p / files[0]}" if files else ""
+        raise RecordingError(f"{where}: missing metadata.yaml, not a complete rosbag2 directory{hint}")
+    try:
+        reader = Reader(p)
+        reader.open()
+    except RecordingError:
+        raise
+    except Exception as exc:  # rosbags raises many kinds for damaged files
+        raise RecordingError(f"{where}: cannot open bag, truncated or corrupt? ({_one_line(exc)})") from None
+    try:
+        yield reader
+    except (RecordingError, KeyboardInterrupt):
+        raise
+    except Exception as exc:
+        raise RecordingError(f"{where}: cannot read bag, truncated or corrupt? ({_one_line(exc)})") from None
+    finally:
+        with suppress(Exception):  # closing a damaged bag may fail again; reported above
+            reader.close()
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+def bag_topics(reader: Any) -> dict[str, tuple[str, int]]:
+    """{topic: (message type, message count)} of an open reader."""
+    return {name: (info.msgtype or "(several types)", int(info.msgcount)) for name, info in reader.topics.items()}
+
+
+def format_topics(topics: dict[str, tuple[str, int]]) -> str:
+    if not topics:
+        return "the bag has no topics"
+    return "topics in the bag: " + ", ".join(f"{t} [{ty}, {n} msgs]" for t, (ty, n) in sorted(topics.items()))
+
+
+def choose_topic(bag: Path, topics: dict[str, tuple[str, int]], topic: str | None) -> str:
+    """The topic to read: ``topic`` if given (must exist); otherwise DEFAULT_TOPIC if present,
+    else the only topic of a supported input type."""
+    if topic:
+        name = normalize_topic(topic)
+        if name not in topics:
+            raise RecordingError(f"{bag}: no topic {name}; {format_topics(topics)}")
+        return name
+    if DEFAULT_TOPIC in topics:
+        return DEFAULT_TOPIC
+    supported = [t for t, (ty, _) in topics.items() if ty in INPUT_MSGTYPES.values()]
+    if len(supported) == 1:
+        return supported[0]
+    raise RecordingError(
+        f"{bag}: no topic {DEFAULT_TOPIC} and {'several' if supported else 'no'} topics of type "
+        f"{JOINT_STATE} or {FLOAT64_MULTI_ARRAY}: choose one with --topic; {format_topics(topics)}"
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading samples
+
+
+def _joint_names(joint_names: Sequence[str] | str | None) -> tuple[str, ...]:
+    if joint_names is None:
+        return CHANNELS
+    if isinstance(joint_names, str):
+        joint_names = [j.strip() for j in joint_names.split(",")]
+    names = tuple(joint_names)
+    if len(names) != N_CHANNELS or not all(names) or len(set(names)) != N_CHANNELS:
+        raise RecordingError(f"joint names must be {N_CHANNELS} distinct names ({', '.join(CHANNELS)}), got {names}")
+    return names
+
+
+def read_bag(
+    path: str | Path,
+    topic: str | None = None,
+    joint_names: Sequence[str] | str | None = None,
+    input_units: str = "rad",
+    max_gap_s: float = DEFAULT_MAX_GAP_S,
+    **_: Any,
+) -> BagRecording:
+    """Read the driver topic of a bag into a BagRecording (angles in degrees, CHANNELS order).
+
+    Args:
+        path: rosbag2 directory or .mcap/.db3 file.
+        topic: Topic to read (default: DEFAULT_TOPIC, or the only JointState/Float64MultiArray
+            topic).
+        joint_names: Joint names of right_thigh, left_thigh, right_shank, left_shank in a
+            JointState (sequence or comma-separated string; default CHANNELS).
+        input_units: ``rad`` (default) or ``deg``: units of the angles in the messages.
+        max_gap_s: A gap longer than this (seconds) between accepted samples restarts the
+            matcher window (<= 0 disables), as the node's ``max_gap_s`` parameter.
+
+    Raises:
+        RecordingError: one line naming the bag and topic (missing topic, unsupported type,
+            damaged bag, no usable samples).
+    """
+    p = Path(path)
+    names = _joint_names(joint_names)
+    if input_units not in UNITS:
+        raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {input_units!r}")
+    max_gap = float(max_gap_s)
+    if math.isnan(max_gap):
+        raise RecordingError(f"max_gap_s must be a number of seconds, got {max_gap_s!r}")
+    with open_bag(p, topic and normalize_topic(topic)) as reader:
+        topics = bag_topics(reader)
+        name = choose_topic(p, topics, topic)
+        msgtype = topics[name][0]
+        if msgtype not in INPUT_MSGTYPES.values():
+            raise RecordingError(
+                f"{p}: topic {name} has message type {msgtype}; expected {JOINT_STATE} or {FLOAT64_MULTI_ARRAY}"
+            )
+        conns = [c for c in reader.connections if c.topic == name]
+        try:
+            return _read_samples(p, name, msgtype, reader.messages(connections=conns), names, input_units, max_gap)
+        except (RecordingError, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            raise RecordingError(f"{p} (topic {name}): cannot read bag, truncated or corrupt? ({_one_line(exc)})") from None
+
+
+def _read_samples(
+    bag: Path,
+    topic: str,
+    msgtype: str,
+    messages: Iterator[tuple[Any, int, bytes]],
+    joint_names: tuple[str, ...],
+    units: str,
+    max_gap_s: float,
+) -> BagRecording:
+    deserialize = typestore().deserialize_cdr
+    guard = StreamGuard(max_gap_s=max_gap_s)
+    angles: list[np.ndarray] = []
+    stamps: list[int] = []
+    logs: list[int] = []
+    index: list[int] = []
+    undecodable = 0
+    fallbacks = 0
+    is_joint_state = msgtype == JOINT_STATE
+    n = 0
+    for n, (_conn, log_ns, raw) in enumerate(messages, start=1):
+        try:
+            msg = deserialize(raw, msgtype)
+        except Exception:  # corrupt CDR: skip the message, like a node that never received it
+            undecodable += 1
+            continue
+        fallback = False
+        try:
+            if is_joint_state:
+                sample = angles_from_named(msg.name, msg.position, joint_names, units)
+                stamp_ns = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+                if stamp_ns == 0:
+                    stamp_ns, fallback = int(log_ns), True
+            else:
+                sample = angles_from_array(msg.data, units)
+                stamp_ns = int(log_ns)
+            guard.accept(stamp_ns * 1e-9)  # counts gaps > max_gap_s in guard.resets
+        except SampleRejected as exc:
+            guard.reject(exc)
+            continue
+        fallbacks += fallback
+        angles.append(sample)
+        stamps.append(stamp_ns)
+        logs.append(int(log_ns))
+        index.append(n - 1)
+    skipped = {reason: int(c) for reason, c in guard.rejected.items() if c}
+    if undecodable:
+        skipped[UNDECODABLE] = undecodable
+    if not angles:
+        why = "; skipped: " + ", ".join(f"{c} {r}" for r, c in skipped.items()) if skipped else ""
+        raise RecordingError(f"{bag}: topic {topic}: no usable samples in {n} message(s){why}")
+    stamp_arr = np.array(stamps, dtype=np.int64)
+    return BagRecording(
+        time_s=(stamp_arr - stamp_arr[0]) * 1e-9,
+        angles_deg=np.array(angles, dtype=np.float64).reshape(-1, N_CHANNELS),
+        source=f"{bag} {topic}",
+        index=np.array(index, dtype=np.int64),
+        skipped=skipped,
+        stamp_ns=stamp_arr,
+        log_time_ns=np.array(logs, dtype=np.int64),
+        bag=str(bag),
+        topic=topic,
+        msgtype=msgtype,
+        messages=n,
+        stamp_fallbacks=fallbacks,
+        resets=guard.resets,
+        max_gap_s=max_gap_s,
+    )

@@ -1,0 +1,74 @@
+"""Names and layouts of the estimator's outputs, ROS-free.
+
+The live node (rclpy messages) and the bag writer (rosbags messages) both build their messages
+from these, so a recorded result is identical to what the node publishes.
+
+Topics (relative names, so namespaces and remapping apply):
+
+``mode``, ``phase`` and ``sse`` are published once the matcher is ready, ``estimate`` for every
+estimate (with ``ready`` = 0 while the window fills):
+
+* ``mode``  std_msgs/String: name of the estimated mode;
+* ``phase`` std_msgs/Float64: gait phase in [0, 1), 0 = right heel strike;
+* ``sse``   std_msgs/Float64MultiArray: per-mode minimum SSE (deg^2), in library order;
+  ``layout.dim[0]`` = {label: ``SSE_LABEL_PREFIX`` + comma-separated mode names, size: M, stride: M};
+* ``estimate`` sensor_msgs/JointState used as stamped named values: ``header.stamp`` = the input
+  sample's stamp, ``name[k]``/``position[k]`` = key/value (see ``estimate_names``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..core.estimator import EstimateTrace
+from ..core.supervisor import Estimate
+
+INPUT_TOPIC = "segment_angles"
+MODE_TOPIC = "mode"
+PHASE_TOPIC = "phase"
+SSE_TOPIC = "sse"
+ESTIMATE_TOPIC = "estimate"
+SSE_LABEL_PREFIX = "modes:"
+
+
+def sse_label(mode_names: Sequence[str]) -> str:
+    """``layout.dim[0].label`` of the ``sse`` message: ``modes:Slow,Med,...``."""
+    return SSE_LABEL_PREFIX + ",".join(mode_names)
+
+
+def mode_names_from_sse_label(label: str) -> list[str]:
+    if not label.startswith(SSE_LABEL_PREFIX):
+        raise ValueError(f"not an sse layout label: {label!r}")
+    return label[len(SSE_LABEL_PREFIX) :].split(",")
+
+
+ESTIMATE_HEAD = ("mode_index", "phase", "ready")
+ESTIMATE_TAIL = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode_index")
+
+
+def estimate_names(mode_names: Sequence[str]) -> list[str]:
+    """Keys of the ``estimate`` message (JointState ``name``), fixed for a library.
+
+    In order: ``mode_index`` (reported mode, index into the library's modes), ``phase`` ([0, 1)),
+    ``ready`` (1.0 or 0.0), ``sse/<mode>`` (deg^2) and ``phase/<mode>`` for every mode in library
+    order, then ``confidence`` (margin over the best other mode, relative to its SSE),
+    ``fit_rms_deg`` (RMS error per sample and channel, degrees), ``held`` (1.0 while the reported
+    mode is held), ``phase_rate`` (strides/s, nan until known) and ``raw_mode_index`` (the
+    matcher's own choice before supervision).
+    """
+    return [*ESTIMATE_HEAD, *(f"sse/{m}" for m in mode_names), *(f"phase/{m}" for m in mode_names), *ESTIMATE_TAIL]
+
+
+def estimate_array(est: Estimate | EstimateTrace) -> np.ndarray:
+    """Values of the ``estimate`` message (JointState ``position``) in the order of
+    ``estimate_names``: float64 (K,) for one Estimate, (T, K) for a whole EstimateTrace.
+    No Python loop over modes (the node's hot path)."""
+    head = [np.asarray(getattr(est, k), dtype=np.float64) for k in ESTIMATE_HEAD]
+    tail = [np.asarray(getattr(est, k), dtype=np.float64) for k in ESTIMATE_TAIL]
+    sse = np.asarray(est.sse, dtype=np.float64)
+    phases = np.asarray(est.phases, dtype=np.float64)
+    if sse.ndim == 1:
+        return np.concatenate((np.array(head), sse, phases, np.array(tail)))
+    return np.column_stack((*head, sse, phases, *tail))

@@ -1,0 +1,105 @@
+"""Offline processing: run the matcher over a recording and write or summarise the predictions."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator
+from ..core.kernels import KernelLibrary
+from .recording import Recording
+
+
+@dataclass(frozen=True)
+class Predictions:
+    """Estimator output aligned with the recording samples it came from."""
+
+    time_s: np.ndarray  # (T,) seconds: the input samples' times (or the resampling grid)
+    sample: np.ndarray  # (T,) index in the source recording of the (latest) input sample
+    trace: EstimateTrace
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A run of consecutive ready samples with the same predicted mode."""
+
+    mode: str
+    start_s: float
+    end_s: float
+    samples: int
+
+
+def predict(recording: Recording, library: KernelLibrary, config: EstimatorConfig | None = None) -> Predictions:
+    """Run a fresh Estimator (default: the paper's algorithm) over every sample of ``recording``."""
+    trace = run_estimator(Estimator(library, config), recording.time_s, recording.angles_deg, recording.index)
+    return Predictions(trace.time_s, trace.sample, trace)
+
+
+PREDICTION_COLUMNS = ("time_s", "sample", "mode", "phase", "ready")
+"""First columns of the predictions CSV; then sse_<mode> per mode, then EXTRA_COLUMNS."""
+EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode")
+
+
+def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
+    """Write ``time_s, sample, mode, phase, ready, sse_<mode>..., confidence, fit_rms_deg, held,
+    phase_rate, raw_mode`` (SSE in deg^2, fit in deg, phase rate in strides/s)."""
+    p = Path(path)
+    tr = pred.trace
+    names = np.asarray(tr.mode_names, dtype=object)
+    with p.open("w", encoding="utf-8", newline="") as f:
+        w = csv.writer(f)
+        w.writerow([*PREDICTION_COLUMNS, *(f"sse_{m}" for m in tr.mode_names), *EXTRA_COLUMNS])
+        for i in range(len(pred.time_s)):
+            w.writerow(
+                [
+                    f"{pred.time_s[i]:.6f}",
+                    int(pred.sample[i]),
+                    names[tr.mode_index[i]],
+                    f"{tr.phase[i]:.9f}",
+                    int(tr.ready[i]),
+                    *(f"{v:.9g}" for v in tr.sse[i]),
+                    f"{tr.confidence[i]:.6g}",
+                    f"{tr.fit_rms_deg[i]:.6g}",
+                    int(tr.held[i]),
+                    f"{tr.phase_rate[i]:.6g}",
+                    names[tr.raw_mode_index[i]],
+                ]
+            )
+    return p
+
+
+def segments(pred: Predictions) -> list[Segment]:
+    """Consecutive ready samples grouped by predicted mode."""
+    tr = pred.trace
+    out: list[Segment] = []
+    ready = np.flatnonzero(tr.ready)
+    if ready.size == 0:
+        return out
+    idx = tr.mode_index[ready]
+    breaks = np.flatnonzero((np.diff(idx) != 0) | (np.diff(ready) != 1)) + 1
+    for run in np.split(np.arange(ready.size), breaks):
+        first, last = ready[run[0]], ready[run[-1]]
+        out.append(Segment(tr.mode_names[idx[run[0]]], float(pred.time_s[first]), float(pred.time_s[last]), run.size))
+    return out
+
+
+def format_summary(pred: Predictions, library: KernelLibrary, source: str) -> str:
+    """A human-readable summary: counts per mode and the mode segments with their times."""
+    tr = pred.trace
+    n = len(pred.time_s)
+    ready = int(tr.ready.sum())
+    lines = [
+        f"{source}: {n} samples, {ready} ready (window full after {library.lengths.max()} samples); "
+        f"library '{library.name}' ({len(library)} modes)"
+    ]
+    if ready:
+        counts = np.bincount(tr.mode_index[tr.ready], minlength=len(library))
+        share = ", ".join(f"{m} {c / ready:.1%}" for m, c in zip(tr.mode_names, counts, strict=True) if c)
+        lines.append(f"predicted modes (ready samples): {share}")
+    lines.append("segments:")
+    for s in segments(pred):
+        lines.append(f"  {s.start_s:8.2f} s - {s.end_s:8.2f} s  {s.mode:<8} ({s.samples} samples)")
+    return "\n".join(lines)

@@ -1,0 +1,38 @@
+"""One entry point for every recording source: project CSV, reference CSV, rosbag2."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import RecordingError
+from .bag import is_bag_path, read_bag
+from .recording import Recording, is_project_csv, is_reference_csv, read_project_csv, read_reference_csv
+
+READERS: tuple[tuple[Callable[[Path], bool], Callable[..., Recording]], ...] = (
+    (is_bag_path, read_bag),
+    (is_reference_csv, read_reference_csv),
+    (is_project_csv, read_project_csv),
+)
+"""(detect, read) pairs, tried in order: the first ``detect(path)`` that is true reads it."""
+
+
+def read_recording(path: str | Path, **options: Any) -> Recording:
+    """Read a recording from a project CSV, a reference CSV or a rosbag2 directory/file.
+
+    Args:
+        path: File or directory.
+        **options: Passed to the reader; ``rate_hz`` (Hz) sets the time base of sources without
+            time stamps (the reference CSV; default: the paper's 230 Hz).
+
+    Raises:
+        RecordingError: one line naming the file and what is wrong.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise RecordingError(f"{p}: no such file or directory")
+    for detect, read in READERS:
+        if detect(p):
+            return read(p, **options)
+    raise RecordingError(f"{p}: not a recognised recording (expected a CSV file or a rosbag2 directory)")

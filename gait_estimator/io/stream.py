@@ -1,0 +1,131 @@
+"""Turning a stream of driver messages into matcher samples, ROS-free.
+
+Shared by the live node and offline bag processing so both treat input identically:
+
+* ``angles_from_named`` / ``angles_from_array`` extract the four angles (degrees, CHANNELS order)
+  from the fields of a ``sensor_msgs/JointState`` or ``std_msgs/Float64MultiArray``, raising
+  ``SampleRejected`` with a reason code for bad input (including finite but absurd angles,
+  ``out_of_range``, which would otherwise swamp the matcher's running sums);
+* ``StreamGuard`` checks time stamps (non-increasing -> rejected; a gap longer than
+  ``max_gap_s`` -> the matcher window must restart) and counts rejections by reason.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.channels import CHANNELS, N_CHANNELS
+
+UNITS = ("rad", "deg")
+INPUT_TYPES = ("joint_state", "float64_multi_array")
+
+# Reason codes, as counted in diagnostics and summaries.
+NON_FINITE = "non_finite"
+MISSING_JOINT = "missing_joint"
+WRONG_LENGTH = "wrong_length"
+NON_INCREASING_STAMP = "non_increasing_stamp"
+OUT_OF_RANGE = "out_of_range"
+REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP, OUT_OF_RANGE)
+
+MAX_ABS_ANGLE_DEG = 1.0e4
+"""Largest accepted |angle| (degrees, after unit conversion). Far beyond any segment angle, far
+below values whose squares would swamp the matcher's running sums (or overflow to inf)."""
+
+
+class SampleRejected(ValueError):
+    """A message that cannot become a sample; ``reason`` is one of REASONS."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(detail)
+        self.reason = reason
+
+
+def _to_degrees(values: np.ndarray, units: str) -> np.ndarray:
+    if units == "rad":
+        deg = np.degrees(values)
+    elif units == "deg":
+        deg = values
+    else:
+        raise ValueError(f"units must be one of {UNITS}, got {units!r}")
+    if not (np.abs(deg) <= MAX_ABS_ANGLE_DEG).all():
+        raise SampleRejected(OUT_OF_RANGE, f"angle(s) {values.tolist()} {units} beyond +-{MAX_ABS_ANGLE_DEG:g} deg")
+    return deg
+
+
+def angles_from_named(
+    names: Sequence[str], positions: Sequence[float], joint_names: Sequence[str] = CHANNELS, units: str = "rad"
+) -> np.ndarray:
+    """Angles (4,), degrees, from JointState-style ``name``/``position`` fields.
+
+    ``joint_names`` gives the names of right_thigh, left_thigh, right_shank, left_shank in that
+    order; other joints in the message are ignored and the message order does not matter.
+    """
+    if len(names) != len(positions):
+        raise SampleRejected(WRONG_LENGTH, f"{len(names)} names but {len(positions)} positions")
+    index = {n: i for i, n in enumerate(names)}
+    missing = [j for j in joint_names if j not in index]
+    if missing:
+        raise SampleRejected(MISSING_JOINT, f"missing joint(s) {', '.join(missing)} (got {', '.join(names) or 'none'})")
+    values = np.array([positions[index[j]] for j in joint_names], dtype=np.float64)
+    if not np.isfinite(values).all():
+        raise SampleRejected(NON_FINITE, f"non-finite angle(s) {values.tolist()}")
+    return _to_degrees(values, units)
+
+
+def angles_from_array(data: Sequence[float], units: str = "rad") -> np.ndarray:
+    """Angles (4,), degrees, from ``[right_thigh, left_thigh, right_shank, left_shank]``."""
+    if len(data) != N_CHANNELS:
+        raise SampleRejected(WRONG_LENGTH, f"expected {N_CHANNELS} values, got {len(data)}")
+    values = np.array(data, dtype=np.float64)
+    if not np.isfinite(values).all():
+        raise SampleRejected(NON_FINITE, f"non-finite angle(s) {values.tolist()}")
+    return _to_degrees(values, units)
+
+
+@dataclass
+class StreamGuard:
+    """Stamp checks and rejection counts for one input stream.
+
+    Args:
+        max_gap_s: A gap between accepted samples longer than this (seconds) means the window
+            must restart (``accept`` returns True); <= 0 or inf disables the check.
+    """
+
+    max_gap_s: float = 0.5
+    rejected: Counter = field(default_factory=Counter)
+    accepted: int = 0
+    resets: int = 0
+    last_stamp: float | None = None
+
+    def check_stamp(self, stamp_s: float) -> bool:
+        """Validate the stamp of the next sample; True if the matcher must be reset first.
+
+        Raises SampleRejected (non_increasing_stamp, non_finite) without changing state.
+        """
+        if not math.isfinite(stamp_s):
+            raise SampleRejected(NON_FINITE, f"non-finite stamp {stamp_s}")
+        last = self.last_stamp
+        if last is not None and stamp_s <= last:
+            raise SampleRejected(NON_INCREASING_STAMP, f"stamp {stamp_s:.6f} s is not after the previous {last:.6f} s")
+        return last is not None and 0 < self.max_gap_s < math.inf and stamp_s - last > self.max_gap_s
+
+    def accept(self, stamp_s: float) -> bool:
+        """Record an accepted sample at ``stamp_s``; True if a gap reset happened before it."""
+        reset = self.check_stamp(stamp_s)
+        if reset:
+            self.resets += 1
+        self.last_stamp = stamp_s
+        self.accepted += 1
+        return reset
+
+    def reject(self, exc: SampleRejected) -> None:
+        self.rejected[exc.reason] += 1
+
+    @property
+    def rejected_total(self) -> int:
+        return int(sum(self.rejected.values()))

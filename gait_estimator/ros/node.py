@@ -1,0 +1,623 @@
+"""ROS 2 node ``estimator_node``: locomotion mode and gait phase from streamed segment angles.
+
+Subscribes ``segment_angles`` (sensor-data QoS: best effort, keep last; receives from best-effort
+and reliable publishers) as ``sensor_msgs/JointState`` (angles by name) or
+``std_msgs/Float64MultiArray`` (``[right_thigh, left_thigh, right_shank, left_shank]``), feeds
+every message to the shared estimator pipeline (``estimator.Estimator``: gap check, optional
+resampling, incremental matcher, supervisor; the same code as ``gait-estimator process``) and
+publishes (reliable, keep last 10):
+
+* ``mode`` (std_msgs/String) and ``phase`` (std_msgs/Float64, [0, 1)) once the window is full;
+* ``sse`` (std_msgs/Float64MultiArray, per-mode minimum SSE in deg^2, the layout names the
+  modes) once the window is full;
+* ``estimate`` (sensor_msgs/JointState as stamped key/values, see ``outputs.py``) for every
+  estimate, ``header.stamp`` = the input stamp, ``ready`` = 0 while the window fills;
+* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) at 1 Hz.
+
+Time comes from the input stamps (JointState ``header.stamp``); inputs without a stamp
+(Float64MultiArray, or a zero JointState stamp) are stamped with the node clock on arrival, which
+follows ``/clock`` under ``use_sim_time``. Bad input is dropped, counted and reported (throttled
+warning naming the problem) without touching the estimator state.
+
+This module needs rclpy at import time; the offline tools (``gait-estimator``) do not.
+"""
+
+from __future__ import annotations
+
+import array
+import gc
+import math
+import sys
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import fields
+from typing import Any
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.exceptions import InvalidHandle, ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
+
+from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.errors import GaitEstimatorError
+from ..core.estimator import OPTIONS, Estimator, EstimatorConfig
+from ..core.kernels import KernelLibrary
+from ..core.supervisor import Estimate
+from ..io.library_io import load_library
+from ..io.outputs import (
+    ESTIMATE_TOPIC,
+    INPUT_TOPIC,
+    MODE_TOPIC,
+    PHASE_TOPIC,
+    SSE_TOPIC,
+    estimate_array,
+    estimate_names,
+    sse_label,
+)
+from ..io.resources import DEFAULT_LIBRARY
+from ..io.stream import (
+    INPUT_TYPES,
+    REASONS,
+    UNITS,
+    SampleRejected,
+    StreamGuard,
+    angles_from_array,
+    angles_from_named,
+)
+
+NODE_NAME = "estimator_node"
+DIAGNOSTICS_TOPIC = "/diagnostics"
+DIAGNOSTICS_PERIOD_S = 1.0
+WARN_THROTTLE_S = 2.0
+"""Minimum wall time (s) between two warnings about dropped samples of the same reason."""
+RATE_TOLERANCE = 0.2
+"""Relative deviation of the input stamp rate from the library rate that raises a WARN."""
+MAX_BATCH = 50
+"""Most input messages handled per executor wake-up (see ``EstimatorNode._on_input``)."""
+
+INPUT_QOS = QoSProfile(
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    durability=DurabilityPolicy.VOLATILE,
+)
+"""Sensor-data QoS (best effort, keep last; matches best-effort and reliable publishers). The
+depth is 100 rather than 5 because the matcher needs every sample: a short stall of the node
+(0.43 s at 230 Hz) is caught up on instead of dropping samples."""
+OUTPUT_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=10)
+DIAGNOSTICS_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=10)
+
+OPTION_NAMES = tuple(o.name for o in OPTIONS)
+_CONFIG_FIELDS = {f.name for f in fields(EstimatorConfig)}
+assert set(OPTION_NAMES) <= _CONFIG_FIELDS
+
+DEFAULTS: dict[str, Any] = {
+    "kernels": DEFAULT_LIBRARY,
+    "joint_names": list(CHANNELS),
+    "input_units": "rad",
+    "input_type": "joint_state",
+    **{o.name: o.default for o in OPTIONS},
+}
+"""Parameter defaults, in declaration order; ``config/estimator.yaml`` holds the same values."""
+
+DESCRIPTIONS: dict[str, str] = {
+    "kernels": "Kernel library: a file (.yaml, .npz, reference .csv or per-mode .yaml) or directory, or a "
+    "bundled name (able_bodied, prosthesis). Changing it at run time reloads it and restarts the window.",
+    "joint_names": "JointState names of right_thigh, left_thigh, right_shank, left_shank, in that order "
+    "(4 distinct names; other joints in the message are ignored, message order does not matter).",
+    "input_units": "Units of the input angles: rad (REP 103) or deg.",
+    "input_type": "Input message type on segment_angles (read-only): joint_state (sensor_msgs/JointState) or "
+    "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]).",
+    **{
+        o.name: o.description[0].upper() + o.description[1:]
+        + ("" if o.name == "max_gap_s" else ". Changing it at run time restarts the window.")
+        for o in OPTIONS
+    },
+}
+READ_ONLY = frozenset({"input_type"})
+
+
+class StartupError(GaitEstimatorError):
+    """The node cannot start (bad parameter, unreadable library): reported in one line."""
+
+
+def _stamp_seconds(stamp: TimeMsg) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def _stamp_from_seconds(t: float) -> TimeMsg:
+    ns = round(t * 1e9)
+    return TimeMsg(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def _double_array(values: np.ndarray) -> array.array:
+    """float64 numpy -> array('d') without a per-element Python loop (the fast message setter)."""
+    out = array.array("d")
+    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+    return out
+
+
+def _config_value(name: str, value: Any) -> Any:
+    """A parameter value as EstimatorConfig wants it (lists become tuples)."""
+    return tuple(value) if isinstance(value, (list, tuple, array.array)) else value
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+class EstimatorNode(Node):
+    """The estimator pipeline on a stream of segment angles; see the module docstring.
+
+    Args:
+        node_name: ROS node name.
+        **kwargs: Passed to ``rclpy.node.Node`` (``context``, ``namespace``,
+            ``parameter_overrides``, ...).
+
+    Raises:
+        StartupError: An invalid parameter value (override or params file) or an unreadable
+            kernel library; the message is one line.
+    """
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self._library: KernelLibrary | None = None
+        self._config = EstimatorConfig()
+        self._pending: tuple[KernelLibrary | None, EstimatorConfig, Estimator | None] | None = None
+        self._last_rejection = ""
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        try:
+            for name, default in DEFAULTS.items():
+                self._last_rejection = ""
+                self.declare_parameter(
+                    name, default, ParameterDescriptor(description=DESCRIPTIONS[name], read_only=name in READ_ONLY)
+                )
+                # Declaring validated the value (kernels: loaded it); keep it for the next ones.
+                if self._pending is not None:
+                    self._library, self._config = self._pending[0] or self._library, self._pending[1]
+                self._pending = None
+            assert self._library is not None
+            self._set_estimator(Estimator(self._library, self._config))
+        except ParameterException as exc:
+            reason = self._last_rejection or ": " + _one_line(exc)
+            self.destroy_node()
+            raise StartupError(f"invalid parameter {reason}") from None
+        except (GaitEstimatorError, ValueError) as exc:
+            self.destroy_node()
+            raise StartupError(_one_line(exc)) from None
+
+        self._joint_names: tuple[str, ...] = tuple(self.get_parameter("joint_names").value)
+        self._units: str = self.get_parameter("input_units").value
+        self._input_type: str = self.get_parameter("input_type").value
+        self._guard = StreamGuard(max_gap_s=0.0)  # stamp checks and rejection counts; gaps: Estimator
+        self._resets_before = 0  # gap restarts of estimators replaced by parameter changes
+
+        self._received = 0
+        self._warned_at: dict[str, float] = {}
+        self._suppressed: Counter = Counter()
+        self._proc_sum = 0.0
+        self._proc_max = 0.0
+        self._proc_count = 0
+        self._period_received = 0
+        self._period_rejected = 0
+        self._period_first_stamp: float | None = None
+        self._period_last_stamp: float | None = None
+        self._period_accepted = 0
+        self._period_start = time.monotonic()
+
+        # No QoS event handlers on the outputs: each one costs executor time on every wake-up, and a
+        # subscriber with incompatible QoS logs the problem itself.
+        quiet = PublisherEventCallbacks(use_default_callbacks=False)
+        self._mode_pub = self.create_publisher(String, MODE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
+        self._phase_pub = self.create_publisher(Float64, PHASE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
+        self._sse_pub = self.create_publisher(Float64MultiArray, SSE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
+        self._estimate_pub = self.create_publisher(JointState, ESTIMATE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
+        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS, event_callbacks=quiet)
+        self._mode_msg = String()
+        self._phase_msg = Float64()
+        if self._input_type == "joint_state":
+            msg_type, self._handle = JointState, self._handle_joint_state
+        else:
+            msg_type, self._handle = Float64MultiArray, self._handle_array
+        self._sub = self.create_subscription(
+            msg_type,
+            INPUT_TOPIC,
+            self._on_input,
+            INPUT_QOS,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+        )
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        # Diagnostics describe the process (rates, processing time), so they run on the steady
+        # clock: they keep coming while simulated time is paused.
+        self._diag_timer = self.create_timer(
+            DIAGNOSTICS_PERIOD_S, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
+        lib = self._library
+        self.get_logger().info(
+            f"library '{lib.name}' ({len(lib)} modes: {', '.join(lib.mode_names)}; window "
+            f"{self._estimator.matcher.max_window} samples at {lib.sample_rate_hz:g} Hz) from {lib.path or '?'}; "
+            f"input {self._input_type} on {self._sub.topic_name} in {self._units}"
+            + (f", joints {', '.join(self._joint_names)}" if self._input_type == "joint_state" else "")
+            + f"; options: {self._options_summary()}"
+        )
+
+    # -----------------------------------------------------------------------------------------
+    # Parameters
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """on-set callback: reject invalid values with a reason; stash what they would build."""
+        lib = self._library
+        values: dict[str, Any] = {}
+        for p in params:
+            reason = ""
+            if p.name == "kernels":
+                reason, loaded = self._check_kernels(p.value)
+                lib = loaded or lib
+            elif p.name in OPTION_NAMES:
+                values[p.name] = _config_value(p.name, p.value)
+            else:
+                reason = self._check_input_parameter(p)
+            if reason:
+                return self._reject_parameter(f"{p.name}: {reason}")
+        try:
+            config = self._config.with_options(**values) if values else self._config
+        except (ValueError, TypeError) as exc:
+            names = ", ".join(values)
+            return self._reject_parameter(f"{names}: {_one_line(exc)}")
+        estimator = None
+        if lib is not None and (values or lib is not self._library):
+            try:
+                estimator = Estimator(lib, config)  # also reads a transitions file
+            except (GaitEstimatorError, ValueError, OSError) as exc:
+                return self._reject_parameter(f"{', '.join(p.name for p in params)}: {_one_line(exc)}")
+        self._pending = (lib if lib is not self._library else None, config, estimator)
+        return SetParametersResult(successful=True)
+
+    def _reject_parameter(self, reason: str) -> SetParametersResult:
+        self._last_rejection = reason
+        return SetParametersResult(successful=False, reason=reason)
+
+    @staticmethod
+    def _check_kernels(value: Any) -> tuple[str, KernelLibrary | None]:
+        if not isinstance(value, str) or not value.strip():
+            return "must be a library path or bundled name, got an empty value", None
+        try:
+            return "", load_library(value)
+        except (GaitEstimatorError, OSError, ValueError) as exc:
+            return _one_line(exc), None
+
+    @staticmethod
+    def _check_input_parameter(p: Parameter) -> str:
+        """Why an input parameter value is invalid, or '' (also for parameters not ours)."""
+        v = p.value
+        if p.name == "joint_names":
+            names = list(v or [])
+            if len(names) != N_CHANNELS:
+                return f"needs {N_CHANNELS} names ({', '.join(CHANNELS)}), got {len(names)}"
+            if any(not n.strip() for n in names):
+                return "names must not be empty"
+            if len(set(names)) != len(names):
+                return f"names must be distinct, got {names}"
+        elif p.name == "input_units" and v not in UNITS:
+            return f"must be one of {', '.join(UNITS)}, got {v!r}"
+        elif p.name == "input_type" and v not in INPUT_TYPES:
+            return f"must be one of {', '.join(INPUT_TYPES)}, got {v!r}"
+        return ""
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        """post-set callback: apply values that passed validation."""
+        pending, self._pending = self._pending, None
+        names = {p.name for p in params}
+        for p in params:
+            if p.name == "joint_names":
+                self._joint_names = tuple(p.value)
+            elif p.name == "input_units":
+                self._units = p.value
+        if pending is None:
+            return
+        lib, config, estimator = pending
+        if lib is not None:
+            self._library = lib
+        self._config = config
+        restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - {"max_gap_s"})
+        if restart and estimator is not None:
+            self._resets_before += self._estimator.resets
+            self._set_estimator(estimator)
+            lib = self._library
+            self.get_logger().info(
+                f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: {self._options_summary()}: "
+                "window restarted"
+            )
+        elif "max_gap_s" in names:
+            self._estimator.config = config  # only the gap threshold changed: keep the window
+
+    def _set_estimator(self, estimator: Estimator) -> None:
+        self._estimator = estimator
+        names = estimator.mode_names
+        self._sse_msg = Float64MultiArray()
+        self._sse_msg.layout.dim = [MultiArrayDimension(label=sse_label(names), size=len(names), stride=len(names))]
+        self._estimate_msg = JointState()
+        self._estimate_msg.name = estimate_names(names)
+        self._last_estimate: Estimate | None = None
+
+    def _options_summary(self) -> str:
+        changed = [
+            f"{o.name}={getattr(self._config, o.name)}"
+            for o in OPTIONS
+            if _config_value(o.name, o.default) != getattr(self._config, o.name)
+        ]
+        return ", ".join(changed) or "paper defaults"
+
+    # -----------------------------------------------------------------------------------------
+    # Input
+
+    def _on_input(self, msg: JointState | Float64MultiArray) -> None:
+        """Subscription callback: handle ``msg``, then the messages already queued behind it.
+
+        Taking the queued messages here, up to MAX_BATCH per wake-up, instead of returning to
+        the executor for each one keeps the executor's per-wake-up cost (hundreds of
+        microseconds in rclpy) from limiting the input rate; in order, one estimator update each.
+        """
+        handle = self._handle
+        handle(msg)
+        sub = self._sub
+        for _ in range(MAX_BATCH - 1):
+            try:
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            except InvalidHandle:  # destroyed during shutdown
+                return
+            if taken is None:
+                return
+            handle(taken[0])
+
+    def _handle_joint_state(self, msg: JointState) -> None:
+        """One JointState sample: angles by name, time from ``header.stamp``."""
+        t0 = time.perf_counter()
+        self._received += 1
+        self._period_received += 1
+        stamp = msg.header.stamp
+        if stamp.sec == 0 and stamp.nanosec == 0:
+            stamp = self.get_clock().now().to_msg()
+        try:
+            angles = angles_from_named(msg.name, msg.position, self._joint_names, self._units)
+        except SampleRejected as exc:
+            self._reject(exc)
+            return
+        self._process(angles, stamp, t0)
+
+    def _handle_array(self, msg: Float64MultiArray) -> None:
+        """One Float64MultiArray sample; stamped with the node clock on arrival."""
+        t0 = time.perf_counter()
+        self._received += 1
+        self._period_received += 1
+        stamp = self.get_clock().now().to_msg()
+        try:
+            angles = angles_from_array(msg.data, self._units)
+        except SampleRejected as exc:
+            self._reject(exc)
+            return
+        self._process(angles, stamp, t0)
+
+    def _process(self, angles_deg: np.ndarray, stamp: TimeMsg, t0: float) -> None:
+        """Stamp check, one estimator update, publish; ``t0`` = callback start (perf_counter)."""
+        t = _stamp_seconds(stamp)
+        prev = self._guard.last_stamp
+        try:
+            self._guard.accept(t)
+        except SampleRejected as exc:
+            self._reject(exc)
+            return
+        est = self._estimator
+        resets = est.resets
+        estimates = est.update(t, angles_deg)
+        if est.resets != resets:
+            self.get_logger().info(
+                f"gap of {t - (prev if prev is not None else t):.3f} s in input stamps > max_gap_s "
+                f"{est.config.max_gap_s:g} s: window restarted"
+            )
+        resampled = est.resampler is not None
+        for e in estimates:
+            self._publish(e, _stamp_from_seconds(e.time_s) if resampled else stamp)
+
+        if self._period_first_stamp is None:
+            self._period_first_stamp = t
+        self._period_last_stamp = t
+        self._period_accepted += 1
+        dt = time.perf_counter() - t0
+        self._proc_sum += dt
+        self._proc_count += 1
+        if dt > self._proc_max:
+            self._proc_max = dt
+
+    def _publish(self, e: Estimate, stamp: TimeMsg) -> None:
+        """Publish one estimate; topics nobody listens to are skipped (a count query is far
+        cheaper than a publish). ``estimate`` goes last: once it is out, everything is."""
+        self._last_estimate = e
+        if e.ready:
+            if self._mode_pub.get_subscription_count():
+                self._mode_msg.data = e.mode
+                self._mode_pub.publish(self._mode_msg)
+            if self._phase_pub.get_subscription_count():
+                self._phase_msg.data = e.phase
+                self._phase_pub.publish(self._phase_msg)
+            if self._sse_pub.get_subscription_count():
+                self._sse_msg.data = _double_array(e.sse)
+                self._sse_pub.publish(self._sse_msg)
+        if self._estimate_pub.get_subscription_count():
+            msg = self._estimate_msg
+            msg.header.stamp = stamp
+            msg.position = _double_array(estimate_array(e))
+            self._estimate_pub.publish(msg)
+
+    def _reject(self, exc: SampleRejected) -> None:
+        """Count a dropped sample; warn at most every WARN_THROTTLE_S per reason."""
+        self._period_rejected += 1
+        self._guard.reject(exc)
+        now = time.monotonic()
+        last = self._warned_at.get(exc.reason)
+        if last is not None and now - last < WARN_THROTTLE_S:
+            self._suppressed[exc.reason] += 1
+            return
+        self._warned_at[exc.reason] = now
+        more = self._suppressed.pop(exc.reason, 0)
+        self.get_logger().warn(
+            f"dropped sample on {self._sub.topic_name}: {exc.reason}: {exc}"
+            + (f" ({more} more {exc.reason} dropped since the last warning)" if more else "")
+        )
+
+    # -----------------------------------------------------------------------------------------
+    # State and diagnostics
+
+    @property
+    def library(self) -> KernelLibrary:
+        """The kernel library in use."""
+        assert self._library is not None
+        return self._library
+
+    @property
+    def config(self) -> EstimatorConfig:
+        """The estimator options in use."""
+        return self._config
+
+    @property
+    def ready(self) -> bool:
+        """True while the matcher window is full (mode/phase/sse are being published)."""
+        return self._estimator.matcher.ready
+
+    @property
+    def samples_received(self) -> int:
+        """Input messages seen so far (accepted + rejected)."""
+        return self._received
+
+    @property
+    def samples_accepted(self) -> int:
+        """Input messages that went into the estimator."""
+        return self._guard.accepted
+
+    @property
+    def rejected(self) -> dict[str, int]:
+        """Dropped samples so far, by reason (every reason listed)."""
+        return {r: int(self._guard.rejected.get(r, 0)) for r in REASONS}
+
+    def diagnostics_status(self) -> DiagnosticStatus:
+        """The node's status; rates and processing times cover the time since the previous call."""
+        now = time.monotonic()
+        elapsed = max(now - self._period_start, 1e-9)
+        lib = self.library
+        m = self._estimator.matcher
+        e = self._last_estimate
+        shown = e is not None and e.ready
+        input_rate = self._period_received / elapsed
+        stamp_rate = math.nan
+        first, last = self._period_first_stamp, self._period_last_stamp
+        if self._period_accepted >= 2 and first is not None and last is not None and last > first:
+            stamp_rate = (self._period_accepted - 1) / (last - first)
+        mean_ms = 1e3 * self._proc_sum / self._proc_count if self._proc_count else 0.0
+        values = {
+            "ready": "true" if m.ready else "false",
+            "window": f"{min(m.steps, m.max_window)}/{m.max_window}",
+            "mode": e.mode if shown else "",
+            "phase": f"{e.phase:.4f}" if shown else "",
+            "confidence": f"{e.confidence:.4g}" if shown else "",
+            "held": ("true" if e.held else "false") if shown else "",
+            "library": lib.name,
+            "library_path": lib.path,
+            "modes": str(len(lib)),
+            "mode_names": ",".join(lib.mode_names),
+            "library_rate_hz": f"{lib.sample_rate_hz:g}",
+            "estimator_options": self._options_summary(),
+            "input_topic": self._sub.topic_name,
+            "input_type": self._input_type,
+            "input_units": self._units,
+            "input_rate_hz": f"{input_rate:.1f}",
+            "stamp_rate_hz": "" if math.isnan(stamp_rate) else f"{stamp_rate:.1f}",
+            "processing_time_mean_ms": f"{mean_ms:.4f}",
+            "processing_time_max_ms": f"{1e3 * self._proc_max:.4f}",
+            "samples_received": str(self._received),
+            "samples_accepted": str(self._guard.accepted),
+            "samples_rejected": str(self._guard.rejected_total),
+            **{f"rejected_{reason}": str(n) for reason, n in self.rejected.items()},
+            "window_resets": str(self._resets_before + self._estimator.resets),
+            "max_gap_s": f"{self._config.max_gap_s:g}",
+        }
+        problems = []
+        if self._period_received == 0:
+            problems.append(f"no input on {self._sub.topic_name}")
+        if self._period_rejected:
+            problems.append(f"{self._period_rejected} sample(s) rejected")
+        if (
+            not math.isnan(stamp_rate)
+            and not self._config.resample
+            and abs(stamp_rate / lib.sample_rate_hz - 1.0) > RATE_TOLERANCE
+        ):
+            problems.append(
+                f"input stamp rate {stamp_rate:.0f} Hz differs from the library's {lib.sample_rate_hz:g} Hz "
+                "(set resample: true)"
+            )
+        if problems:
+            level, message = DiagnosticStatus.WARN, "; ".join(problems)
+        elif shown and e is not None:
+            level, message = DiagnosticStatus.OK, f"ready: {e.mode} phase {e.phase:.2f}"
+        else:
+            level, message = DiagnosticStatus.OK, f"filling window {values['window']}"
+        self._period_start = now
+        self._period_received = self._period_rejected = self._period_accepted = 0
+        self._period_first_stamp = self._period_last_stamp = None
+        self._proc_sum = self._proc_max = 0.0
+        self._proc_count = 0
+        return DiagnosticStatus(
+            level=level,
+            name=f"{self.get_fully_qualified_name()}: gait estimator",
+            message=message,
+            hardware_id="",
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
+
+    def _publish_diagnostics(self) -> None:
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [self.diagnostics_status()]
+        self._diag_pub.publish(msg)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of ``estimator_node`` (``ros2 run gait_estimator estimator_node``).
+
+    Returns 0 after SIGINT/SIGTERM or an external shutdown, 2 if it cannot start (an invalid
+    parameter or an unreadable library: usage/input errors, as for the CLI).
+    """
+    rclpy.init(args=args)
+    node: EstimatorNode | None = None
+    code = 0
+    try:
+        node = EstimatorNode()
+        gc.collect()
+        gc.freeze()  # start-up objects stay out of later collections: shorter GC pauses
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except StartupError as exc:
+        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        code = 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

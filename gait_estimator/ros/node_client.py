@@ -1,0 +1,429 @@
+"""Driving ``estimator_node`` from Python: start it, stream samples into it, collect its outputs.
+
+Used by ``gait-estimator demo``, ``gait-estimator bench-node`` and the node tests. Everything here
+talks real DDS, restricted to this machine: ``local_ros_environment`` sets
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a ``ROS_DOMAIN_ID`` for child processes, and
+``use_local_ros`` does the same for the current process (call it before creating a client).
+"""
+
+from __future__ import annotations
+
+import array
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.exceptions import InvalidHandle
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray, String
+
+from ..core.channels import CHANNELS
+from ..core.matcher import MatchTrace
+from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
+
+DIAGNOSTICS_TOPIC = "/diagnostics"
+NODE_MODULE = "gait_estimator.ros.node"
+
+
+def local_ros_environment(domain_id: int, base: Mapping[str, str] | None = None) -> dict[str, str]:
+    """Environment for a ROS child process: discovery on localhost only, the given domain."""
+    env = dict(os.environ if base is None else base)
+    env["ROS_DOMAIN_ID"] = str(int(domain_id))
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_STATIC_PEERS", None)
+    env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated in Jazzy, superseded by the range above
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def use_local_ros(domain_id: int) -> None:
+    """Restrict this process's ROS traffic to localhost and ``domain_id`` (before rclpy.init)."""
+    os.environ.update(local_ros_environment(domain_id, {}))
+    os.environ.pop("ROS_STATIC_PEERS", None)
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+
+
+def node_command(ros_args: Sequence[str] = (), executable: str | Sequence[str] | None = None) -> list[str]:
+    """Command line starting estimator_node (default: this interpreter, ``-m gait_estimator.ros.node``)."""
+    if executable is None:
+        cmd = [sys.executable, "-m", NODE_MODULE]
+    elif isinstance(executable, str):
+        cmd = [executable]
+    else:
+        cmd = list(executable)
+    return cmd + (["--ros-args", *ros_args] if ros_args else [])
+
+
+class NodeProcess:
+    """estimator_node as a child process; its stdout+stderr go to a temporary file.
+
+    Args:
+        cmd: Command line (see ``node_command``).
+        env: Environment (see ``local_ros_environment``).
+    """
+
+    def __init__(self, cmd: Sequence[str], env: Mapping[str, str]) -> None:
+        self.cmd = list(cmd)
+        self._log = tempfile.TemporaryFile(mode="w+b")
+        # A session of its own: a Ctrl-C in the terminal reaches only us; we stop the node.
+        self.proc = subprocess.Popen(
+            self.cmd, env=dict(env), stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True
+        )
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def poll(self) -> int | None:
+        return self.proc.poll()
+
+    def output(self) -> str:
+        """Everything the node printed so far (stdout and stderr)."""
+        self._log.flush()
+        self._log.seek(0)
+        text = self._log.read().decode("utf-8", errors="replace")
+        self._log.seek(0, os.SEEK_END)
+        return text
+
+    def stop(self, sig: int = signal.SIGINT, timeout_s: float = 15.0) -> int:
+        """Send ``sig`` and wait; returns the exit code (kills it after ``timeout_s``)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return int(self.proc.returncode)
+
+    def wait(self, timeout_s: float) -> int:
+        return int(self.proc.wait(timeout=timeout_s))
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.stop(signal.SIGKILL)
+        self._log.close()
+
+    def __enter__(self) -> NodeProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass
+class Received:
+    """What a client collected from the node. Times are ``time.perf_counter_ns()`` on arrival."""
+
+    estimate_stamp_ns: list[int] = field(default_factory=list)
+    estimate_values: list[np.ndarray] = field(default_factory=list)
+    estimate_names: list[str] = field(default_factory=list)
+    estimate_recv_ns: list[int] = field(default_factory=list)
+    modes: list[str] = field(default_factory=list)
+    phases: list[float] = field(default_factory=list)
+    sse: list[np.ndarray] = field(default_factory=list)
+    sse_label: str = ""
+    diagnostics: list[dict[str, str]] = field(default_factory=list)
+    diagnostics_level: list[int] = field(default_factory=list)
+    diagnostics_message: list[str] = field(default_factory=list)
+
+    def clear(self) -> None:
+        for name in ("estimate_stamp_ns", "estimate_values", "estimate_recv_ns", "modes", "phases", "sse"):
+            getattr(self, name).clear()
+
+    def estimates(self) -> np.ndarray:
+        """Received estimate values, (K, len(estimate_names))."""
+        return np.array(self.estimate_values) if self.estimate_values else np.empty((0, 0))
+
+    def trace(self, mode_names: Sequence[str]) -> MatchTrace:
+        """The received estimates as a MatchTrace (as offline ``predict`` returns)."""
+        m = len(mode_names)
+        v = self.estimates().reshape(-1, len(estimate_names(mode_names)))
+        return MatchTrace(
+            list(mode_names),
+            v[:, 0].astype(np.int64),
+            v[:, 1].copy(),
+            v[:, 3 : 3 + m].copy(),
+            v[:, 3 + m : 3 + 2 * m].copy(),
+            v[:, 2] > 0.5,
+        )
+
+
+def _drained(callback: Callable[[Any], None], box: list[Subscription]) -> Callable[[Any], None]:
+    """Wrap a subscription callback to also take the messages queued behind the first one
+    (rclpy's executor costs hundreds of microseconds per wake-up; see EstimatorNode._on_input).
+    ``box`` receives the subscription once created."""
+
+    def on_message(msg: Any) -> None:
+        callback(msg)
+        sub = box[0]
+        for _ in range(200):
+            try:
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            except InvalidHandle:
+                return
+            if taken is None:
+                return
+            callback(taken[0])
+
+    return on_message
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def _double_array(values: np.ndarray) -> array.array:
+    out = array.array("d")
+    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+    return out
+
+
+class EstimatorClient:
+    """A ROS node that feeds ``segment_angles`` and records the estimator's outputs.
+
+    Args:
+        domain_id: ROS domain (a private context is created with it).
+        input_type: ``joint_state`` or ``float64_multi_array``.
+        reliable: Publish input reliably (default best effort, like most sensor drivers).
+        joint_names: JointState names for the four channels (CHANNELS order).
+        namespace: Namespace of the estimator's topics (relative names are used otherwise).
+        record: Keep received messages (turn off for long runs where only counts matter).
+        context: An initialised rclpy Context to use instead of creating one (the caller owns it).
+        extra_nodes: Further nodes (e.g. an in-process EstimatorNode) to spin in the same executor.
+        node_name: This client's node name.
+        outputs: The estimator topics to subscribe to (the node skips topics nobody listens to).
+        estimator_name: Keep only diagnostics of the estimator node with this fully qualified name
+            (e.g. ``/estimator_node``; default: any).
+    """
+
+    def __init__(
+        self,
+        domain_id: int,
+        input_type: str = "joint_state",
+        reliable: bool = False,
+        joint_names: Sequence[str] = CHANNELS,
+        namespace: str = "",
+        record: bool = True,
+        context: Context | None = None,
+        extra_nodes: Sequence[Node] = (),
+        node_name: str = "gait_estimator_client",
+        outputs: Sequence[str] = (ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, DIAGNOSTICS_TOPIC),
+        estimator_name: str | None = None,
+    ) -> None:
+        self._own_context = context is None
+        if context is None:
+            context = Context()
+            rclpy.init(context=context, domain_id=int(domain_id))
+        self.context = context
+        self.node = Node(node_name, namespace=namespace or None, context=context)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        for n in extra_nodes:
+            self.executor.add_node(n)
+        self.input_type = input_type
+        self._diag_prefix = f"{estimator_name}: " if estimator_name else None
+        self.joint_names = list(joint_names)
+        self.record = record
+        self.received = Received()
+        self.estimate_count = 0
+        self.mode_count = 0
+        self.phase_count = 0
+        self.on_mode: Callable[[str], None] | None = None
+        self.on_phase: Callable[[float], None] | None = None
+        in_qos = QoSProfile(
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            history=HistoryPolicy.KEEP_LAST,
+            depth=1000 if reliable else 10,
+        )
+        msg_type = JointState if input_type == "joint_state" else Float64MultiArray
+        self.publisher = self.node.create_publisher(msg_type, INPUT_TOPIC, in_qos)
+        out_qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=5000)
+        subs = {
+            ESTIMATE_TOPIC: (JointState, self._on_estimate, out_qos),
+            MODE_TOPIC: (String, self._on_mode, out_qos),
+            PHASE_TOPIC: (Float64, self._on_phase, out_qos),
+            SSE_TOPIC: (Float64MultiArray, self._on_sse, out_qos),
+            DIAGNOSTICS_TOPIC: (DiagnosticArray, self._on_diagnostics, 10),
+        }
+        unknown = set(outputs) - set(subs)
+        if unknown:
+            raise ValueError(f"unknown output topic(s) {sorted(unknown)}")
+        self._subs = []
+        for topic in outputs:
+            msg_type, callback, qos = subs[topic]
+            box: list[Subscription] = []
+            sub = self.node.create_subscription(msg_type, topic, _drained(callback, box), qos)
+            box.append(sub)
+            self._subs.append(sub)
+        self._js = JointState()
+        self._js.name = self.joint_names
+        self._fma = Float64MultiArray()
+
+    # -- callbacks
+
+    def _on_estimate(self, msg: JointState) -> None:
+        self.estimate_count += 1
+        r = self.received
+        r.estimate_recv_ns.append(time.perf_counter_ns())
+        r.estimate_stamp_ns.append(stamp_to_ns(msg.header.stamp))
+        if self.record:
+            r.estimate_values.append(np.frombuffer(msg.position, dtype=np.float64).copy())
+            if not r.estimate_names:
+                r.estimate_names = list(msg.name)
+
+    def _on_mode(self, msg: String) -> None:
+        self.mode_count += 1
+        if self.record:
+            self.received.modes.append(msg.data)
+        if self.on_mode is not None:
+            self.on_mode(msg.data)
+
+    def _on_phase(self, msg: Float64) -> None:
+        self.phase_count += 1
+        if self.record:
+            self.received.phases.append(msg.data)
+        if self.on_phase is not None:
+            self.on_phase(msg.data)
+
+    def _on_sse(self, msg: Float64MultiArray) -> None:
+        if self.record:
+            self.received.sse.append(np.frombuffer(msg.data, dtype=np.float64).copy())
+            if msg.layout.dim:
+                self.received.sse_label = msg.layout.dim[0].label
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            if st.name.startswith(self._diag_prefix) if self._diag_prefix else st.name.endswith(": gait estimator"):
+                self.received.diagnostics.append({kv.key: kv.value for kv in st.values})
+                level = st.level
+                self.received.diagnostics_level.append(level[0] if isinstance(level, (bytes, bytearray)) else int(level))
+                self.received.diagnostics_message.append(st.message)
+
+    # -- spinning
+
+    def spin_once(self, timeout_s: float = 0.0) -> None:
+        self.executor.spin_once(timeout_sec=timeout_s)
+
+    def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        """Spin until ``predicate()`` is true (returns True) or ``timeout_s`` passes (False)."""
+        deadline = time.monotonic() + timeout_s
+        while not predicate():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            self.executor.spin_once(timeout_sec=min(left, 0.05))
+        return True
+
+    def spin_for(self, seconds: float) -> None:
+        self.spin_until(lambda: False, seconds)
+
+    def wait_for_node(self, timeout_s: float = 20.0, outputs: bool = True, settle_s: float = 0.5) -> bool:
+        """Wait until the estimator subscribes to our input (and, if ``outputs``, until our
+        subscriptions are matched with its publishers), then ``settle_s`` more.
+
+        Discovery is not symmetric: our publisher can see the node's subscription before the
+        node's (best-effort) subscription has matched our publisher, and samples sent in between
+        are lost. There is no way to observe the other side's match, hence the settling time.
+        """
+
+        def matched() -> bool:
+            if self.publisher.get_subscription_count() < 1:
+                return False
+            return not outputs or all(s.get_publisher_count() >= 1 for s in self._subs if s.topic_name != DIAGNOSTICS_TOPIC)
+
+        if not self.spin_until(matched, timeout_s):
+            return False
+        self.spin_for(settle_s)
+        return True
+
+    def latest_diagnostics(self, timeout_s: float = 3.0, after: int | None = None) -> dict[str, str] | None:
+        """A diagnostics report newer than report number ``after`` (default: newer than now)."""
+        n = len(self.received.diagnostics) if after is None else after
+        self.spin_until(lambda: len(self.received.diagnostics) > n, timeout_s)
+        return self.received.diagnostics[-1] if len(self.received.diagnostics) > n else None
+
+    # -- publishing
+
+    def message(self, angles: np.ndarray, stamp_ns: int) -> JointState | Float64MultiArray:
+        """Input message for one sample (angles in the units the node expects)."""
+        if self.input_type == "joint_state":
+            msg = self._js
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+            msg.position = _double_array(angles)
+            return msg
+        self._fma.data = _double_array(angles)
+        return self._fma
+
+    def publish(self, angles: np.ndarray, stamp_ns: int = 0) -> None:
+        self.publisher.publish(self.message(angles, stamp_ns))
+
+    def stream(
+        self,
+        angles: np.ndarray,
+        stamps_ns: Sequence[int] | np.ndarray,
+        rate_hz: float | None,
+        on_sample: Callable[[int], None] | None = None,
+        due_s: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Publish samples paced at ``rate_hz`` (None: as fast as possible), spinning in between.
+
+        Args:
+            angles: (T, 4) in the node's input units.
+            stamps_ns: (T,) stamps (JointState only; ignored for Float64MultiArray).
+            rate_hz: Publication rate, Hz.
+            on_sample: Called with the index after each publication.
+            due_s: (T,) publication times, seconds from the start, instead of a fixed rate.
+
+        Returns:
+            perf_counter_ns() of every publication, (T,).
+        """
+        n = len(angles)
+        sent = np.empty(n, dtype=np.int64)
+        period_ns = 0 if not rate_hz else round(1e9 / rate_hz)
+        start = time.perf_counter_ns()
+        clock = time.perf_counter_ns
+        spin = self.executor.spin_once
+        offsets = None if due_s is None else np.round(np.asarray(due_s, dtype=np.float64) * 1e9).astype(np.int64)
+        for i in range(n):
+            due = start + (i * period_ns if offsets is None else int(offsets[i]))
+            while True:
+                left = due - clock()
+                if left <= 0:
+                    break
+                spin(timeout_sec=min(left, 2_000_000) / 1e9 if left > 200_000 else 0.0)
+            self.publisher.publish(self.message(angles[i], int(stamps_ns[i])))
+            sent[i] = clock()
+            if on_sample is not None:
+                on_sample(i)
+            if not period_ns:
+                spin(timeout_sec=0.0)
+        return sent
+
+    def close(self) -> None:
+        self.executor.remove_node(self.node)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        if self._own_context:
+            rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self) -> EstimatorClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
