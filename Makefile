@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 OLD_NUMPY ?= 1.26.4
 OLD_VENV ?= .venv-numpy126
 
-.PHONY: venv test test-core-old-numpy lint demo bench clean
+.PHONY: venv test test-core-old-numpy lint demo bench docs docs-check clean
 
 $(BIN)/.installed: setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,16 @@ demo: venv
 bench: venv
 	mkdir -p out
 	$(BIN)/gait-estimator bench --modes 7,70,700 --json out/bench.json
+
+# The measured tables in README.md and docs/: rebuild the evaluation and headline tables from the
+# results in experiments/results/, then copy every experiments/results/**/tables.md section into
+# its <!-- BEGIN name --> block (docs/performance.md, "Regenerating the numbers").
+docs: venv
+	$(BIN)/python experiments/summary_tables.py
+	$(BIN)/python experiments/update_docs.py
+
+docs-check: venv
+	$(BIN)/python experiments/update_docs.py --check
 
 clean:
 	rm -rf $(VENV) $(OLD_VENV) build install log out *.egg-info

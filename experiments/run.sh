@@ -1,5 +1,6 @@
 #!/bin/sh
-# Reproduces every number in the README section "Training and evaluating".
+# Reproduces every number of docs/training.md, "Results on the bundled recordings", and the
+# accuracy rows of the README's results table (then run: make docs).
 # Usage (with gait-estimator installed; paths are relative to the repository root):
 #     sh experiments/run.sh [OUT_DIR]        # default OUT_DIR: experiments/results
 # Uses the recordings bundled in data/swge.
@@ -46,3 +47,8 @@ $GE train "$MS" --labels "$OUT/multispeed_train.csv" --heel-strikes right_shank 
 $GE process "$MS" --kernels "$OUT/multispeed_kernels.yaml" --out "$OUT/multispeed_personal_pred.csv" --quiet
 $GE evaluate --predictions "$OUT/multispeed_personal_pred.csv" --truth "$MS" --labels "$OUT/multispeed_test.csv" \
     --heel-strikes right_shank --out-dir "$OUT/multispeed_split" --title "Multispeed_Walk_AB, kernels from the first halves, tested on the second halves"
+
+if [ "$OUT" = "$HERE/results" ]; then
+    echo "== Tables for README.md and docs/ (experiments/results/evaluation and headline/tables.md)"
+    ${PYTHON:-python} "$HERE/summary_tables.py"
+fi
