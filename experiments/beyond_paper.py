@@ -1,15 +1,15 @@
 #!/usr/bin/env python3
-"""Measurements of the estimator options beyond the paper (issue 6; README "Beyond the paper").
+"""Measurements of the estimator options beyond the paper (issue 6; docs/beyond_paper.md).
 
-Every number and table of that README section comes from this script:
+Every number and table of that page comes from this script:
 
     python experiments/beyond_paper.py                      # -> experiments/results/beyond/
     python experiments/beyond_paper.py --out DIR --seeds 5 --jobs 2
 
 Run from anywhere with gait_estimator importable; the recordings are the project's bundled
-data/swge. Writes ``summary.json`` (all metrics),
-``tables.md`` (the README tables) and two figures into the output directory. Runtime ≈ 2-3 min on
-2 cores.
+data/swge. Writes ``summary.json`` (all metrics), ``tables.md`` (the tables of
+docs/beyond_paper.md, copied in by ``make docs``) and two figures into the output directory.
+Runtime ≈ 2-3 min on 2 cores.
 
 Data sets (all evaluated with ``gait_estimator.analysis.evaluate.evaluate``, the code behind
 ``gait-estimator evaluate``; predictions come from ``Estimator``, the code behind ``process``):

@@ -1,6 +1,6 @@
 """Evaluating predictions against truth: mode accuracy, confusion, phase error, transition delay.
 
-Definitions (README "Evaluating"):
+Definitions (docs/training.md, "`evaluate`: definitions"):
 
 * Predictions (``process`` CSV rows) are matched to truth samples by time (``match_times``):
   the nearest truth sample, for rows within half the truth's median sample interval of one or

@@ -3,7 +3,7 @@
 Shared by ``train`` (kernels are averages of strides), ``evaluate`` (phase truth runs linearly
 from one right heel strike to the next) and the label tools.
 
-Heel-strike detection rule (documented in the README): the signal (right foot angle for level
+Heel-strike detection rule (documented in docs/training.md): the signal (right foot angle for level
 and ramp walking, right shank angle for stairs, both degrees, sagittal plane, positive =
 toes/shank rotated forward) is resampled to a uniform rate, then ``scipy.signal.find_peaks``
 keeps maxima that

@@ -1,6 +1,6 @@
 """Training kernels: labelled recordings -> strides -> outlier rejection -> average per mode.
 
-Pipeline (paper, "Data Processing"; README "Training kernels"):
+Pipeline (paper, "Data Processing"; docs/training.md, "`train`: rules"):
 
 1. Each recording is resampled to one uniform rate (default: the median of the recordings'
    median sample rates), which the library records.
