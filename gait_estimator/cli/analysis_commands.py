@@ -250,7 +250,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--label-map", metavar="TRUTH=PRED,...",
                    help="rename truth labels, e.g. level=Med; 'level=Slow|Med|Fast' accepts any of them; 'turn=' drops one")
     e.add_argument("--heel-strikes", choices=(*HEEL_STRIKE_SOURCES, "none"), default="auto",
-                   help=hs_help.replace("(default", "; 'none' = no phase truth (default"))
+                   help=hs_help.replace(" (default %", "; 'none' = no phase truth (default %"))
     e.add_argument("--window", type=_window, metavar="START:END", help="time window (s) of the time-series figure")
     e.add_argument("--title", help="figure title (default: the predictions file name)")
     _detection_args(e)
