@@ -15,6 +15,7 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from gait_estimator.cli.app import main
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.errors import RecordingError
+from gait_estimator.core.estimator import EstimatorConfig
 from gait_estimator.io.bag import (
     FLOAT64_MULTI_ARRAY,
     JOINT_STATE,
@@ -56,16 +57,16 @@ def csv_pred(ramp_csv: Path, able_bodied):
     return predict(read_recording(ramp_csv), able_bodied)
 
 
-def _same_trace(a, b, exact_sse: bool) -> None:
+def _same_trace(a, b) -> None:
     assert a.mode_names == b.mode_names
     np.testing.assert_array_equal(a.mode_index, b.mode_index)
-    np.testing.assert_array_equal(a.phase, b.phase)
-    np.testing.assert_array_equal(a.phases, b.phases)
     np.testing.assert_array_equal(a.ready, b.ready)
-    if exact_sse:
-        np.testing.assert_array_equal(a.sse, b.sse)
-    else:  # radians in the bag: deg -> rad -> deg may change the last bit of an angle
-        np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10, atol=1e-9)
+    # The default resampling interpolates at the stamps: the bag's are integer nanoseconds from
+    # START_NS, the CSV's microseconds from 0, so grid weights differ in the last bits.
+    np.testing.assert_allclose(a.phase, b.phase, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.phases, b.phases, rtol=0, atol=1e-9)
+    # radians in the bag: deg -> rad -> deg may change the last bit of an angle; stamps as above
+    np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10, atol=1e-9)
 
 
 def _error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
@@ -95,7 +96,7 @@ def test_bag_predictions_equal_csv(tmp_path, ramp, csv_pred, able_bodied, storag
     assert rec.stamp_ns[0] == START_NS
     np.testing.assert_allclose(rec.time_s, ramp.time_s - ramp.time_s[0], atol=1e-9)
     pred = predict(rec, able_bodied)
-    _same_trace(pred.trace, csv_pred.trace, exact_sse=units == "deg")
+    _same_trace(pred.trace, csv_pred.trace)
     np.testing.assert_array_equal(pred.sample, np.arange(N))
 
 
@@ -121,7 +122,7 @@ def test_storage_file_without_metadata_is_read(tmp_path, ramp, able_bodied, csv_
     bag = write_input_bag(ramp, tmp_path / "bag", start_ns=START_NS)
     (bag / "metadata.yaml").unlink()
     rec = read_recording(next(bag.glob("*.mcap")))
-    _same_trace(predict(rec, able_bodied).trace, csv_pred.trace, exact_sse=False)
+    _same_trace(predict(rec, able_bodied).trace, csv_pred.trace)
 
 
 def test_reference_csv_without_time_converts_at_230_hz(tmp_path, multispeed_csv, capsys):
@@ -176,10 +177,10 @@ def test_out_bag_round_trip(tmp_path, ramp, csv_pred, storage, capsys):
     values = np.array([m.position for _, m in est])
     m = len(tr.mode_names)
     np.testing.assert_array_equal(values[:, 0], tr.mode_index)
-    np.testing.assert_array_equal(values[:, 1], tr.phase)
+    np.testing.assert_allclose(values[:, 1], tr.phase, rtol=0, atol=1e-9)  # stamps: see _same_trace
     np.testing.assert_array_equal(values[:, 2], tr.ready.astype(float))
     np.testing.assert_allclose(values[:, 3 : 3 + m], tr.sse, rtol=1e-10, atol=1e-9)
-    np.testing.assert_array_equal(values[:, 3 + m : 3 + 2 * m], tr.phases)
+    np.testing.assert_allclose(values[:, 3 + m : 3 + 2 * m], tr.phases, rtol=0, atol=1e-9)
     tail = values[:, 3 + 2 * m :]
     np.testing.assert_allclose(tail[:, 0], tr.confidence, rtol=1e-10)
     np.testing.assert_allclose(tail[:, 1], tr.fit_rms_deg, rtol=1e-10)
@@ -190,7 +191,7 @@ def test_out_bag_round_trip(tmp_path, ramp, csv_pred, storage, capsys):
     for topic in ("/mode", "/phase", "/sse"):
         assert [log for log, _ in got[topic]] == stamps[ready].tolist(), topic
     assert [msg.data for _, msg in got["/mode"]] == [tr.mode_names[i] for i in tr.mode_index[ready]]
-    np.testing.assert_array_equal([msg.data for _, msg in got["/phase"]], tr.phase[ready])
+    np.testing.assert_allclose([msg.data for _, msg in got["/phase"]], tr.phase[ready], rtol=0, atol=1e-9)
     sse = got["/sse"]
     assert all(mode_names_from_sse_label(msg.layout.dim[0].label) == tr.mode_names for _, msg in sse)
     assert sse[0][1].layout.dim[0].label == sse_label(tr.mode_names)
@@ -198,17 +199,19 @@ def test_out_bag_round_trip(tmp_path, ramp, csv_pred, storage, capsys):
     np.testing.assert_allclose(np.array([msg.data for _, msg in sse]), tr.sse[ready], rtol=1e-10, atol=1e-9)
 
 
-def test_out_bag_with_resampling_stamps_the_grid(tmp_path, ramp, capsys):
+@pytest.mark.parametrize("resample", ["on", "off"])
+def test_out_bag_answers_every_input_at_its_stamp(tmp_path, ramp, resample):
+    """With or without resampling to the library's grid, one estimate per input sample, stamped
+    and logged with that sample's stamp."""
     bag = write_input_bag(ramp, tmp_path / "in", start_ns=START_NS)
-    argv = ["process", str(bag), "-q", "--resample", "--out", str(tmp_path / "p.csv"), "--out-bag", str(tmp_path / "o")]
+    argv = ["process", str(bag), "-q", "--resample", resample, "--out", str(tmp_path / "p.csv"), "--out-bag", str(tmp_path / "o")]
     assert main(argv) == 0
-    grid = np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1, usecols=0)
+    times = np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1, usecols=0)
     est = _read_back(tmp_path / "o")["/estimate"]
     stamps = np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, m in est])
-    assert len(est) == len(grid) != N
-    np.testing.assert_allclose((stamps - START_NS) * 1e-9, grid, rtol=0, atol=1e-6)
-    logs = np.array([log for log, _ in est])
-    assert np.all(logs >= stamps) and np.all(np.diff(logs) >= 0)  # published when the next input arrived
+    assert len(est) == len(times) == N
+    np.testing.assert_array_equal(stamps, read_bag(bag).stamp_ns)
+    np.testing.assert_array_equal([log for log, _ in est], stamps)
 
 
 def test_fast_output_serialization_is_byte_identical_to_rosbags():
@@ -321,7 +324,7 @@ def test_bad_messages_are_skipped_and_counted(tmp_path, ramp, able_bodied, capsy
     keep = np.setdiff1d(np.arange(n), [100, 200, 400, 450])
     np.testing.assert_array_equal(rec.index, keep)
     clean = Recording(time_s=ramp.time_s[keep], angles_deg=ramp.angles_deg[keep])
-    _same_trace(predict(rec, able_bodied).trace, predict(clean, able_bodied).trace, exact_sse=False)
+    _same_trace(predict(rec, able_bodied).trace, predict(clean, able_bodied).trace)
 
     assert main(["process", str(bag)]) == 0
     out = capsys.readouterr().out
@@ -339,8 +342,9 @@ def test_gap_restarts_the_window_like_the_node(tmp_path, ramp, able_bodied, caps
 
     got = read_bag(bag, input_units="deg")
     assert got.resets == 1
-    expected = [predict(rec.slice(0, cut), able_bodied).trace, predict(rec.slice(cut, n), able_bodied).trace]
-    tr = predict(got, able_bodied).trace
+    paper = EstimatorConfig.preset("paper")  # the window counts below are the paper's (no resampling)
+    expected = [predict(rec.slice(0, cut), able_bodied, paper).trace, predict(rec.slice(cut, n), able_bodied, paper).trace]
+    tr = predict(got, able_bodied, paper).trace
     for name in ("mode_index", "phase", "sse", "phases", "ready"):
         np.testing.assert_array_equal(getattr(tr, name), np.concatenate([getattr(t, name) for t in expected]))
     assert not tr.ready[cut : cut + 391].any() and tr.ready[cut + 391 :].all()
@@ -356,7 +360,7 @@ def test_gap_restarts_the_window_like_the_node(tmp_path, ramp, able_bodied, caps
     # the gap check can be disabled (as the node's max_gap_s = 0)
     assert read_bag(bag, input_units="deg", max_gap_s=0).resets == 0
     out = tmp_path / "nogap.csv"
-    assert main(["process", str(bag), "--input-units", "deg", "--max-gap", "0", "--out", str(out)]) == 0
+    assert main(["process", str(bag), "--input-units", "deg", "--max-gap", "0", "--preset", "paper", "--out", str(out)]) == 0
     assert "gap(s)" not in capsys.readouterr().out
     ready = np.loadtxt(out, delimiter=",", skiprows=1, usecols=4)
     assert ready[391:].all()

@@ -25,7 +25,8 @@ def multispeed(multispeed_csv: Path):
 
 
 def run(lib: KernelLibrary, time_s: np.ndarray, x: np.ndarray, **options):
-    return run_estimator(Estimator(lib, EstimatorConfig(**options)), time_s, x)
+    """The paper preset plus ``options`` over (time_s, x), stamped input."""
+    return run_estimator(Estimator(lib, EstimatorConfig.preset("paper", **options)), time_s, x)
 
 
 def circular(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -131,7 +132,7 @@ def test_phase_rate_matches_the_stride_frequency(able_bodied) -> None:
 def test_gap_restarts_the_window(able_bodied, multispeed) -> None:
     t = multispeed.time_s[:1200].copy()
     t[600:] += 1.0  # a 1 s gap
-    est = Estimator(able_bodied, EstimatorConfig(max_gap_s=0.5))
+    est = Estimator(able_bodied, EstimatorConfig.preset("paper", max_gap_s=0.5))
     trace = run_estimator(est, t, multispeed.angles_deg[:1200])
     assert est.resets == 1
     assert trace.ready[599] and not trace.ready[600] and not trace.ready[600 + 390] and trace.ready[600 + 391]
@@ -151,7 +152,7 @@ def test_bad_samples_leave_the_state_untouched(able_bodied, multispeed) -> None:
                 est.update(t[i], [np.nan, 0, 0, 0])
             with pytest.raises(ValueError):
                 est.update(t[i - 1], x[i])
-        a, b = est.update(t[i], x[i])[0], ref.update(t[i], x[i])[0]
+        a, b = est.update(t[i], x[i]), ref.update(t[i], x[i])
         np.testing.assert_array_equal(a.sse, b.sse)
 
 
@@ -181,11 +182,11 @@ def test_rate_invariance(able_bodied, multispeed, rate) -> None:
     else:
         t1 = np.arange(t0[0], t0[-1], 1.0 / rate)
     x1 = np.stack([np.interp(t1, t0, x0[:, c]) for c in range(4)], axis=1)
-    out = run(able_bodied, t1, x1, resample=True)
-    idx = np.searchsorted(t0, out.time_s - 1e-9)  # the original sample at each grid time
-    ok = (idx < t0.size) & out.ready & base.ready[np.minimum(idx, t0.size - 1)]
+    out = run(able_bodied, t1, x1, resample="on")
+    assert np.array_equal(out.time_s, t1)  # one estimate per input sample, at its stamp
+    idx = np.searchsorted(t0, out.time_s + 1e-9, side="right") - 1  # the last 230 Hz sample before it
+    ok = (idx >= 0) & out.ready & base.ready[np.maximum(idx, 0)]
     idx = idx[ok]
-    assert np.allclose(out.time_s[ok], t0[idx], atol=1e-6)
     agree = out.mode_index[ok] == base.mode_index[idx]
     assert agree.mean() >= 0.99
 
@@ -193,9 +194,10 @@ def test_rate_invariance(able_bodied, multispeed, rate) -> None:
         keep = np.r_[True, m[1:] != m[:-1]]
         starts = np.flatnonzero(keep)
         lengths = np.diff(np.r_[starts, m.size])
-        return [int(v) for v, n in zip(m[starts], lengths, strict=True) if n >= 115]  # runs >= 0.5 s
+        return [int(v) for v, n in zip(m[starts], lengths, strict=True) if n >= 0.5 * rate_hz]  # runs >= 0.5 s
 
-    assert runs(out.mode_index[ok]) == runs(base.mode_index[idx])
+    rate_hz = 230.0 if rate == "jitter" else float(rate)
+    assert runs(out.mode_index[ok]) == runs(base.mode_index[np.searchsorted(t0, t1[ok] + 1e-9, side="right") - 1])
     same = agree & out.ready[ok]
     err = circular(out.phase[ok][same], base.phase[idx][same])
     assert err.mean() <= 0.005
@@ -226,7 +228,7 @@ def test_cli_process_with_options(tmp_path: Path, multispeed_csv: Path) -> None:
                      "--channels", "right_thigh", "right_shank"])
     assert code == 0
     header = out.read_text().splitlines()[0].split(",")
-    assert header[-5:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode"]
+    assert header[-6:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio"]
     assert cli_main(["process", str(multispeed_csv), "--window-fraction", "2", "-q"]) == 2
     assert cli_main(["process", str(multispeed_csv), "--transitions", str(tmp_path / "none.yaml"), "-q"]) == 2
 

@@ -31,6 +31,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from gait_estimator import load_library
+from gait_estimator.core.estimator import Estimator
 from gait_estimator.io.stream import REASONS
 from gait_estimator.ros.node import DEFAULTS, DESCRIPTIONS, EstimatorNode, StartupError
 
@@ -57,21 +58,21 @@ def ros(monkeypatch):
 
 
 def test_joint_state_rad_at_230hz_equals_offline_process(ros, multispeed_csv: Path, able_bodied) -> None:
-    """1500 Multispeed samples (fresh state at sample 0, mode changes after 5 s) as JointState in
-    radians at 230 Hz from a best-effort publisher: every estimate equals offline predict."""
+    """1500 Multispeed samples (fresh state at sample 4500, Slow -> Med after 3 s) as JointState
+    in radians at 230 Hz from a best-effort publisher: every estimate equals offline predict."""
     h = ros(11)
     node = h.estimator()
     client = h.client(node)
-    rec = load_multispeed(multispeed_csv, 0, 1500)
+    rec = load_multispeed(multispeed_csv, 4500, 6000)
     stamps = stamps_ns(rec)
     assert client.wait_for_node(10.0, settle_s=0.0)
     client.stream(np.radians(rec.angles_deg), stamps, 230.0)
     wait_all_answered(client, len(rec))
     idx = check_against_offline(client.received, stamps, rec.angles_deg, "rad", able_bodied, min_fraction=0.99)
-    ref = offline(as_node_sees(rec.angles_deg[idx], "rad"), able_bodied)
+    ref = offline(as_node_sees(rec.angles_deg[idx], "rad"), able_bodied, stamps[idx])
     assert len(set(ref.modes[400:])) >= 2, "the chosen samples should contain mode changes"
-    if idx[0] == 0:
-        assert np.flatnonzero(ref.ready)[0] == able_bodied.lengths.max() - 1
+    if np.array_equal(idx, np.arange(len(rec))):
+        assert np.flatnonzero(ref.ready)[0] == Estimator(able_bodied).matcher.max_window - 1
     diag = client.latest_diagnostics(3.0)
     assert diag is not None
     assert diag["ready"] == "true" and diag["library"] == "able_bodied" and diag["modes"] == "7"
@@ -252,7 +253,7 @@ def test_parameters_validated_at_set_time(ros, tmp_path: Path) -> None:
     assert client.wait_for_node(10.0, settle_s=0.0)
     lockstep(client, np.full((2, 4), 10.0), 230.0, stamps=[1_000_000_000, 1_010_000_000])
     assert client.received.estimate_names[3:10] == [f"sse/{m}" for m in load_library("prosthesis").mode_names]
-    ref = offline(np.full((2, 4), 10.0), load_library("prosthesis"))  # degrees, taken as such
+    ref = offline(np.full((2, 4), 10.0), load_library("prosthesis"), [1_000_000_000, 1_010_000_000])  # degrees as such
     assert_same_trace(client.received.trace(ref.mode_names), ref)
 
     # Through the ROS parameter service too: the reason reaches the caller.
@@ -296,10 +297,10 @@ def test_max_gap_restarts_the_window(ros, multispeed_csv: Path, able_bodied) -> 
     lockstep(client, x, 2000.0, stamps)
     got = client.received
     ready = got.trace(able_bodied.mode_names).ready
-    window = int(able_bodied.lengths.max())
+    window = Estimator(able_bodied).matcher.max_window
     assert ready[449] and not ready[450] and not ready[450 + window - 2] and ready[450 + window - 1]
-    first = offline(as_node_sees(rec.angles_deg[:450], "rad"), able_bodied)
-    second = offline(as_node_sees(rec.angles_deg[450:], "rad"), able_bodied)
+    first = offline(as_node_sees(rec.angles_deg[:450], "rad"), able_bodied, stamps[:450])
+    second = offline(as_node_sees(rec.angles_deg[450:], "rad"), able_bodied, stamps[450:])
     live = got.trace(able_bodied.mode_names)
     np.testing.assert_array_equal(live.mode_index, np.concatenate([first.mode_index, second.mode_index]))
     np.testing.assert_array_equal(live.phase, np.concatenate([first.phase, second.phase]))

@@ -1,78 +1,140 @@
 """The estimator pipeline used by the node and the offline tools alike:
 
     time-stamped sample -> [gap check] -> [resampling to the library rate] -> matcher
-                        -> supervisor -> Estimate
+                        -> supervisor -> [personalisation] -> Estimate
 
 ``EstimatorConfig`` holds every option; ``OPTIONS`` describes them once for both the node's
-parameters and the CLI's flags. All defaults reproduce the paper / reference implementation.
+parameters and the CLI's flags. Two presets: ``default`` (what works for a new wearer: rate
+handling, cadence variants, offset tolerance, comparison per sample) and ``paper`` (the paper's
+algorithm, which reproduces the reference implementation exactly). ``EstimatorConfig()`` is the
+default preset; ``EstimatorConfig.preset("paper")`` the paper.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
 
-from .channels import CHANNELS
+from .adapt import AdaptOptions, KernelAdapter
+from .channels import CHANNELS, N_CHANNELS
 from .kernels import KernelLibrary
-from .matcher import IncrementalMatcher, check_channel_weights, check_window_fraction
+from .matcher import (
+    IncrementalMatcher,
+    check_channel_weights,
+    check_offset_tolerance,
+    check_time_scales,
+    check_window_fraction,
+)
 from .resample import UniformResampler
 from .supervisor import Estimate, Supervisor, load_transitions
+
+RESAMPLE_MODES = ("auto", "on", "off")
+"""``resample``: ``auto`` = on when the input has time stamps (JointState stamps, a recording's
+time column), off for unstamped input (timed on arrival, or by sample index)."""
+
+DEFAULT_TIME_SCALES = (0.88, 0.94, 1.0, 1.06, 1.12)
 
 
 @dataclass(frozen=True)
 class Option:
-    """One estimator option, as a node parameter and a CLI flag."""
+    """One estimator option, as a node parameter and a CLI flag: its default (the ``default``
+    preset) and its value in the ``paper`` preset."""
 
     name: str
     default: Any
     description: str
+    paper: Any = None
+
+    @property
+    def paper_value(self) -> Any:
+        return self.default if self.paper is None else self.paper
 
 
 OPTIONS: tuple[Option, ...] = (
+    Option("resample", "auto", "resample the input onto the library's sample rate by linear interpolation of the "
+           "stamps: auto (when the input is stamped), on, off", "off"),
+    Option("time_scales", list(DEFAULT_TIME_SCALES), "stride-duration factors of the kernel variants matched per "
+           "mode (cadence robustness; the chosen one gives cadence_ratio = 1/scale); [1.0] = the paper",
+           [1.0]),
+    Option("offset_tolerance_deg", 4.0, "per-channel difference (deg) between window and kernel means that costs "
+           "nothing (sensor mounting); .inf = shapes only; 0 = the paper", 0.0),
+    Option("normalize_error", True, "compare modes by mean squared error per window sample instead of SSE", False),
     Option("window_fraction", 1.0, "fraction of each stride compared, (0, 1]; 1.0 = the paper's full stride"),
     Option("channels", list(CHANNELS), "channels used for matching (subset of right_thigh, left_thigh, right_shank, "
            "left_shank), e.g. [right_thigh, right_shank] for unilateral sensing"),
     Option("channel_weights", [1.0, 1.0, 1.0, 1.0], "weight of each channel in the SSE, CHANNELS order, >= 0"),
-    Option("subsample_phase", False, "parabolic interpolation of the SSE minimum for a phase finer than 1/N"),
-    Option("resample", False, "resample the input onto the library's sample rate by linear interpolation of the stamps"),
-    Option("min_confidence", 0.0, "below this margin ((SSE_2nd - SSE_best) / SSE_best) hold the last confident mode; 0 = off"),
+    Option("subsample_phase", False, "parabolic interpolation of the error minimum for a phase finer than 1/N"),
+    Option("min_confidence", 0.0, "below this margin ((error_2nd - error_best) / error_best) hold the last "
+           "confident mode; 0 = off"),
     Option("min_dwell_samples", 0, "a new mode must win this many consecutive samples before it is reported; 0 = off"),
     Option("min_dwell_s", 0.0, "a new mode must win this long (s) before it is reported; 0 = off"),
     Option("transitions", "", "YAML file of allowed transitions (allowed_transitions: {MODE: [MODE, ...]}); '' = any"),
     Option("phase_rate_tau_s", 0.2, "time constant (s) of the phase-rate smoothing"),
+    Option("adapt_rate", 0.0, "online personalisation: weight of one confident stride in its mode's kernel, "
+           "[0, 1]; 0 = off"),
+    Option("adapt_min_confidence", 0.2, "personalisation: lowest confidence margin allowed during an adapted stride"),
+    Option("adapt_max_step_deg", 5.0, "personalisation: per-sample clip (deg) of stride - kernel before weighting "
+           "(one stride moves a kernel by at most adapt_rate x this)"),
     Option("max_gap_s", 0.5, "a longer gap (s) between samples restarts the window (not ready until refilled); 0 = never"),
 )
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "default": {o.name: o.default for o in OPTIONS},
+    "paper": {o.name: o.paper_value for o in OPTIONS},
+}
+"""Option values of each preset (lists as given in OPTIONS)."""
+
+
+def _resample_mode(value: Any) -> str:
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    v = str(value).strip().lower()
+    aliases = {"true": "on", "false": "off", "yes": "on", "no": "off", "1": "on", "0": "off"}
+    v = aliases.get(v, v)
+    if v not in RESAMPLE_MODES:
+        raise ValueError(f"resample must be one of {', '.join(RESAMPLE_MODES)}, got {value!r}")
+    return v
 
 
 @dataclass(frozen=True)
 class EstimatorConfig:
-    """All estimator options; see OPTIONS for their meaning. Defaults = the paper."""
+    """All estimator options; see OPTIONS for their meaning. Defaults = the ``default`` preset."""
 
+    resample: str = "auto"
+    time_scales: tuple[float, ...] = DEFAULT_TIME_SCALES
+    offset_tolerance_deg: float = 4.0
+    normalize_error: bool = True
     window_fraction: float = 1.0
     channels: tuple[str, ...] = CHANNELS
     channel_weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
     subsample_phase: bool = False
-    resample: bool = False
     min_confidence: float = 0.0
     min_dwell_samples: int = 0
     min_dwell_s: float = 0.0
     transitions: str = ""
     phase_rate_tau_s: float = 0.2
+    adapt_rate: float = 0.0
+    adapt_min_confidence: float = 0.2
+    adapt_max_step_deg: float = 5.0
     max_gap_s: float = 0.5
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "resample", _resample_mode(self.resample))
         check_window_fraction(self.window_fraction)
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "channel_weights", tuple(float(w) for w in self.channel_weights))
+        object.__setattr__(self, "time_scales", tuple(float(s) for s in check_time_scales(self.time_scales)))
+        object.__setattr__(self, "offset_tolerance_deg", check_offset_tolerance(self.offset_tolerance_deg))
         unknown = [c for c in self.channels if c not in CHANNELS]
         if unknown or not self.channels:
             raise ValueError(f"channels must be a non-empty subset of {', '.join(CHANNELS)}, got {list(self.channels)}")
         check_channel_weights(self.effective_weights())
-        for name in ("min_confidence", "min_dwell_s", "max_gap_s"):
+        for name in ("min_confidence", "min_dwell_s", "max_gap_s", "adapt_min_confidence"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and v >= 0 and not math.isnan(v)):
                 raise ValueError(f"{name} must be a number >= 0, got {v!r}")
@@ -80,6 +142,18 @@ class EstimatorConfig:
             raise ValueError(f"min_dwell_samples must be an integer >= 0, got {self.min_dwell_samples!r}")
         if not (self.phase_rate_tau_s > 0 and math.isfinite(self.phase_rate_tau_s)):
             raise ValueError(f"phase_rate_tau_s must be > 0, got {self.phase_rate_tau_s!r}")
+        if not (0.0 <= self.adapt_rate <= 1.0):
+            raise ValueError(f"adapt_rate must be in [0, 1], got {self.adapt_rate!r}")
+        if not (self.adapt_max_step_deg > 0 and math.isfinite(self.adapt_max_step_deg)):
+            raise ValueError(f"adapt_max_step_deg must be > 0, got {self.adapt_max_step_deg!r}")
+
+    @classmethod
+    def preset(cls, name: str, **overrides: Any) -> EstimatorConfig:
+        """The options of preset ``name`` (``default`` or ``paper``), then ``overrides``."""
+        if name not in PRESETS:
+            raise ValueError(f"preset must be one of {', '.join(PRESETS)}, got {name!r}")
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in PRESETS[name].items()}
+        return cls().with_options(**{**values, **overrides})
 
     def effective_weights(self) -> np.ndarray:
         """channel_weights with channels outside ``channels`` set to 0."""
@@ -93,21 +167,51 @@ class EstimatorConfig:
             raise ValueError(f"unknown estimator option(s): {', '.join(sorted(unknown))}")
         return replace(self, **values)
 
+    def changed_from(self, preset: str) -> dict[str, Any]:
+        """Options whose value differs from preset ``preset``."""
+        base = EstimatorConfig.preset(preset)
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) != getattr(base, f.name)}
+
+    def preset_name(self) -> str | None:
+        """The preset these options equal, if any."""
+        return next((p for p in PRESETS if not self.changed_from(p)), None)
+
+    def resamples(self, stamped: bool) -> bool:
+        """Whether input with (``stamped``) or without real time stamps is resampled."""
+        return self.resample == "on" or (self.resample == "auto" and stamped)
+
 
 class Estimator:
-    """Streams time-stamped samples through gap check, resampling, matcher and supervisor.
+    """Streams time-stamped samples through gap check, resampling, matcher, supervisor and
+    personalisation; every accepted sample gets exactly one estimate.
+
+    With resampling, the matcher steps once per point of the library-rate grid the sample
+    completes (none, one or several); the sample's estimate is the latest grid estimate, stamped
+    with the sample's time and its phase advanced by the phase rate over the time since that grid
+    point (less than one grid interval).
 
     Args:
         library: Kernel library (degrees).
-        config: Options; default = the paper.
+        config: Options; default = the ``default`` preset.
+        stamped: The input carries real time stamps (resolves ``resample: auto``).
+        backend: Matcher step implementation (``auto``, ``numba``, ``numpy``).
     """
 
-    def __init__(self, library: KernelLibrary, config: EstimatorConfig | None = None) -> None:
+    def __init__(
+        self, library: KernelLibrary, config: EstimatorConfig | None = None, stamped: bool = True, backend: str = "auto"
+    ) -> None:
         self.library = library
         self.config = config or EstimatorConfig()
         c = self.config
         self.matcher = IncrementalMatcher(
-            library, window_fraction=c.window_fraction, channel_weights=c.effective_weights(), subsample=c.subsample_phase
+            library,
+            window_fraction=c.window_fraction,
+            channel_weights=c.effective_weights(),
+            subsample=c.subsample_phase,
+            time_scales=c.time_scales,
+            offset_tolerance_deg=c.offset_tolerance_deg,
+            normalize=c.normalize_error,
+            backend=backend,
         )
         allowed = load_transitions(c.transitions, library.mode_names) if c.transitions else None
         self.supervisor = Supervisor(
@@ -118,36 +222,47 @@ class Estimator:
             min_dwell_s=c.min_dwell_s,
             allowed=allowed,
             phase_rate_tau_s=c.phase_rate_tau_s,
+            normalized=c.normalize_error,
+            time_scales=self.matcher.time_scales,
         )
-        self.resampler = UniformResampler(library.sample_rate_hz) if c.resample else None
+        self.stamped = bool(stamped)
+        self.resampler = UniformResampler(library.sample_rate_hz) if c.resamples(stamped) else None
+        self.adapter: KernelAdapter | None = None
+        if c.adapt_rate > 0:
+            options = AdaptOptions(c.adapt_rate, c.adapt_min_confidence, c.adapt_max_step_deg)
+            self.adapter = KernelAdapter(library, options, library.sample_rate_hz)
+            self._history = np.zeros((self.matcher.max_length, N_CHANNELS))
         self.last_time: float | None = None
         self.resets = 0
+        self._last: Estimate | None = None
 
     @property
     def mode_names(self) -> list[str]:
         return self.library.mode_names
 
     def reset(self) -> None:
-        """Restart from an empty window (as after a gap)."""
+        """Restart from an empty window (as after a gap); adapted kernels are kept."""
         self.matcher.reset()
         self.supervisor.reset()
         if self.resampler is not None:
             self.resampler.reset()
+        if self.adapter is not None:
+            self.adapter.reset()
         self.last_time = None
+        self._last = None
 
     def gap_exceeded(self, time_s: float) -> bool:
         """True if a sample at ``time_s`` comes more than max_gap_s after the previous one."""
         gap = self.config.max_gap_s
         return self.last_time is not None and gap > 0 and time_s - self.last_time > gap
 
-    def update(self, time_s: float, sample_deg: Sequence[float] | np.ndarray) -> list[Estimate]:
+    def update(self, time_s: float, sample_deg: Sequence[float] | np.ndarray) -> Estimate:
         """Consume one sample (4 angles, degrees, CHANNELS order) stamped ``time_s`` (seconds,
-        strictly increasing); returns the estimates it produces: one, or with resampling zero or
-        more (one per grid point reached).
+        strictly increasing); return its estimate.
 
         Raises ValueError for a non-finite sample or a non-increasing stamp; state is unchanged.
         """
-        x = np.asarray(sample_deg, dtype=np.float64).reshape(len(CHANNELS))
+        x = np.asarray(sample_deg, dtype=np.float64).reshape(N_CHANNELS)
         if not np.isfinite(x).all() or not math.isfinite(time_s):
             raise ValueError(f"non-finite sample {x.tolist()} at {time_s}")
         if self.last_time is not None and time_s <= self.last_time:
@@ -156,8 +271,68 @@ class Estimator:
             self.reset()
             self.resets += 1
         self.last_time = time_s
-        points = self.resampler.push(time_s, x) if self.resampler is not None else [(time_s, x)]
-        return [self.supervisor.update(t, self.matcher.step(p)) for t, p in points]
+        if self.resampler is None:
+            est = self._step(time_s, x)
+        else:
+            for t, p in self.resampler.push(time_s, x):
+                self._last = self._step(t, p)
+            assert self._last is not None  # the first sample of a stream is a grid point
+            est = self._restamped(self._last, time_s)
+        return est
+
+    def _step(self, time_s: float, x: np.ndarray) -> Estimate:
+        result = self.matcher.step(x)
+        est = self.supervisor.update(time_s, result)
+        if self.adapter is not None:
+            self._adapt(time_s, x, est, result)
+        return est
+
+    @staticmethod
+    def _restamped(est: Estimate, time_s: float) -> Estimate:
+        dt = time_s - est.time_s
+        if dt <= 0.0:
+            return est
+        phase = est.phase
+        if est.ready and math.isfinite(est.phase_rate):
+            phase = (phase + est.phase_rate * dt) % 1.0
+            if phase >= 1.0:
+                phase = 0.0
+        return replace(est, time_s=time_s, phase=phase)
+
+    # -----------------------------------------------------------------------------------------
+    # Personalisation
+
+    def _adapt(self, time_s: float, x: np.ndarray, est: Estimate, result: Any) -> None:
+        adapter = self.adapter
+        assert adapter is not None
+        steps = self.matcher.steps
+        self._history[(steps - 1) % self._history.shape[0]] = x
+        m = est.mode_index
+        if est.ready and adapter.ends_stride(m, est.phase):
+            stride = self._aligned_stride(m, result)
+            if stride is not None:
+                new = adapter.finish_stride(time_s, m, stride)
+                if new is not None:
+                    self.matcher.set_kernel(m, new)
+        adapter.track(time_s, m, est.phase, est.held, est.confidence, est.ready)
+
+    def _aligned_stride(self, mode: int, result: Any) -> np.ndarray | None:
+        """The last n samples (n = length of the mode's best variant) at the kernel columns
+        the matcher aligned them with: row (j* - t) mod n holds d_{i-t}; degrees."""
+        variant = 0 if result.variant is None else int(result.variant[mode])
+        n = int(self.matcher.lengths[mode * self.matcher.n_scales + variant])
+        steps = self.matcher.steps
+        if steps < n:
+            return None
+        h = self._history.shape[0]
+        t = np.arange(n)
+        out = np.empty((n, N_CHANNELS))
+        out[(int(result.column[mode]) - t) % n] = self._history[(steps - 1 - t) % h]
+        return out
+
+    def adapted_library(self) -> KernelLibrary:
+        """The library with the kernels as personalised so far (the original if adaptation is off)."""
+        return self.adapter.adapted_library() if self.adapter is not None else self.library
 
 
 @dataclass(frozen=True)
@@ -177,6 +352,7 @@ class EstimateTrace:
     fit_rms_deg: np.ndarray  # (T,)
     held: np.ndarray  # (T,) bool
     phase_rate: np.ndarray  # (T,) strides/s
+    cadence_ratio: np.ndarray  # (T,) wearer cadence / kernel cadence of the reported mode (nan: one scale)
 
     def __len__(self) -> int:
         return int(self.time_s.shape[0])
@@ -191,10 +367,7 @@ def run_estimator(
 ) -> EstimateTrace:
     """Stream a whole recording through ``estimator`` (fresh or not) and collect the estimates."""
     idx = np.arange(len(time_s)) if index is None else np.asarray(index)
-    rows: list[tuple[int, Estimate]] = []
-    for i in range(len(time_s)):
-        for est in estimator.update(float(time_s[i]), angles_deg[i]):
-            rows.append((int(idx[i]), est))
+    rows = [(int(idx[i]), estimator.update(float(time_s[i]), angles_deg[i])) for i in range(len(time_s))]
     return trace_from_estimates(estimator.mode_names, rows)
 
 
@@ -220,6 +393,7 @@ def trace_from_estimates(mode_names: Sequence[str], rows: Sequence[tuple[int, Es
         fit_rms_deg=col("fit_rms_deg"),
         held=col("held", bool),
         phase_rate=col("phase_rate"),
+        cadence_ratio=col("cadence_ratio"),
     )
 
 
@@ -228,14 +402,21 @@ def trace_from_estimates(mode_names: Sequence[str], rows: Sequence[tuple[int, Es
 
 
 def add_estimator_arguments(parser: Any, skip: Sequence[str] = ("max_gap_s",)) -> None:
-    """Add ``--window-fraction`` ... flags (one per OPTIONS entry not in ``skip``) to ``parser``."""
-    group = parser.add_argument_group("estimator options (defaults = the paper)")
+    """Add ``--preset`` and one flag per OPTIONS entry not in ``skip`` (``--window-fraction`` ...)
+    to ``parser``; absent flags take the preset's value."""
+    group = parser.add_argument_group("estimator options (default: the 'default' preset)")
+    group.add_argument("--preset", choices=tuple(PRESETS), default="default",
+                       help="option values to start from: default (robust for a new wearer) or paper (the paper's "
+                       "algorithm, reproduces the reference implementation); the flags below override it")
     for opt in OPTIONS:
         if opt.name in skip:
             continue
         flag = "--" + opt.name.replace("_", "-")
-        if isinstance(opt.default, bool):
-            group.add_argument(flag, dest=opt.name, action="store_true", help=opt.description)
+        if opt.name == "resample":
+            group.add_argument(flag, dest=opt.name, nargs="?", const="on", choices=RESAMPLE_MODES, help=opt.description)
+        elif isinstance(opt.default, bool):
+            group.add_argument(flag, dest=opt.name, action=argparse.BooleanOptionalAction, default=None,
+                               help=opt.description)
         elif isinstance(opt.default, list):
             kind = float if isinstance(opt.default[0], float) else str
             group.add_argument(flag, dest=opt.name, nargs="+", type=kind, metavar="V", help=opt.description)
@@ -244,11 +425,17 @@ def add_estimator_arguments(parser: Any, skip: Sequence[str] = ("max_gap_s",)) -
 
 
 def config_from_args(args: Any, **overrides: Any) -> EstimatorConfig:
-    """EstimatorConfig from parsed flags (absent flags keep the defaults); raises ValueError."""
-    values = {}
+    """EstimatorConfig from parsed flags: the ``--preset``'s values, then the flags given, then
+    ``overrides`` (None values ignored); raises ValueError."""
+    values: dict[str, Any] = {}
     for opt in OPTIONS:
         v = getattr(args, opt.name, None)
-        if v is not None and v is not False:
+        if v is not None:
             values[opt.name] = tuple(v) if isinstance(v, list) else v
     values.update({k: v for k, v in overrides.items() if v is not None})
-    return EstimatorConfig().with_options(**values)
+    return EstimatorConfig.preset(getattr(args, "preset", None) or "default", **values)
+
+
+def config_from_values(values: Mapping[str, Any], preset: str = "default") -> EstimatorConfig:
+    """EstimatorConfig from option values by name (lists become tuples) on top of ``preset``."""
+    return EstimatorConfig.preset(preset, **{k: tuple(v) if isinstance(v, (list, tuple)) else v for k, v in values.items()})

@@ -166,3 +166,19 @@ def make_mode(
     arr = np.array(samples, dtype=np.float64)
     arr.setflags(write=False)
     return KernelMode(str(name), arr, float(sample_rate_hz), int(mode_id), dict(info or {}))
+
+
+def resample_stride(samples: np.ndarray, n: int) -> np.ndarray:
+    """One stride (N, C) resampled to ``n`` samples by periodic linear interpolation.
+
+    Row 0 stays at phase 0 and row k of the result is the stride at phase k / n, so a stride
+    stretched by s is ``resample_stride(samples, round(s * N))``; ``n == N`` returns a copy.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    length = x.shape[0]
+    if n == length:
+        return x.copy()
+    pos = np.arange(n) * (length / n)
+    i0 = np.floor(pos).astype(np.int64)
+    f = (pos - i0)[:, None]
+    return (1.0 - f) * x[i0 % length] + f * x[(i0 + 1) % length]

@@ -1,26 +1,40 @@
 """Mode and phase matching: the paper's Algorithms 1 (naive) and 2 (incremental).
 
-Every step takes one sample d_i (4 angles, degrees, CHANNELS order). For every mode m and every
-kernel column j (0-based) the matcher keeps
+Every step takes one sample d_i (4 angles, degrees, CHANNELS order). The matcher keeps one *row*
+per mode m and time scale s: the mode's kernel stretched to n = round(s N_m) samples (s = 1: the
+kernel itself). For every row r and every column j (0-based) it keeps the running SSE
 
-    e[m, j] = sum_{t=0}^{W-1} || d_{i-t} - k^m_{(j-t) mod N_m} ||^2        (SSE, deg^2)
+    e[r, j] = sum_{t=0}^{W-1} || d_{i-t} - k^r_{(j-t) mod n} ||^2        (deg^2)
 
-where W = min(samples seen, N_m): the window ends at the newest sample, aligned with kernel
-column j. Until W = N_m for every mode (``ready``) the sums run over the samples seen so far, as
-in the reference implementation, whose running sums start from zero.
+where W = min(samples seen, W_r): the window ends at the newest sample, aligned with column j.
+Until W = W_r for every row (``ready``) the sums run over the samples seen so far, as in the
+reference implementation, whose running sums start from zero.
 
-The best mode is argmin_m min_j e[m, j] (ties: the earlier mode); its best column j* gives the
-phase ((j* + 1) mod N_m) / N_m in [0, 1). That is the paper's phi = j*/N_m with its 1-based j*,
-and the reference implementation's output, except that we wrap its 1.0 to 0.0.
+Read-out, per row: score[r, j] = e[r, j] (the paper), minus an offset penalty and divided by the
+window length if asked (below); best column j* = argmin_j score. Per mode: the row (time scale)
+with the lowest score. The best mode is argmin_m of that (ties: the earlier mode, then the
+smaller scale, then the earlier column); its best column gives the phase ((j* + 1) mod n) / n in
+[0, 1). That is the paper's phi = j*/N with its 1-based j*, and the reference implementation's
+output, except that we wrap its 1.0 to 0.0.
 
-Options beyond the paper (all off by default, which reproduces the reference exactly):
+Options (the defaults are the paper, which reproduces the reference exactly):
 
-* ``window_fraction`` f in (0, 1]: match only the newest W_m = max(2, round(f N_m)) samples
-  against the corresponding part of every kernel shift (shorter delay after a mode change);
+* ``window_fraction`` f in (0, 1]: match only the newest W_r = max(2, round(f n)) samples against
+  the corresponding part of every kernel shift (shorter delay after a mode change);
 * ``channel_weights`` w (4,), >= 0: e = sum_c w_c (d_c - k_c)^2, so 0 drops a channel (e.g.
   unilateral sensing with the prosthesis-side thigh and shank only); implemented by scaling
   kernels and samples by sqrt(w);
-* ``subsample``: parabolic interpolation of e around j* for a phase finer than 1/N_m.
+* ``subsample``: parabolic interpolation of the score around j* for a phase finer than 1/n;
+* ``time_scales`` (S,): stretch factors of the kernels' stride duration; a wearer whose strides
+  last s times the kernel's is matched by the rows of scale s (cadence ratio 1/s);
+* ``offset_tolerance_deg`` tau >= 0: per channel, a difference of up to tau degrees between the
+  window's mean and the mean of the kernel part it is compared with costs nothing (sensor
+  mounting); larger differences cost only their excess. With x_c that mean difference the score
+  is e - W sum_c (x_c^2 - max(|x_c| - tau, 0)^2): every SSE splits exactly into the shape part
+  and W x_c^2 per channel. tau = inf matches shapes only; 0 is the paper;
+* ``normalize``: compare modes and scales by mean squared error per window sample, score / W,
+  instead of SSE (needed when rows of different lengths compete: the paper's SSE favours shorter
+  kernels).
 """
 
 from __future__ import annotations
@@ -31,8 +45,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import compiled
 from .channels import N_CHANNELS
-from .kernels import KernelLibrary
+from .kernels import KernelLibrary, resample_stride
+
+BACKENDS = ("auto", "numba", "numpy")
+"""Incremental step implementations: ``numba`` (compiled), ``numpy``; ``auto`` = numba if installed."""
 
 
 @dataclass(frozen=True)
@@ -43,10 +61,14 @@ class StepResult:
         mode_index: Index of the best mode in the library.
         mode: Name of the best mode.
         phase: Gait phase of the best mode, [0, 1), 0 = right heel strike.
-        sse: Per-mode minimum SSE over all shifts, deg^2, shape (M,).
+        sse: Per-mode match error (the score of the mode's best row and shift), shape (M,): SSE
+            in deg^2 (the paper), or deg^2 per window sample with ``normalize``; channel-weighted.
         phases: Per-mode phase at that mode's best shift, shape (M,).
-        ready: True once the window of every mode is full.
-        window: Samples in each mode's comparison window so far, min(steps, W_m), shape (M,).
+        ready: True once the window of every row is full.
+        window: Samples in each mode's comparison window so far (of its best row), shape (M,).
+        variant: Per mode, index of the best time scale in ``matcher.time_scales``, shape (M,);
+            None when the matcher has only one scale.
+        column: Per mode, the best kernel column j* of that row, shape (M,); None if not kept.
     """
 
     mode_index: int
@@ -56,6 +78,8 @@ class StepResult:
     phases: np.ndarray
     ready: bool
     window: np.ndarray
+    variant: np.ndarray | None = None
+    column: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -74,14 +98,57 @@ class MatchTrace:
         return [self.mode_names[i] for i in self.mode_index]
 
 
+def check_window_fraction(value: float) -> float:
+    """Validate ``window_fraction``: a number in (0, 1]."""
+    f = float(value)
+    if not (0.0 < f <= 1.0):
+        raise ValueError(f"window_fraction must be in (0, 1], got {value!r}")
+    return f
+
+
+def check_channel_weights(value: Sequence[float] | None) -> np.ndarray:
+    """Validate ``channel_weights``: 4 finite numbers >= 0, not all 0 (None = all 1)."""
+    if value is None:
+        return np.ones(N_CHANNELS)
+    w = np.asarray(value, dtype=np.float64).reshape(-1)
+    if w.size != N_CHANNELS:
+        raise ValueError(f"channel_weights needs {N_CHANNELS} values (CHANNELS order), got {w.size}")
+    if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+        raise ValueError(f"channel_weights must be finite, >= 0 and not all 0, got {w.tolist()}")
+    return w
+
+
+def check_time_scales(value: Sequence[float] | None) -> np.ndarray:
+    """Validate ``time_scales``: distinct numbers in [0.5, 2], sorted (None = (1.0,))."""
+    if value is None:
+        return np.ones(1)
+    s = np.asarray(value, dtype=np.float64).reshape(-1)
+    if s.size == 0 or not np.all(np.isfinite(s)) or np.any((s < 0.5) | (s > 2.0)):
+        raise ValueError(f"time_scales must be one or more numbers in [0.5, 2], got {s.tolist()}")
+    if np.unique(s).size != s.size:
+        raise ValueError(f"time_scales must be distinct, got {s.tolist()}")
+    return np.sort(s)
+
+
+def check_offset_tolerance(value: float) -> float:
+    """Validate ``offset_tolerance_deg``: a number >= 0 (inf allowed)."""
+    t = float(value)
+    if math.isnan(t) or t < 0:
+        raise ValueError(f"offset_tolerance_deg must be >= 0 (inf: any offset), got {value!r}")
+    return t
+
+
 class _MatcherBase:
-    """Shared state: padded kernels, the ring buffer of recent samples, result assembly.
+    """Shared state: the rows (padded kernels), the ring buffer of recent samples, the read-out.
 
     Args:
         library: The kernels to match against (degrees).
         window_fraction: Fraction of each stride compared, (0, 1]; 1.0 = the paper.
         channel_weights: Weight of each channel (CHANNELS order), >= 0, not all 0; None = all 1.
         subsample: Refine the phase between kernel columns by parabolic interpolation.
+        time_scales: Stride-duration factors of the kernel variants; None = (1.0,), the paper.
+        offset_tolerance_deg: Per-channel mean offset that costs nothing, degrees; 0 = the paper.
+        normalize: Compare by mean squared error per window sample instead of SSE.
     """
 
     def __init__(
@@ -90,30 +157,73 @@ class _MatcherBase:
         window_fraction: float = 1.0,
         channel_weights: Sequence[float] | None = None,
         subsample: bool = False,
+        time_scales: Sequence[float] | None = None,
+        offset_tolerance_deg: float = 0.0,
+        normalize: bool = False,
     ) -> None:
         self.library = library
         self.mode_names = library.mode_names
-        self.lengths = library.lengths
         self.n_modes = len(library)
-        self.max_length = int(self.lengths.max())
         self.window_fraction = check_window_fraction(window_fraction)
         self.channel_weights = check_channel_weights(channel_weights)
+        self.time_scales = check_time_scales(time_scales)
+        self.offset_tolerance_deg = check_offset_tolerance(offset_tolerance_deg)
         self.subsample = bool(subsample)
-        self.windows = np.maximum(2, np.rint(self.window_fraction * self.lengths)).astype(np.int64)
-        self.windows = np.minimum(self.windows, self.lengths)
-        self.max_window = int(self.windows.max())
+        self.normalize = bool(normalize)
+        self.n_scales = int(self.time_scales.size)
         self.active_channels = int(np.count_nonzero(self.channel_weights))
         self._scale = np.sqrt(self.channel_weights)
         self._weighted = bool(np.any(self.channel_weights != 1.0))
-        m, n = self.n_modes, self.max_length
-        kernels = np.zeros((m, N_CHANNELS, n))  # channel-major: one (4, Nmax) matrix per mode
-        for i, mode in enumerate(library.modes):
-            kernels[i, :, : mode.length] = (mode.samples * self._scale).T
-        self._kernels = kernels
-        self._valid = np.arange(n)[None, :] < self.lengths[:, None]  # (M, Nmax)
+        self._offset = self.offset_tolerance_deg > 0
+        self._tau = self.offset_tolerance_deg * self._scale  # in the weighted units of d and k
+        base = library.lengths
+        # Rows are mode-major: row m * S + s is mode m at time scale s.
+        self.lengths = np.maximum(2, np.rint(np.outer(base, self.time_scales))).astype(np.int64).reshape(-1)
+        self.windows = np.minimum(
+            np.maximum(2, np.rint(self.window_fraction * self.lengths)).astype(np.int64), self.lengths
+        )
+        self.n_rows = int(self.lengths.size)
+        self.max_length = int(self.lengths.max())
+        self.max_window = int(self.windows.max())
+        self._partial = bool(np.any(self.windows < self.lengths))
+        self._rows = np.arange(self.n_rows)
+        self._all = np.arange(self.n_modes)
+        self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
+        self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
+        self._mu = np.zeros((self.n_rows, N_CHANNELS))
+        self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._offset and self._partial else 1))
+        for m in range(self.n_modes):
+            self._set_rows(m, library.modes[m].samples)
         self._ring = np.zeros((self.max_window, N_CHANNELS))
         self._count = 0
-        self._all = np.arange(self.n_modes)
+
+    # -----------------------------------------------------------------------------------------
+    # Rows
+
+    def _set_rows(self, mode: int, samples: np.ndarray) -> None:
+        """(Re)build the rows of ``mode`` from its kernel ``samples`` (N_m, 4), degrees."""
+        for r in range(mode * self.n_scales, (mode + 1) * self.n_scales):
+            n = int(self.lengths[r])
+            k = resample_stride(samples, n) * self._scale  # (n, 4)
+            self._kernels[r] = 0.0
+            self._kernels[r, :, :n] = k.T
+            self._mu[r] = k.mean(axis=0)
+            if self._mu_seg.shape[2] > 1:
+                w = int(self.windows[r])
+                # mean of k over columns j-W+1 .. j (circular), for every j
+                c = np.cumsum(np.concatenate([k, k]), axis=0)
+                j = np.arange(n) + n
+                self._mu_seg[r, :, :n] = ((c[j] - c[j - w]) / w).T
+
+    def row_kernel(self, row: int) -> np.ndarray:
+        """The kernel of ``row`` (n, 4), degrees (unweighted channels as given)."""
+        n = int(self.lengths[row])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = self._kernels[row, :, :n].T / np.where(self._scale > 0, self._scale, 1.0)
+        return k
+
+    # -----------------------------------------------------------------------------------------
+    # State
 
     @property
     def steps(self) -> int:
@@ -122,7 +232,7 @@ class _MatcherBase:
 
     @property
     def ready(self) -> bool:
-        """True once every mode's window holds W_m samples (W_m = N_m by default)."""
+        """True once every row's window holds W_r samples (W_r = n_r by default)."""
         return self._count >= self.max_window
 
     def reset(self) -> None:
@@ -130,40 +240,85 @@ class _MatcherBase:
         self._ring[:] = 0.0
         self._count = 0
 
-    def _checked(self, sample: np.ndarray) -> np.ndarray:
+    def _weighted_sample(self, sample: np.ndarray) -> tuple[np.ndarray, float]:
         d = np.asarray(sample, dtype=np.float64).reshape(N_CHANNELS)
-        if not np.isfinite(d).all():
+        dsq = float(d @ d)
+        if not math.isfinite(dsq):  # also catches overflow of ||d||^2, i.e. |angle| > 1e154
             raise ValueError(f"sample has non-finite values: {d.tolist()}")
-        return d * self._scale if self._weighted else d
+        if self._weighted:
+            d = d * self._scale
+            dsq = float(d @ d)
+        return d, dsq
 
-    def _push(self, d: np.ndarray) -> None:
-        self._ring[self._count % self.max_window] = d
-        self._count += 1
+    def _window_data(self) -> np.ndarray:
+        """The buffered samples newest first: row t is d_{i-t}, (Wmax, 4) (weighted)."""
+        w = self.max_window
+        return self._ring[(self._count - 1 - np.arange(w)) % w]
 
-    def _result(self, e: np.ndarray) -> StepResult:
-        best_cols = e.argmin(axis=1)
-        sse = e[self._all, best_cols]
+    def window_sums(self) -> np.ndarray:
+        """Per row, the sum of the samples in its current window, (R, 4) (weighted)."""
+        data = self._window_data()
+        cum = np.concatenate([np.zeros((1, N_CHANNELS)), np.cumsum(data, axis=0)])
+        return cum[np.minimum(self._count, self.windows)]
+
+    # -----------------------------------------------------------------------------------------
+    # Read-out (numpy): shared by the naive matcher and the numpy incremental step
+
+    def _scores(self, e: np.ndarray, sums: np.ndarray | None) -> np.ndarray:
+        """score[r, j] from the running sums e (R, Nmax); see the module docstring."""
+        win = np.minimum(self._count, self.windows)
+        score = e
+        if self._offset:
+            filled = self._count >= self.windows
+            w = self.windows.astype(np.float64)
+            if self._partial:
+                x = sums[:, :, None] / w[:, None, None] - self._mu_seg  # (R, 4, Nmax)
+                w_ = w[:, None]
+            else:
+                x = sums / w[:, None] - self._mu  # (R, 4)
+                w_ = w
+            excess = np.maximum(np.abs(x) - (self._tau[:, None] if self._partial else self._tau), 0.0)
+            penalty = w_ * (x * x - excess * excess).sum(axis=1)
+            penalty = np.where(filled if not self._partial else filled[:, None], penalty, 0.0)
+            score = e - (penalty if self._partial else penalty[:, None])
+        if self.normalize:
+            score = score / win[:, None]
+        return score
+
+    def _result(self, score: np.ndarray) -> StepResult:
+        cols = score.argmin(axis=1)
+        best = score[self._rows, cols]
+        s = self.n_scales
+        if s > 1:
+            variant = best.reshape(self.n_modes, s).argmin(axis=1)
+            rows = self._all * s + variant
+        else:
+            variant, rows = None, self._all
+        cols, sse = cols[rows], best[rows]
+        lens = self.lengths[rows]
         if self.subsample:
-            lens = self.lengths
-            before = e[self._all, (best_cols - 1) % lens]
-            after = e[self._all, (best_cols + 1) % lens]
+            before = score[rows, (cols - 1) % lens]
+            after = score[rows, (cols + 1) % lens]
             curvature = before - 2.0 * sse + after
             with np.errstate(divide="ignore", invalid="ignore"):
                 offset = np.where(curvature > 0, 0.5 * (before - after) / curvature, 0.0)
-            position = best_cols + 1 + np.clip(offset, -0.5, 0.5)
+            position = cols + 1 + np.clip(offset, -0.5, 0.5)
             phases = np.mod(position, lens) / lens
             phases[phases >= 1.0] = 0.0
         else:
-            phases = ((best_cols + 1) % self.lengths) / self.lengths
-        best = int(sse.argmin())
-        window = np.minimum(self._count, self.windows)
-        return StepResult(best, self.mode_names[best], float(phases[best]), sse, phases, self.ready, window)
+            phases = ((cols + 1) % lens) / lens
+        b = int(sse.argmin())
+        window = np.minimum(self._count, self.windows[rows])
+        return StepResult(b, self.mode_names[b], float(phases[b]), sse, phases, self.ready, window, variant, cols)
+
+    # -----------------------------------------------------------------------------------------
+    # Naive recomputation (the specification; also used to resynchronise)
 
     def _window_sse(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """Naive SSE of the current window against kernel shifts (rows[b], cols[b]), shape (B,)."""
+        """Naive SSE of the current window against row shifts (rows[b], cols[b]), shape (B,)."""
         w = self.max_window
         t = np.arange(w)
-        data = self._ring[(self._count - 1 - t) % w]  # (Wmax, 4): d_{i-t}
+        data = self._window_data()  # (Wmax, 4): d_{i-t}
         lens = self.lengths[rows][:, None]
         diff = data[None, :, :] - self._kernels[rows[:, None], :, (cols[:, None] - t[None, :]) % lens]
         sq = np.einsum("btc,btc->bt", diff, diff)
@@ -171,7 +326,7 @@ class _MatcherBase:
         return sq.sum(axis=1)
 
     def full_sse(self) -> np.ndarray:
-        """e[m, j] recomputed from the buffered samples (the naive sum), (M, Nmax); padding inf."""
+        """e[r, j] recomputed from the buffered samples (the naive sum), (R, Nmax); padding inf."""
         rows, cols = np.nonzero(self._valid)
         out = np.full(self._valid.shape, np.inf)
         for lo in range(0, rows.size, _CHUNK):
@@ -200,26 +355,6 @@ class _MatcherBase:
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
 
 
-def check_window_fraction(value: float) -> float:
-    """Validate ``window_fraction``: a number in (0, 1]."""
-    f = float(value)
-    if not (0.0 < f <= 1.0):
-        raise ValueError(f"window_fraction must be in (0, 1], got {value!r}")
-    return f
-
-
-def check_channel_weights(value: Sequence[float] | None) -> np.ndarray:
-    """Validate ``channel_weights``: 4 finite numbers >= 0, not all 0 (None = all 1)."""
-    if value is None:
-        return np.ones(N_CHANNELS)
-    w = np.asarray(value, dtype=np.float64).reshape(-1)
-    if w.size != N_CHANNELS:
-        raise ValueError(f"channel_weights needs {N_CHANNELS} values (CHANNELS order), got {w.size}")
-    if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
-        raise ValueError(f"channel_weights must be finite, >= 0 and not all 0, got {w.tolist()}")
-    return w
-
-
 class NaiveMatcher(_MatcherBase):
     """Paper Algorithm 1: every step recomputes every shift from the window, O(N^2 M).
 
@@ -229,29 +364,33 @@ class NaiveMatcher(_MatcherBase):
 
     def step(self, sample: np.ndarray) -> StepResult:
         """Consume one sample (4,), degrees, CHANNELS order; return the estimate."""
-        self._push(self._checked(sample))
-        return self._result(self.full_sse())
+        d, _ = self._weighted_sample(sample)
+        self._ring[self._count % self.max_window] = d
+        self._count += 1
+        e = self.full_sse()
+        return self._result(self._scores(e, self.window_sums() if self._offset else None))
 
     def state_bytes(self) -> int:
         return self._kernels.nbytes + self._ring.nbytes + self._valid.nbytes
 
 
 class IncrementalMatcher(_MatcherBase):
-    """Paper Algorithm 2 with O(N M) time and memory per step, vectorised across modes.
+    """Paper Algorithm 2 with O(N M) time and memory per step, vectorised across rows.
 
-    With W_m = N_m (the paper):
+    With W_r = n_r (the paper):
 
-        e[m, j] <- e[m, j-1] + ||d_i - k_j||^2 - ||d_{i-N_m} - k_j||^2
-                 = e[m, j-1] + ||d_i||^2 - ||d_{i-N_m}||^2 - 2 k_j . (d_i - d_{i-N_m})
+        e[r, j] <- e[r, j-1] + ||d_i - k_j||^2 - ||d_{i-n} - k_j||^2
+                 = e[r, j-1] + ||d_i||^2 - ||d_{i-n}||^2 - 2 k_j . (d_i - d_{i-n})
 
-    With a shorter window the stale sample d_{i-W_m} leaves paired with kernel column j - W_m:
+    With a shorter window the stale sample d_{i-W} leaves paired with kernel column j - W:
 
-        e[m, j] <- e[m, j-1] + ||d_i - k_j||^2 - ||d_{i-W_m} - k_{j-W_m}||^2
+        e[r, j] <- e[r, j-1] + ||d_i - k_j||^2 - ||d_{i-W} - k_{j-W}||^2
 
     The stale sample comes from a ring buffer of the last W_max samples instead of the paper's
-    N x N cache of squared terms (which would take O(N^2 M) memory). One step is a batched
-    (1 x 4) @ (4 x N_max) product per mode (8 channels with a shorter window) plus a few passes
-    over the (M, N_max) array.
+    N x N cache of squared terms (which would take O(N^2 M) memory). Window sums for the offset
+    penalty come from a ring of prefix sums (two lookups per row). The ``numba`` backend does a
+    step in one compiled pass; the ``numpy`` backend in a batched (1 x 4) @ (4 x N_max) product
+    per row plus a few passes over the (R, N_max) array.
 
     Resynchronisation: rounding errors of the running sums are bounded by recomputing
     ``resync_block`` entries from the window every few steps, so that every entry is recomputed
@@ -260,9 +399,11 @@ class IncrementalMatcher(_MatcherBase):
 
     Args:
         library: The kernels to match against.
-        window_fraction, channel_weights, subsample: see the module docstring.
+        window_fraction, channel_weights, subsample, time_scales, offset_tolerance_deg,
+            normalize: see the module docstring.
         resync_period: Steps within which every column is recomputed from scratch (0 = never).
         resync_block: Columns recomputed at one resynchronisation.
+        backend: ``auto`` (numba if installed), ``numba`` or ``numpy``.
     """
 
     def __init__(
@@ -271,55 +412,106 @@ class IncrementalMatcher(_MatcherBase):
         window_fraction: float = 1.0,
         channel_weights: Sequence[float] | None = None,
         subsample: bool = False,
+        time_scales: Sequence[float] | None = None,
+        offset_tolerance_deg: float = 0.0,
+        normalize: bool = False,
         resync_period: int = 1 << 20,
         resync_block: int = 64,
+        backend: str = "auto",
     ) -> None:
-        super().__init__(library, window_fraction, channel_weights, subsample)
-        m, n = self.n_modes, self.max_length
-        self._ksq = np.einsum("mcj,mcj->mj", self._kernels, self._kernels)  # ||k_j||^2, (M, Nmax)
-        self._partial = bool(np.any(self.windows < self.lengths))
-        if self._partial:
-            # k_{j-W_m} for every column j: the kernel column the stale sample was compared with.
-            j = np.arange(n)[None, :]
-            src = np.where(self._valid, (j - self.windows[:, None]) % self.lengths[:, None], j)
-            lagged = self._kernels[self._all[:, None], :, src].transpose(0, 2, 1)  # (M, 4, Nmax)
-            self._stacked = np.concatenate([self._kernels, lagged], axis=1)  # (M, 8, Nmax)
-            self._kconst = self._ksq - np.einsum("mcj,mcj->mj", lagged, lagged)
-        self._last = self.lengths - 1
-        padded = self.lengths < n
-        self._pad_rows = np.flatnonzero(padded)
-        self._pad_cols = self.lengths[padded]
+        super().__init__(library, window_fraction, channel_weights, subsample, time_scales, offset_tolerance_deg, normalize)
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        if backend == "numba" and not compiled.AVAILABLE:
+            raise ValueError("backend 'numba' needs the numba package (pip install numba)")
+        self.backend = "numba" if backend == "auto" and compiled.AVAILABLE else ("numpy" if backend == "auto" else backend)
+        r, n = self.n_rows, self.max_length
+        self._lagged: np.ndarray | None = None
         self._ring_sq = np.zeros(self.max_window)
-        self._e = np.empty((m, n))
-        self._next = np.empty((m, 1, n))  # matmul output; becomes e after the update
+        self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
+        self._psum = np.zeros(N_CHANNELS)
+        self._e = np.empty((r, n))
+        self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
+        self._update_row_constants()
+        self._pad_rows = np.flatnonzero(self.lengths < n)
+        self._pad_cols = self.lengths[self._pad_rows]
+        self._last = self.lengths - 1
+        # numba outputs, reused every step
+        self._out_col = np.zeros(r, dtype=np.int64)
+        self._out_score = np.zeros(r)
         total = int(self._valid.sum())
         self._resync_block = max(1, min(int(resync_block), total))
         if resync_period > 0:
-            rounds = math.ceil(m * n / self._resync_block)
+            rounds = math.ceil(r * n / self._resync_block)
             self._resync_every = max(1, int(resync_period) // rounds)
         else:
             self._resync_every = 0
         self.reset()
+        if self.backend == "numba":  # compile (or load the cached code) now, not at the first sample
+            self._step_numba(np.zeros(N_CHANNELS), 0.0)
+            self.reset()
+
+    def _update_row_constants(self, rows: np.ndarray | None = None) -> None:
+        """Per-row kernel constants of the step for ``rows`` (default: all) after their kernels
+        changed: ||k_j||^2 and, with a shorter window, the lagged kernel k_{j-W}."""
+        if rows is None:
+            rows = self._rows
+            self._ksq = np.empty((self.n_rows, self.max_length))
+            if self._partial:
+                self._stacked = np.empty((self.n_rows, 2 * N_CHANNELS, self.max_length))
+                self._kconst = np.empty((self.n_rows, self.max_length))
+        k = self._kernels[rows]
+        self._ksq[rows] = np.einsum("rcj,rcj->rj", k, k)  # ||k_j||^2, (R, Nmax)
+        if self._partial:
+            # k_{j-W} for every column j: the kernel column the stale sample was compared with.
+            j = np.arange(self.max_length)[None, :]
+            src = np.where(self._valid[rows], (j - self.windows[rows, None]) % self.lengths[rows, None], j)
+            lagged = k[np.arange(rows.size)[:, None], :, src].transpose(0, 2, 1)  # (R, 4, Nmax)
+            self._stacked[rows] = np.concatenate([k, lagged], axis=1)  # (R, 8, Nmax)
+            self._kconst[rows] = self._ksq[rows] - np.einsum("rcj,rcj->rj", lagged, lagged)
 
     def reset(self) -> None:
         super().reset()
         self._ring_sq[:] = 0.0
+        self._psum_ring[:] = 0.0
+        self._psum[:] = 0.0
         self._e[:] = np.where(self._valid, 0.0, np.inf)
         self._resync_cursor = 0
 
     def step(self, sample: np.ndarray) -> StepResult:
         """Consume one sample (4,), degrees, CHANNELS order; return the estimate."""
-        d = np.asarray(sample, dtype=np.float64).reshape(N_CHANNELS)
-        dsq = float(d @ d)
-        if not math.isfinite(dsq):  # also catches overflow of ||d||^2, i.e. |angle| > 1e154
-            raise ValueError(f"sample has non-finite values: {d.tolist()}")
-        if self._weighted:
-            d = d * self._scale
-            dsq = float(d @ d)
+        d, dsq = self._weighted_sample(sample)
+        if self.backend == "numba":
+            result = self._step_numba(d, dsq)
+        else:
+            result = self._step_numpy(d, dsq)
+        if self._resync_every and self._count % self._resync_every == 0:
+            self._resync()
+        return result
+
+    def _step_numba(self, d: np.ndarray, dsq: float) -> StepResult:
+        m = self.n_modes
+        sse, phases = np.empty(m), np.empty(m)
+        variant, column, window = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+        nxt = self._next.reshape(self._e.shape)
+        b = compiled.step_rows(
+            self._e, nxt, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
+            self._psum_ring, self._psum, self._count, d, dsq, self._offset, self._mu, self._mu_seg, self._tau,
+            self.normalize, self.subsample, self.n_scales,
+            self._out_col, self._out_score, sse, phases, variant, column, window,
+        )
+        self._e, self._next = nxt, self._e.reshape(self._next.shape)
+        self._count += 1
+        return StepResult(
+            b, self.mode_names[b], float(phases[b]), sse, phases, self._count >= self.max_window, window,
+            variant if self.n_scales > 1 else None, column,
+        )
+
+    def _step_numpy(self, d: np.ndarray, dsq: float) -> StepResult:
         i = self._count
         w = self.max_window
         stale = (i - self.windows) % w
-        if i >= w:  # every window is full: d_{i-W_m} leaves every mode's window
+        if i >= w:  # every window is full: d_{i-W_r} leaves every row's window
             old = self._ring[stale]
             base = dsq - self._ring_sq[stale]
             full = None
@@ -327,18 +519,25 @@ class IncrementalMatcher(_MatcherBase):
             full = i >= self.windows
             old = self._ring[stale] * full[:, None]
             base = dsq - self._ring_sq[stale] * full
-        self._push(d)
+        sums = None
+        if self._offset:
+            psum = self._psum + d
+            sums = psum - np.where((i >= self.windows)[:, None], self._psum_ring[stale], 0.0)
+            self._psum = psum
+            self._psum_ring[i % w] = psum
+        self._ring[i % w] = d
+        self._count += 1
         self._ring_sq[i % w] = dsq
         nxt3 = self._next
         if self._partial:
-            vec = np.concatenate([-2.0 * np.broadcast_to(d, old.shape), 2.0 * old], axis=1)  # (M, 8)
+            vec = np.concatenate([-2.0 * np.broadcast_to(d, old.shape), 2.0 * old], axis=1)  # (R, 8)
             np.matmul(vec[:, None, :], self._stacked, out=nxt3)
         else:
             np.matmul((-2.0 * (d[None, :] - old))[:, None, :], self._kernels, out=nxt3)
         nxt = nxt3.reshape(self._e.shape)
         e = self._e
-        first = nxt[:, 0] + e[self._all, self._last]  # circular: column 0 follows column N_m - 1
-        nxt.ravel()[1:] += e.ravel()[:-1]  # e[m, j-1]: the window and the kernel slide together
+        first = nxt[:, 0] + e[self._rows, self._last]  # circular: column 0 follows column n - 1
+        nxt.ravel()[1:] += e.ravel()[:-1]  # e[r, j-1]: the window and the kernel slide together
         nxt[:, 0] = first
         nxt[self._pad_rows, self._pad_cols] = np.inf
         nxt += base[:, None]
@@ -350,13 +549,13 @@ class IncrementalMatcher(_MatcherBase):
             if self._partial:
                 nxt[full] += self._kconst[full]
         self._e, self._next = nxt, e.reshape(nxt3.shape)
-        if self._resync_every and self._count % self._resync_every == 0:
-            self._resync()
+        if self._offset or self.normalize:
+            return self._result(self._scores(self._e, sums))
         return self._result(self._e)
 
     def _resync(self) -> None:
-        # Errors travel with the diagonal e[m, j] -> e[m, j + 1], so the sweep runs over the
-        # diagonals r = (j - steps) mod N_m, which stay put, not over the columns j.
+        # Errors travel with the diagonal e[r, j] -> e[r, j + 1], so the sweep runs over the
+        # diagonals q = (j - steps) mod n, which stay put, not over the columns j.
         lo = self._resync_cursor
         hi = min(lo + self._resync_block, self._valid.size)
         flat = lo + np.flatnonzero(self._valid.ravel()[lo:hi])
@@ -364,19 +563,68 @@ class IncrementalMatcher(_MatcherBase):
         if flat.size:
             cols = (diag + self._count) % self.lengths[rows]
             self._e[rows, cols] = self._window_sse(rows, cols)
-        self._resync_cursor = 0 if hi >= self._valid.size else hi
+        if hi >= self._valid.size:
+            self._resync_cursor = 0
+            if self._count > self.max_window:  # every window sum is then a difference of two
+                self._rebase_prefix_sums()
+        else:
+            self._resync_cursor = hi
+
+    def _rebase_prefix_sums(self) -> None:
+        """Keep the prefix sums small (their differences, the window sums, are what counts)."""
+        if self._offset:
+            shift = self._psum.copy()
+            self._psum -= shift
+            self._psum_ring -= shift
 
     def resync_all(self) -> None:
         """Recompute every column from the window now (O(N^2 M); not needed in normal use)."""
         self._e[:] = self.full_sse()
 
     def running_sse(self) -> np.ndarray:
-        """The running e[m, j] (M, Nmax), padding inf; a copy."""
+        """The running e[r, j] (R, Nmax), padding inf; a copy."""
         return self._e.copy()
+
+    def set_kernel(self, mode: int, samples: np.ndarray) -> None:
+        """Replace the kernel of ``mode`` (N_m, 4), degrees, keeping the window: the running
+        sums of its rows are recomputed exactly from the buffered samples in O(n log n) per row
+        (FFT circular correlation), so the next step continues as if the kernel had always been
+        this one."""
+        k = np.asarray(samples, dtype=np.float64)
+        if k.shape != self.library.modes[mode].samples.shape or not np.all(np.isfinite(k)):
+            raise ValueError(f"new kernel for mode {self.mode_names[mode]!r} must be finite with shape "
+                             f"{self.library.modes[mode].samples.shape}, got {k.shape}")
+        self._set_rows(mode, k)
+        rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
+        self._update_row_constants(rows)
+        self._e[rows] = self._rows_sse_fft(rows)
+
+    def _rows_sse_fft(self, rows: np.ndarray) -> np.ndarray:
+        """e[r, :] for ``rows`` from the buffered window by FFT, (len(rows), Nmax), padding inf.
+
+        e[j] = sum_{t<W} ||x_t||^2 - 2 sum_{t<W} x_t . k_{(j-t) mod n} + sum_{t<W} ||k_{(j-t) mod n}||^2
+        with x_t = d_{i-t}: two circular convolutions of length n.
+        """
+        data = self._window_data()
+        out = np.full((rows.size, self.max_length), np.inf)
+        for a, r in enumerate(rows):
+            n = int(self.lengths[r])
+            w = min(self._count, int(self.windows[r]))
+            x = np.zeros((n, N_CHANNELS))
+            x[:w] = data[:w]
+            box = np.zeros(n)
+            box[:w] = 1.0
+            k = self._kernels[r, :, :n]  # (4, n)
+            fx = np.fft.rfft(x.T, n=n)
+            cross = np.fft.irfft((fx * np.fft.rfft(k, n=n)).sum(axis=0), n=n)
+            ksq = np.fft.irfft(np.fft.rfft(box) * np.fft.rfft((k * k).sum(axis=0)), n=n)
+            out[a, :n] = float((x * x).sum()) - 2.0 * cross + ksq
+        return out
 
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
-        arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid]
+        arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid,
+                  self._psum_ring, self._mu, self._mu_seg]
         if self._partial:
             arrays += [self._stacked, self._kconst]
         return int(sum(a.nbytes for a in arrays))

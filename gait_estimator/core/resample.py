@@ -6,12 +6,18 @@ import math
 
 import numpy as np
 
+SNAP = 0.01
+"""Fraction of the grid interval within which a grid point takes the sample as it is."""
+
 
 class UniformResampler:
     """Linear interpolation of a time-stamped stream onto t0 + k / rate_hz.
 
     The first sample after construction or ``reset`` starts the grid (t0 = its stamp); every
-    later sample emits the grid points in (previous stamp, its stamp].
+    later sample emits the grid points in (previous stamp, its stamp]. A grid point within
+    ``SNAP`` grid intervals of a sample's stamp is that sample itself (value and stamp), so a
+    stream already at the rate (up to stamp rounding, e.g. to nanoseconds) passes through
+    unchanged.
 
     Args:
         rate_hz: Output rate (Hz), e.g. the kernel library's sample rate.
@@ -39,12 +45,16 @@ class UniformResampler:
         if time_s <= self._prev_t:
             raise ValueError(f"stamps must increase: {time_s} after {self._prev_t}")
         out = []
+        snap = SNAP / self.rate_hz
         while True:
             t = self._t0 + self._k / self.rate_hz
-            if t > time_s + 1e-12:
+            if t > time_s + snap:
                 break
-            a = (t - self._prev_t) / (time_s - self._prev_t)
-            out.append((t, self._prev_x + a * (x - self._prev_x)))
+            if t >= time_s - snap:
+                out.append((time_s, x))
+            else:
+                a = (t - self._prev_t) / (time_s - self._prev_t)
+                out.append((t, self._prev_x + a * (x - self._prev_x)))
             self._k += 1
         self._prev_t, self._prev_x = time_s, x
         return out

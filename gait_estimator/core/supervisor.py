@@ -48,6 +48,8 @@ class Estimate:
         fit_rms_deg: RMS error per sample and channel of the reported mode, degrees.
         held: True while the reported mode is held (low confidence or dwell pending).
         phase_rate: Smoothed phase velocity, strides per second; nan until known.
+        cadence_ratio: Wearer cadence / kernel cadence of the reported mode: 1 / the time scale
+            of its best kernel variant; nan when the matcher has one scale.
     """
 
     time_s: float
@@ -62,6 +64,7 @@ class Estimate:
     fit_rms_deg: float
     held: bool
     phase_rate: float
+    cadence_ratio: float = math.nan
 
 
 def load_transitions(path: str | Path, mode_names: Sequence[str]) -> np.ndarray:
@@ -113,6 +116,8 @@ class Supervisor:
         min_dwell_s: Seconds a new mode must win before it is reported; 0 = off.
         allowed: (M, M) allowed[from, to] matrix, or None for no restriction.
         phase_rate_tau_s: Time constant of the phase-rate smoothing, seconds.
+        normalized: The matcher's errors are per window sample (not SSE).
+        time_scales: The matcher's time scales (for the cadence ratio).
     """
 
     def __init__(
@@ -124,6 +129,8 @@ class Supervisor:
         min_dwell_s: float = 0.0,
         allowed: np.ndarray | None = None,
         phase_rate_tau_s: float = 0.2,
+        normalized: bool = False,
+        time_scales: Sequence[float] | np.ndarray = (1.0,),
     ) -> None:
         self.mode_names = list(mode_names)
         self.active_channels = active_channels
@@ -132,6 +139,8 @@ class Supervisor:
         self.min_dwell_s = float(min_dwell_s)
         self.allowed = allowed
         self.phase_rate_tau_s = float(phase_rate_tau_s)
+        self.normalized = bool(normalized)
+        self._inverse_scales = 1.0 / np.asarray(time_scales, dtype=np.float64)
         self.reset()
 
     def reset(self) -> None:
@@ -155,8 +164,8 @@ class Supervisor:
             reported = candidate
         else:
             reported, held = self._choose(time_s, candidate, confidence)
-        window = max(int(result.window[reported]), 1)
-        fit_rms = math.sqrt(max(float(sse[reported]), 0.0) / (window * self.active_channels))
+        per_sample = max(float(sse[reported]), 0.0) / (1 if self.normalized else max(int(result.window[reported]), 1))
+        fit_rms = math.sqrt(per_sample / self.active_channels)
         phase = float(result.phases[reported])
         rate = self._phase_rate(time_s, reported, phase) if result.ready else math.nan
         return Estimate(
@@ -172,6 +181,7 @@ class Supervisor:
             fit_rms_deg=fit_rms,
             held=held,
             phase_rate=rate,
+            cadence_ratio=math.nan if result.variant is None else float(self._inverse_scales[result.variant[reported]]),
         )
 
     def _choose(self, time_s: float, candidate: int, confidence: float) -> tuple[int, bool]:

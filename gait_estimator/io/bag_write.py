@@ -105,7 +105,7 @@ def output_stamps(rec: Recording, pred: Predictions, start_ns: int | None = None
     """(stamps, log times) of the prediction rows of ``pred`` (computed from ``rec``), int64 ns.
 
     Stamp = the stamp of ``rec``'s first sample (``recording_stamps``) + the row's time since
-    it, i.e. exactly the input stamp for an input sample (or the grid time when resampling);
+    it, i.e. exactly the input stamp of the sample the row answers;
     log time = that of the input sample that produced the row (``pred.sample``).
     """
     stamps_in, logs_in = recording_stamps(rec, start_ns)

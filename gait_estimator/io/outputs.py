@@ -10,7 +10,9 @@ estimate (with ``ready`` = 0 while the window fills):
 
 * ``mode``  std_msgs/String: name of the estimated mode;
 * ``phase`` std_msgs/Float64: gait phase in [0, 1), 0 = right heel strike;
-* ``sse``   std_msgs/Float64MultiArray: per-mode minimum SSE (deg^2), in library order;
+* ``sse``   std_msgs/Float64MultiArray: per-mode match error in library order: minimum SSE
+  (deg^2) in the paper preset, mean squared error per window sample (deg^2) with
+  ``normalize_error`` (the default);
   ``layout.dim[0]`` = {label: ``SSE_LABEL_PREFIX`` + comma-separated mode names, size: M, stride: M};
 * ``estimate`` sensor_msgs/JointState used as stamped named values: ``header.stamp`` = the input
   sample's stamp, ``name[k]``/``position[k]`` = key/value (see ``estimate_names``).
@@ -45,18 +47,19 @@ def mode_names_from_sse_label(label: str) -> list[str]:
 
 
 ESTIMATE_HEAD = ("mode_index", "phase", "ready")
-ESTIMATE_TAIL = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode_index")
+ESTIMATE_TAIL = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode_index", "cadence_ratio")
 
 
 def estimate_names(mode_names: Sequence[str]) -> list[str]:
     """Keys of the ``estimate`` message (JointState ``name``), fixed for a library.
 
     In order: ``mode_index`` (reported mode, index into the library's modes), ``phase`` ([0, 1)),
-    ``ready`` (1.0 or 0.0), ``sse/<mode>`` (deg^2) and ``phase/<mode>`` for every mode in library
+    ``ready`` (1.0 or 0.0), ``sse/<mode>`` (match error, deg^2, as on ``sse``) and ``phase/<mode>`` for every mode in library
     order, then ``confidence`` (margin over the best other mode, relative to its SSE),
     ``fit_rms_deg`` (RMS error per sample and channel, degrees), ``held`` (1.0 while the reported
-    mode is held), ``phase_rate`` (strides/s, nan until known) and ``raw_mode_index`` (the
-    matcher's own choice before supervision).
+    mode is held), ``phase_rate`` (strides/s, nan until known), ``raw_mode_index`` (the
+    matcher's own choice before supervision) and ``cadence_ratio`` (wearer cadence / kernel
+    cadence of the reported mode from its best time-scaled kernel variant; nan with one scale).
     """
     return [*ESTIMATE_HEAD, *(f"sse/{m}" for m in mode_names), *(f"phase/{m}" for m in mode_names), *ESTIMATE_TAIL]
 

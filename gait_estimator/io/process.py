@@ -17,7 +17,7 @@ from .recording import Recording
 class Predictions:
     """Estimator output aligned with the recording samples it came from."""
 
-    time_s: np.ndarray  # (T,) seconds: the input samples' times (or the resampling grid)
+    time_s: np.ndarray  # (T,) seconds: the input samples' times
     sample: np.ndarray  # (T,) index in the source recording of the (latest) input sample
     trace: EstimateTrace
 
@@ -33,19 +33,23 @@ class Segment:
 
 
 def predict(recording: Recording, library: KernelLibrary, config: EstimatorConfig | None = None) -> Predictions:
-    """Run a fresh Estimator (default: the paper's algorithm) over every sample of ``recording``."""
-    trace = run_estimator(Estimator(library, config), recording.time_s, recording.angles_deg, recording.index)
+    """Run a fresh Estimator (default options: the ``default`` preset) over every sample of
+    ``recording``; one prediction per sample. A recording without time stamps (time = sample /
+    rate) counts as unstamped for ``resample: auto``."""
+    est = Estimator(library, config, stamped=not recording.time_from_rate)
+    trace = run_estimator(est, recording.time_s, recording.angles_deg, recording.index)
     return Predictions(trace.time_s, trace.sample, trace)
 
 
 PREDICTION_COLUMNS = ("time_s", "sample", "mode", "phase", "ready")
 """First columns of the predictions CSV; then sse_<mode> per mode, then EXTRA_COLUMNS."""
-EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode")
+EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio")
 
 
 def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
     """Write ``time_s, sample, mode, phase, ready, sse_<mode>..., confidence, fit_rms_deg, held,
-    phase_rate, raw_mode`` (SSE in deg^2, fit in deg, phase rate in strides/s)."""
+    phase_rate, raw_mode, cadence_ratio`` (match error in deg^2, or deg^2 per sample with
+    ``normalize_error``; fit in deg; phase rate in strides/s; cadence ratio nan with one time scale)."""
     p = Path(path)
     tr = pred.trace
     names = np.asarray(tr.mode_names, dtype=object)
@@ -66,6 +70,7 @@ def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
                     int(tr.held[i]),
                     f"{tr.phase_rate[i]:.6g}",
                     names[tr.raw_mode_index[i]],
+                    f"{tr.cadence_ratio[i]:.6g}",
                 ]
             )
     return p
@@ -91,10 +96,9 @@ def format_summary(pred: Predictions, library: KernelLibrary, source: str) -> st
     tr = pred.trace
     n = len(pred.time_s)
     ready = int(tr.ready.sum())
-    lines = [
-        f"{source}: {n} samples, {ready} ready (window full after {library.lengths.max()} samples); "
-        f"library '{library.name}' ({len(library)} modes)"
-    ]
+    first = np.flatnonzero(tr.ready)
+    filled = f"window full after {int(first[0]) + 1} samples" if first.size else "window never full"
+    lines = [f"{source}: {n} samples, {ready} ready ({filled}); library '{library.name}' ({len(library)} modes)"]
     if ready:
         counts = np.bincount(tr.mode_index[tr.ready], minlength=len(library))
         share = ", ".join(f"{m} {c / ready:.1%}" for m, c in zip(tr.mode_names, counts, strict=True) if c)

@@ -133,15 +133,6 @@ class StartupError(GaitEstimatorError):
     """The node cannot start (bad parameter, unreadable library): reported in one line."""
 
 
-def _stamp_seconds(stamp: TimeMsg) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def _stamp_from_seconds(t: float) -> TimeMsg:
-    ns = round(t * 1e9)
-    return TimeMsg(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
 def _double_array(values: np.ndarray) -> array.array:
     """float64 numpy -> array('d') without a per-element Python loop (the fast message setter)."""
     out = array.array("d")
@@ -189,7 +180,7 @@ class EstimatorNode(Node):
                     self._library, self._config = self._pending[0] or self._library, self._pending[1]
                 self._pending = None
             assert self._library is not None
-            self._set_estimator(Estimator(self._library, self._config))
+            self._set_estimator(self._new_estimator(self._library, self._config))
         except ParameterException as exc:
             reason = self._last_rejection or ": " + _one_line(exc)
             self.destroy_node()
@@ -203,6 +194,7 @@ class EstimatorNode(Node):
         self._input_type: str = self.get_parameter("input_type").value
         self._guard = StreamGuard(max_gap_s=0.0)  # stamp checks and rejection counts; gaps: Estimator
         self._resets_before = 0  # gap restarts of estimators replaced by parameter changes
+        self._epoch_sec: int | None = None
 
         self._received = 0
         self._warned_at: dict[str, float] = {}
@@ -279,7 +271,7 @@ class EstimatorNode(Node):
         estimator = None
         if lib is not None and (values or lib is not self._library):
             try:
-                estimator = Estimator(lib, config)  # also reads a transitions file
+                estimator = self._new_estimator(lib, config)  # also reads a transitions file
             except (GaitEstimatorError, ValueError, OSError) as exc:
                 return self._reject_parameter(f"{', '.join(p.name for p in params)}: {_one_line(exc)}")
         self._pending = (lib if lib is not self._library else None, config, estimator)
@@ -343,6 +335,12 @@ class EstimatorNode(Node):
         elif "max_gap_s" in names:
             self._estimator.config = config  # only the gap threshold changed: keep the window
 
+    def _new_estimator(self, library: KernelLibrary, config: EstimatorConfig) -> Estimator:
+        """An estimator for this node's input: JointState carries stamps (``resample: auto``
+        resamples it), Float64MultiArray is timed on arrival (not resampled unless ``on``)."""
+        input_type = self.get_parameter("input_type").value if self.has_parameter("input_type") else "joint_state"
+        return Estimator(library, config, stamped=input_type == "joint_state")
+
     def _set_estimator(self, estimator: Estimator) -> None:
         self._estimator = estimator
         names = estimator.mode_names
@@ -353,12 +351,11 @@ class EstimatorNode(Node):
         self._last_estimate: Estimate | None = None
 
     def _options_summary(self) -> str:
-        changed = [
-            f"{o.name}={getattr(self._config, o.name)}"
-            for o in OPTIONS
-            if _config_value(o.name, o.default) != getattr(self._config, o.name)
-        ]
-        return ", ".join(changed) or "paper defaults"
+        preset = self._config.preset_name()
+        if preset:
+            return f"preset {preset}"
+        changed = self._config.changed_from("default")
+        return "preset default with " + ", ".join(f"{k}={v}" for k, v in changed.items())
 
     # -----------------------------------------------------------------------------------------
     # Input
@@ -413,7 +410,7 @@ class EstimatorNode(Node):
 
     def _process(self, angles_deg: np.ndarray, stamp: TimeMsg, t0: float) -> None:
         """Stamp check, one estimator update, publish; ``t0`` = callback start (perf_counter)."""
-        t = _stamp_seconds(stamp)
+        t = self._seconds(stamp)
         prev = self._guard.last_stamp
         try:
             self._guard.accept(t)
@@ -422,15 +419,13 @@ class EstimatorNode(Node):
             return
         est = self._estimator
         resets = est.resets
-        estimates = est.update(t, angles_deg)
+        estimate = est.update(t, angles_deg)
         if est.resets != resets:
             self.get_logger().info(
                 f"gap of {t - (prev if prev is not None else t):.3f} s in input stamps > max_gap_s "
                 f"{est.config.max_gap_s:g} s: window restarted"
             )
-        resampled = est.resampler is not None
-        for e in estimates:
-            self._publish(e, _stamp_from_seconds(e.time_s) if resampled else stamp)
+        self._publish(estimate, stamp)
 
         if self._period_first_stamp is None:
             self._period_first_stamp = t
@@ -441,6 +436,14 @@ class EstimatorNode(Node):
         self._proc_count += 1
         if dt > self._proc_max:
             self._proc_max = dt
+
+    def _seconds(self, stamp: TimeMsg) -> float:
+        """A stamp in seconds since the whole second of the first stamp the node saw: float64
+        keeps nanoseconds there, which seconds since 1970 (~1.7e9) do not (the resampler
+        interpolates at these times)."""
+        if self._epoch_sec is None:
+            self._epoch_sec = stamp.sec
+        return (stamp.sec - self._epoch_sec) + stamp.nanosec * 1e-9
 
     def _publish(self, e: Estimate, stamp: TimeMsg) -> None:
         """Publish one estimate; topics nobody listens to are skipped (a count query is far
@@ -560,12 +563,12 @@ class EstimatorNode(Node):
             problems.append(f"{self._period_rejected} sample(s) rejected")
         if (
             not math.isnan(stamp_rate)
-            and not self._config.resample
+            and self._estimator.resampler is None
             and abs(stamp_rate / lib.sample_rate_hz - 1.0) > RATE_TOLERANCE
         ):
             problems.append(
                 f"input stamp rate {stamp_rate:.0f} Hz differs from the library's {lib.sample_rate_hz:g} Hz "
-                "(set resample: true)"
+                "(set resample: on)"
             )
         if problems:
             level, message = DiagnosticStatus.WARN, "; ".join(problems)

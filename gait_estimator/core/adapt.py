@@ -1,0 +1,158 @@
+"""Online personalisation: confident strides pull their mode's kernel towards the wearer.
+
+At every right heel strike of the reported mode (its phase wraps from the end of a stride to the
+start of the next), the stride that just ended is read from the sample history aligned exactly as
+the matcher matched it (the best time scale and shift of that mode), time-normalised to the
+kernel's N_m samples, and, if it passes every guard, averaged into the kernel:
+
+    k <- k + rate * clip(stride - k, -max_step_deg, +max_step_deg)
+
+so one stride moves no kernel sample by more than ``rate * max_step_deg`` degrees, however bad it
+is. Guards (a stride failing one is skipped, counted by reason):
+
+* ``held``: the reported mode was held (low confidence, dwell, transitions) at some sample of the
+  stride, or it changed during the stride;
+* ``confidence``: the confidence margin fell below ``min_confidence`` during the stride;
+* ``duration``: the stride (time between two heel strikes of the mode) differs from the duration
+  of the matched kernel variant by more than 10 % (the duration floor of ``train``'s outlier
+  rule);
+* ``shape``: its RMS distance from the kernel exceeds the median distance of the mode's recent
+  candidate strides by more than max(3.5 robust sigmas, the median) (``train``'s shape rule,
+  applied to a sliding history of ``HISTORY`` strides); the first ``WARMUP`` candidates of a
+  mode only fill that history.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kernels import KernelLibrary, KernelMode, resample_stride
+
+DURATION_TOLERANCE = 0.10
+SHAPE_SIGMAS = 3.5
+MAD_TO_SIGMA = 1.4826
+HISTORY = 16
+WARMUP = 3
+REASONS = ("held", "confidence", "duration", "shape")
+
+
+@dataclass(frozen=True)
+class AdaptOptions:
+    """Personalisation settings.
+
+    Attributes:
+        rate: Weight of one accepted stride in the kernel update, (0, 1]; 0 = off.
+        min_confidence: Lowest confidence margin allowed during an adapted stride.
+        max_step_deg: Per-sample clip of (stride - kernel) before weighting, degrees.
+    """
+
+    rate: float = 0.0
+    min_confidence: float = 0.2
+    max_step_deg: float = 5.0
+
+
+class KernelAdapter:
+    """Tracks strides of the reported mode and updates kernels (see the module docstring).
+
+    Args:
+        library: The library being adapted (its kernels are the starting point).
+        options: Rate and guards.
+        rate_hz: Sample rate of the history passed to ``update`` (the library's rate).
+    """
+
+    def __init__(self, library: KernelLibrary, options: AdaptOptions, rate_hz: float) -> None:
+        self.library = library
+        self.options = options
+        self.rate_hz = float(rate_hz)
+        self.kernels = [m.samples.copy() for m in library.modes]
+        self.accepted = np.zeros(len(library), dtype=np.int64)
+        self.skipped: Counter = Counter()
+        self._dist: list[deque] = [deque(maxlen=HISTORY) for _ in library.modes]
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the stride in progress (after a window restart); kernels stay adapted."""
+        self._mode: int | None = None
+        self._start: float | None = None
+        self._last_phase = math.nan
+        self._clean = False
+        self._min_conf = math.inf
+
+    def ends_stride(self, mode: int, phase: float) -> bool:
+        """True if an estimate of ``mode`` at ``phase`` is a heel strike that ends a tracked
+        stride of that mode (the phase wrapped); then call ``finish_stride`` before ``track``."""
+        return self._mode == mode and self._start is not None and phase < self._last_phase - 0.5
+
+    def finish_stride(self, time_s: float, mode: int, samples: np.ndarray) -> np.ndarray | None:
+        """The stride of ``mode`` that ends at ``time_s``: ``samples`` (n, 4) degrees, aligned to
+        the columns of the matched kernel variant (n samples). Returns the updated
+        kernel (N_m, 4) if the stride passed every guard, else None (the reason is counted)."""
+        assert self._start is not None
+        return self._stride_ended(mode, time_s - self._start, samples)
+
+    def track(self, time_s: float, mode: int, phase: float, held: bool, confidence: float, ready: bool) -> None:
+        """Account for one estimate (reported mode, its phase, held flag, confidence)."""
+        if not ready:
+            self.reset()
+            return
+        if self._mode == mode and phase < self._last_phase - 0.5:  # heel strike: a stride starts
+            self._start, self._clean, self._min_conf = time_s, True, math.inf
+        elif self._mode != mode:
+            self._start, self._clean, self._min_conf = None, False, math.inf
+        self._mode = mode
+        self._last_phase = phase
+        self._clean = self._clean and not held
+        self._min_conf = min(self._min_conf, confidence)
+
+    def _stride_ended(self, mode: int, duration_s: float, samples: np.ndarray) -> np.ndarray | None:
+        k = self.kernels[mode]
+        if not self._clean:
+            return self._skip("held")
+        if self._min_conf < self.options.min_confidence:
+            return self._skip("confidence")
+        expected = samples.shape[0] / self.rate_hz
+        if abs(duration_s / expected - 1.0) > DURATION_TOLERANCE:
+            return self._skip("duration")
+        obs = resample_stride(samples, k.shape[0])
+        dist = float(np.sqrt(np.mean((obs - k) ** 2)))
+        history = self._dist[mode]
+        history.append(dist)
+        if len(history) <= WARMUP:
+            return self._skip("warmup")
+        h = np.asarray(history)
+        med = float(np.median(h))
+        sigma = MAD_TO_SIGMA * float(np.median(np.abs(h - med)))
+        if dist > med + max(SHAPE_SIGMAS * sigma, med):
+            return self._skip("shape")
+        step = np.clip(obs - k, -self.options.max_step_deg, self.options.max_step_deg)
+        self.kernels[mode] = k + self.options.rate * step
+        self.accepted[mode] += 1
+        return self.kernels[mode]
+
+    def _skip(self, reason: str) -> None:
+        self.skipped[reason] += 1
+        return None
+
+    def adapted_library(self) -> KernelLibrary:
+        """The library with the adapted kernels; provenance says how many strides each took."""
+        modes = []
+        for m, k, n in zip(self.library.modes, self.kernels, self.accepted, strict=True):
+            info = dict(m.info)
+            info["adapted_strides"] = int(n)
+            arr = k.copy()
+            arr.setflags(write=False)
+            modes.append(KernelMode(m.name, arr, m.sample_rate_hz, m.mode_id, info))
+        prov = dict(self.library.provenance)
+        prov["adapted_from"] = self.library.path or self.library.name
+        prov["adaptation"] = {
+            "rate": self.options.rate,
+            "min_confidence": self.options.min_confidence,
+            "max_step_deg": self.options.max_step_deg,
+            "accepted_strides": {m.name: int(n) for m, n in zip(self.library.modes, self.accepted, strict=True)},
+            "skipped_strides": dict(self.skipped),
+        }
+        return KernelLibrary(self.library.name, tuple(modes), prov)

@@ -1,0 +1,213 @@
+"""The incremental matcher's step compiled with numba (optional; ``matcher.py`` falls back to numpy).
+
+One call does what ``IncrementalMatcher._step_numpy`` does with a dozen numpy calls: the
+running-sum update of every row (mode x time scale), the window sums, the offset adjustment,
+normalisation, the per-row argmin and the per-mode choice of the best time scale. Row layout and
+conventions are documented in ``matcher.py``; results equal the numpy path to rounding (tested).
+
+``AVAILABLE`` is False when numba is not installed or ``GAIT_ESTIMATOR_NO_NUMBA`` is set; the
+first use compiles (about 2 s) and caches the machine code next to this file or in
+``NUMBA_CACHE_DIR``.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+try:  # pragma: no cover - depends on the environment
+    if os.environ.get("GAIT_ESTIMATOR_NO_NUMBA"):
+        raise ImportError("disabled by GAIT_ESTIMATOR_NO_NUMBA")
+    from numba import njit
+
+    AVAILABLE = True
+except ImportError:  # pragma: no cover - depends on the environment
+    AVAILABLE = False
+
+    def njit(*args, **kwargs):  # type: ignore[no-redef]
+        def wrap(fn):
+            return fn
+
+        return wrap
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover - compiled
+    """W * sum_c g(S_c / W - mu_c), g(x) = x^2 - max(|x| - tau_c, 0)^2: the part of the SSE
+    explained by a per-channel offset of at most tau_c between window and kernel means."""
+    total = 0.0
+    for c in range(4):
+        if c == 0:
+            x = s0 / w - m0
+        elif c == 1:
+            x = s1 / w - m1
+        elif c == 2:
+            x = s2 / w - m2
+        else:
+            x = s3 / w - m3
+        a = abs(x) - tau[c]
+        total += x * x - (a * a if a > 0.0 else 0.0)
+    return total * w
+
+
+@njit(cache=True, nogil=True)
+def step_rows(
+    e_in, e_out, kern, ksq, lens, wins, ring, ring_sq, psum_ring, psum, count, d, dsq,
+    offset, mu, mu_seg, tau, normalize, subsample, n_scales,
+    out_col, out_score, out_sse, out_phase, out_variant, out_column, out_window,
+):  # pragma: no cover - compiled
+    """One matcher step over every row; returns the best mode. See the module docstring.
+
+    e_in/e_out (R, Nmax): running sums before/after; kern (R, 4, Nmax); ksq (R, Nmax) = ||k_j||^2;
+    lens/wins (R,); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and their squared
+    norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,) the prefix
+    sum before this sample; count: samples before this one; d (4,), dsq = ||d||^2; offset: apply
+    the offset penalty (mu (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift means of the
+    window's kernel part when W < N, tau (4,)); normalize: divide by the window length.
+    Writes per row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
+    """
+    n_rows = lens.shape[0]
+    wmax = ring.shape[0]
+    i = count
+    d0, d1, d2, d3 = d[0], d[1], d[2], d[3]
+    p0, p1, p2, p3 = psum[0] + d0, psum[1] + d1, psum[2] + d2, psum[3] + d3
+    for r in range(n_rows):
+        n = lens[r]
+        w = wins[r]
+        full = i >= w
+        o0 = o1 = o2 = o3 = osq = 0.0
+        if full:
+            s = (i - w) % wmax
+            o0, o1, o2, o3 = ring[s, 0], ring[s, 1], ring[s, 2], ring[s, 3]
+            osq = ring_sq[s]
+        base = dsq - osq
+        last = e_in[r, n - 1]
+        if w == n and full:
+            # e[j] = e[j-1] + ||d||^2 - ||old||^2 - 2 k_j . (d - old)
+            c0, c1, c2, c3 = -2.0 * (d0 - o0), -2.0 * (d1 - o1), -2.0 * (d2 - o2), -2.0 * (d3 - o3)
+            e_out[r, 0] = last + base + c0 * kern[r, 0, 0] + c1 * kern[r, 1, 0] + c2 * kern[r, 2, 0] + c3 * kern[r, 3, 0]
+            for j in range(1, n):
+                e_out[r, j] = (
+                    e_in[r, j - 1] + base
+                    + c0 * kern[r, 0, j] + c1 * kern[r, 1, j] + c2 * kern[r, 2, j] + c3 * kern[r, 3, j]
+                )
+        else:
+            # e[j] = e[j-1] + ||d - k_j||^2 - [full] ||old - k_{j-W}||^2
+            c0, c1, c2, c3 = -2.0 * d0, -2.0 * d1, -2.0 * d2, -2.0 * d3
+            for j in range(n):
+                prev = last if j == 0 else e_in[r, j - 1]
+                v = prev + base + ksq[r, j] + c0 * kern[r, 0, j] + c1 * kern[r, 1, j] + c2 * kern[r, 2, j] + c3 * kern[r, 3, j]
+                if full:
+                    lag = j - w
+                    if lag < 0:
+                        lag += n
+                    v += 2.0 * (o0 * kern[r, 0, lag] + o1 * kern[r, 1, lag] + o2 * kern[r, 2, lag] + o3 * kern[r, 3, lag])
+                    v -= ksq[r, lag]
+                e_out[r, j] = v
+
+        # Read-out of row r: score = (e - offset penalty) / window, its argmin over j.
+        filled = i + 1 >= w
+        weff = w if filled else i + 1
+        scale = 1.0 / weff if normalize else 1.0
+        use_offset = offset and filled
+        s0 = s1 = s2 = s3 = 0.0
+        if use_offset:
+            s0, s1, s2, s3 = p0, p1, p2, p3
+            if i >= w:
+                q = (i - w) % wmax
+                s0 -= psum_ring[q, 0]
+                s1 -= psum_ring[q, 1]
+                s2 -= psum_ring[q, 2]
+                s3 -= psum_ring[q, 3]
+        per_shift = use_offset and w < n
+        const = 0.0
+        if use_offset and not per_shift:
+            const = _offset_penalty(s0, s1, s2, s3, float(w), mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
+        best = np.inf
+        bj = 0
+        if per_shift:
+            for j in range(n):
+                v = e_out[r, j] - _offset_penalty(
+                    s0, s1, s2, s3, float(w), mu_seg[r, 0, j], mu_seg[r, 1, j], mu_seg[r, 2, j], mu_seg[r, 3, j], tau
+                )
+                if v < best:
+                    best = v
+                    bj = j
+        else:
+            for j in range(n):
+                v = e_out[r, j]
+                if v < best:
+                    best = v
+                    bj = j
+            best -= const
+        out_col[r] = bj
+        out_score[r] = best * scale
+
+    # Per mode: the time scale (row) with the lowest score; phase of its best column.
+    n_modes = n_rows // n_scales
+    best_mode = 0
+    for m in range(n_modes):
+        r0 = m * n_scales
+        rb = r0
+        for r in range(r0 + 1, r0 + n_scales):
+            if out_score[r] < out_score[rb]:
+                rb = r
+        n = lens[rb]
+        j = out_col[rb]
+        pos = float(j + 1)
+        if subsample:
+            w = wins[rb]
+            shifted = per_shift_row(offset, i, w, n)
+            a = _row_score(e_out, rb, j - 1 if j > 0 else n - 1, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
+            b = _row_score(e_out, rb, j + 1 if j < n - 1 else 0, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
+            center = _row_score(e_out, rb, j, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
+            curv = a - 2.0 * center + b
+            if curv > 0.0:
+                off = 0.5 * (a - b) / curv
+                if off > 0.5:
+                    off = 0.5
+                elif off < -0.5:
+                    off = -0.5
+                pos += off
+        ph = (pos % n) / n
+        if ph >= 1.0:
+            ph = 0.0
+        out_sse[m] = out_score[rb]
+        out_phase[m] = ph
+        out_variant[m] = rb - r0
+        out_column[m] = j
+        out_window[m] = wins[rb] if i + 1 >= wins[rb] else i + 1
+        if out_score[rb] < out_sse[best_mode]:
+            best_mode = m
+
+    # The new sample enters the ring (after every row has read its stale sample).
+    slot = i % wmax
+    ring[slot, 0], ring[slot, 1], ring[slot, 2], ring[slot, 3] = d0, d1, d2, d3
+    ring_sq[slot] = dsq
+    psum_ring[slot, 0], psum_ring[slot, 1], psum_ring[slot, 2], psum_ring[slot, 3] = p0, p1, p2, p3
+    psum[0], psum[1], psum[2], psum[3] = p0, p1, p2, p3
+    return best_mode
+
+
+@njit(cache=True, nogil=True, inline="always")
+def per_shift_row(offset, i, w, n):  # pragma: no cover - compiled
+    """True when row scores carry a per-shift offset penalty (offset on, window full, W < N)."""
+    return offset and i + 1 >= w and w < n
+
+
+@njit(cache=True, nogil=True)
+def _row_score(e, r, j, per_shift, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau):  # pragma: no cover - compiled
+    """e[r, j] minus the per-shift offset penalty if any (for the parabola of ``subsample``;
+    constant penalties and the 1/W scale do not move its vertex)."""
+    v = e[r, j]
+    if per_shift:
+        s0, s1, s2, s3 = p0, p1, p2, p3
+        if i >= w:
+            q = (i - w) % psum_ring.shape[0]
+            s0 -= psum_ring[q, 0]
+            s1 -= psum_ring[q, 1]
+            s2 -= psum_ring[q, 2]
+            s3 -= psum_ring[q, 3]
+        v -= _offset_penalty(s0, s1, s2, s3, float(w), mu_seg[r, 0, j], mu_seg[r, 1, j], mu_seg[r, 2, j], mu_seg[r, 3, j], tau)
+    return v
