@@ -253,3 +253,128 @@ def test_transitions_table_reports_the_best_allowed_mode() -> None:
     est = sup.update(0.01, result([5, 1, 2]))
     assert est.mode == "C" and not est.held and est.raw_mode_index == 1
     assert est.confidence == pytest.approx((1 - 2) / 2)
+
+
+# ---------------------------------------------------------------------------------------------
+# Presets, rate handling by default, cadence ratio, personalisation
+
+
+def test_presets() -> None:
+    paper = EstimatorConfig.preset("paper")
+    assert (paper.resample, paper.time_scales, paper.offset_tolerance_deg, paper.normalize_error) == ("off", (1.0,), 0.0, False)
+    assert paper.preset_name() == "paper" and EstimatorConfig().preset_name() == "default"
+    assert EstimatorConfig.preset("paper", window_fraction=0.5).changed_from("paper") == {"window_fraction": 0.5}
+    assert EstimatorConfig(resample=True).resample == "on" and EstimatorConfig(resample="false").resample == "off"
+    with pytest.raises(ValueError, match="preset"):
+        EstimatorConfig.preset("fast")
+    with pytest.raises(ValueError, match="resample"):
+        EstimatorConfig(resample="sometimes")
+    assert EstimatorConfig().resamples(stamped=True) and not EstimatorConfig().resamples(stamped=False)
+    assert EstimatorConfig(resample="on").resamples(stamped=False) and not paper.resamples(stamped=True)
+
+
+def test_paper_preset_is_the_plain_matcher(able_bodied, multispeed) -> None:
+    x = multispeed.angles_deg[4000:5000]
+    trace = run_estimator(Estimator(able_bodied, EstimatorConfig.preset("paper")), multispeed.time_s[4000:5000], x)
+    raw = IncrementalMatcher(able_bodied).run(x)
+    np.testing.assert_array_equal(trace.mode_index, raw.mode_index)
+    np.testing.assert_array_equal(trace.phase, raw.phase)
+    assert np.isnan(trace.cadence_ratio).all()
+
+
+def test_one_estimate_per_input_at_any_rate(able_bodied, multispeed) -> None:
+    """At 1 kHz (several inputs per 230 Hz grid point) every input is answered at its own time;
+    between grid points the phase advances with the phase rate."""
+    t0, x0 = multispeed.time_s[3000:4000], multispeed.angles_deg[3000:4000]
+    t1 = np.arange(t0[0], t0[-1], 0.001)
+    x1 = np.stack([np.interp(t1, t0, x0[:, c]) for c in range(4)], axis=1)
+    est = Estimator(able_bodied)
+    out = [est.update(float(t), x) for t, x in zip(t1, x1, strict=True)]
+    assert [e.time_s for e in out] == t1.tolist()
+    ready = [e for e in out if e.ready]
+    assert ready and all(0.0 <= e.phase < 1.0 for e in ready)
+    steps = np.diff([e.phase for e in ready])
+    steps = steps[np.abs(steps) < 0.5]  # leave out heel strikes
+    assert np.median(steps) == pytest.approx(0.001 * ready[-1].phase_rate, rel=0.5)
+
+
+def test_cadence_ratio_reports_the_time_scale(able_bodied) -> None:
+    """A wearer 6 % slower than the Med kernel (strides 1.06 x as long): Med, cadence 1/1.06."""
+    from gait_estimator.core.kernels import resample_stride
+
+    med = able_bodied.mode("Med").samples
+    x = np.tile(resample_stride(med, round(1.06 * len(med))), (4, 1))
+    t = np.arange(len(x)) / 230.0
+    trace = run_estimator(Estimator(able_bodied, EstimatorConfig(time_scales=(0.94, 1.0, 1.06))), t, x)
+    assert set(np.asarray(trace.modes)[trace.ready]) == {"Med"}
+    assert trace.cadence_ratio[-1] == pytest.approx(1 / 1.06)
+    paper = run(able_bodied, t, x)
+    assert circular(paper.phase[-200:], trace.phase[-200:]).mean() > circular(trace.phase[-200:], trace.phase[-200:]).mean()
+
+
+def _wearer(lib: KernelLibrary, offsets: np.ndarray, amplitude: float) -> KernelLibrary:
+    modes = []
+    for m in lib.modes:
+        mean = m.samples.mean(axis=0)
+        modes.append(make_mode(m.name, mean + amplitude * (m.samples - mean) + offsets, m.sample_rate_hz))
+    return KernelLibrary("wearer", tuple(modes))
+
+
+def test_personalisation_pulls_the_kernel_towards_the_wearer(able_bodied, tmp_path: Path) -> None:
+    """Steady RA strides of a wearer whose sensors sit differently: only RA adapts, every
+    adopted stride moves it by at most adapt_rate x adapt_max_step_deg, and it ends closer to the
+    wearer's stride; the adapted library saves and loads with its provenance."""
+    import sys
+
+    from gait_estimator.io.library_io import load_library, save_library
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from synthetic import SyntheticConfig, generate
+
+    wearer = _wearer(able_bodied, np.array([2.0, -1.5, 1.0, -2.0]), 1.05)
+    syn = generate(wearer, [("RA", 40)], SyntheticConfig(offset_sd_deg=0.2), seed=4)
+    rec = syn.recording
+    config = EstimatorConfig(adapt_rate=0.2, adapt_max_step_deg=3.0)
+    est = Estimator(able_bodied, config)
+    before = [k.copy() for k in est.adapter.kernels]
+    moves = []
+    for t, x in zip(rec.time_s, rec.angles_deg, strict=True):
+        prev = est.adapter.kernels[3].copy()
+        est.update(float(t), x)
+        moves.append(np.abs(est.adapter.kernels[3] - prev).max())
+    ra = able_bodied.mode_names.index("RA")
+    assert est.adapter.accepted[ra] >= 20 and est.adapter.accepted.sum() == est.adapter.accepted[ra]
+    assert max(moves) <= 0.2 * 3.0 + 1e-12
+    for i in range(len(able_bodied)):
+        if i != ra:
+            np.testing.assert_array_equal(est.adapter.kernels[i], before[i])
+    target = wearer.mode("RA").samples
+    dist = lambda k: float(np.sqrt(np.mean((k - target) ** 2)))  # noqa: E731
+    assert dist(est.adapter.kernels[ra]) < 0.5 * dist(before[ra])
+    lib = est.adapted_library()
+    path = save_library(lib, tmp_path / "adapted.yaml")
+    back = load_library(path)
+    np.testing.assert_allclose(back.mode("RA").samples, est.adapter.kernels[ra], atol=1e-6)
+    assert back.provenance["adaptation"]["accepted_strides"]["RA"] == est.adapter.accepted[ra]
+
+
+def test_personalisation_never_uses_held_or_unconfident_strides(able_bodied) -> None:
+    """Strides alternating between two modes: every estimate is held (dwell) or low-confidence
+    around the switches; nothing alternating is adopted."""
+    x = np.concatenate([able_bodied.mode("Med").samples, able_bodied.mode("Fast").samples] * 8)
+    t = np.arange(len(x)) / 230.0
+    est = Estimator(able_bodied, EstimatorConfig(adapt_rate=0.5, min_dwell_s=10.0))
+    for ti, xi in zip(t, x, strict=True):
+        est.update(float(ti), xi)
+    assert est.adapter.accepted.sum() == 0
+    assert est.adapter.skipped["held"] > 0
+
+
+def test_cli_save_adapted(tmp_path: Path, multispeed_csv: Path, capsys) -> None:
+    out = tmp_path / "adapted.yaml"
+    assert cli_main(["process", str(multispeed_csv), "--start", "4000", "--stop", "9000", "--adapt-rate", "0.1",
+                     "--save-adapted", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"wrote {out} (personalised kernels; strides adopted:" in text
+    assert out.is_file()
+    assert cli_main(["process", str(multispeed_csv), "--save-adapted", str(out), "-q"]) == 2

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gait_estimator import IncrementalMatcher, KernelLibrary, NaiveMatcher
-from gait_estimator.core.kernels import make_mode
+from gait_estimator.core import compiled
+from gait_estimator.core.kernels import make_mode, resample_stride
 from gait_estimator.io.readers import read_recording
 
 
@@ -245,5 +248,124 @@ def test_subsample_phase_recovers_a_fractional_shift() -> None:
     ({"channel_weights": [1, -1, 1, 1]}, ">= 0"),
 ])
 def test_invalid_options(able_bodied, kwargs, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        IncrementalMatcher(able_bodied, **kwargs)
+
+
+# ---------------------------------------------------------------------------------------------
+# Time-scaled variants, offset tolerance, per-sample error; the numba and numpy steps
+
+BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(not compiled.AVAILABLE, reason="numba missing"))]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@settings(max_examples=30, deadline=None)
+@given(
+    lengths=st.lists(st.integers(min_value=10, max_value=30), min_size=1, max_size=4),
+    fraction=st.sampled_from([1.0, 0.6, 0.3]),
+    scales=st.sampled_from([(1.0,), (0.9, 1.0, 1.1), (0.8, 1.25)]),
+    tolerance=st.sampled_from([0.0, 3.0, math.inf]),
+    normalize=st.booleans(),
+    subsample=st.booleans(),
+    seed=st.integers(min_value=0, max_value=2**32 - 1),
+)
+def test_new_options_match_the_naive_specification(
+    backend, lengths, fraction, scales, tolerance, normalize, subsample, seed
+) -> None:
+    rng = np.random.default_rng(seed)
+    lib = random_library(rng, lengths)
+    opts = {"window_fraction": fraction, "time_scales": scales, "offset_tolerance_deg": tolerance,
+            "normalize": normalize, "subsample": subsample, "channel_weights": [1.0, 0.5, 2.0, 1.0]}
+    inc = IncrementalMatcher(lib, resync_period=41, resync_block=3, backend=backend, **opts)
+    naive = NaiveMatcher(lib, **opts)
+    for d in rng.normal(5, 20, (80, 4)):
+        a, b = inc.step(d), naive.step(d)
+        assert_steps_equal(a, b, rtol=1e-8)
+        if b.variant is not None and np.ptp(np.sort(b.sse)[:2]) > 1e-6:
+            assert a.variant[a.mode_index] == b.variant[b.mode_index]
+
+
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba missing")
+def test_numba_and_numpy_steps_agree_on_the_recording(multispeed_csv, able_bodied) -> None:
+    x = read_recording(multispeed_csv).angles_deg[2000:4000]
+    for opts in ({}, {"time_scales": (0.88, 0.94, 1.0, 1.06, 1.12), "offset_tolerance_deg": 4.0, "normalize": True},
+                 {"window_fraction": 0.5, "offset_tolerance_deg": 2.0, "subsample": True, "time_scales": (0.95, 1.05)}):
+        a = IncrementalMatcher(able_bodied, backend="numba", **opts).run(x)
+        b = IncrementalMatcher(able_bodied, backend="numpy", **opts).run(x)
+        np.testing.assert_array_equal(a.mode_index, b.mode_index)
+        np.testing.assert_allclose(a.phase, b.phase, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10)
+
+
+def test_a_stretched_stride_is_matched_by_its_time_scale(able_bodied) -> None:
+    med = able_bodied.mode("Med").samples
+    n = round(1.06 * len(med))
+    stride = resample_stride(med, n)
+    m = IncrementalMatcher(able_bodied, time_scales=(0.94, 1.0, 1.06), normalize=True)
+    r = None
+    for d in np.tile(stride, (3, 1)):
+        r = m.step(d)
+    assert r.mode == "Med" and m.time_scales[r.variant[r.mode_index]] == 1.06
+    assert r.sse[r.mode_index] == pytest.approx(0.0, abs=1e-9)
+    assert r.phase == pytest.approx(0.0)  # the stream ends with a whole stride
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_shape_only_matching_ignores_constant_offsets(able_bodied, multispeed_csv, backend) -> None:
+    x = read_recording(multispeed_csv).angles_deg[3000:4200]
+    offsets = np.array([7.5, -6.0, 4.0, -8.0])
+    a = IncrementalMatcher(able_bodied, offset_tolerance_deg=math.inf, backend=backend).run(x)
+    b = IncrementalMatcher(able_bodied, offset_tolerance_deg=math.inf, backend=backend).run(x + offsets)
+    r = a.ready  # while windows fill, nothing is removed
+    np.testing.assert_array_equal(a.mode_index[r], b.mode_index[r])
+    np.testing.assert_array_equal(a.phase[r], b.phase[r])
+    np.testing.assert_allclose(a.sse[r], b.sse[r], rtol=1e-7, atol=1e-6)
+    paper = IncrementalMatcher(able_bodied, backend=backend).run(x + offsets)
+    assert (paper.sse[r] > a.sse[r]).all()  # the paper pays for the offsets
+
+
+def test_offset_penalty_is_the_excess_over_the_tolerance() -> None:
+    """One mode, a constant kernel: window mean - kernel mean = x per channel, so the score is
+    W sum_c max(|x_c| - tau, 0)^2 (per sample with normalize)."""
+    k = np.zeros((10, 4))
+    lib = KernelLibrary("flat", (make_mode("flat", k, 100.0),))
+    shift = np.array([1.0, -3.0, 5.0, 0.0])
+    for tau, expected in [(0.0, 35.0), (2.0, 1.0 + 9.0), (4.0, 1.0), (math.inf, 0.0)]:
+        r = None
+        m = IncrementalMatcher(lib, offset_tolerance_deg=tau, normalize=True)
+        for _ in range(12):
+            r = m.step(shift)
+        assert r.sse[0] == pytest.approx(expected), tau
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_set_kernel_continues_as_if_the_kernel_had_always_been_this_one(able_bodied, multispeed_csv, backend) -> None:
+    x = read_recording(multispeed_csv).angles_deg[3000:4000]
+    opts = {"time_scales": (0.9, 1.0, 1.1), "offset_tolerance_deg": 3.0, "normalize": True, "window_fraction": 0.7}
+    new = able_bodied.mode("Fast").samples + np.random.default_rng(0).normal(0, 2.0, (280, 4))
+    modes = list(able_bodied.modes)
+    modes[2] = make_mode("Fast", new, 230.0)
+    changed = KernelLibrary("changed", tuple(modes))
+    a = IncrementalMatcher(able_bodied, backend=backend, **opts)
+    a.run(x[:600])
+    a.set_kernel(2, new)
+    ra = a.run(x[600:])
+    b = IncrementalMatcher(changed, backend=backend, **opts)
+    b.run(x[:600])
+    rb = b.run(x[600:])
+    np.testing.assert_array_equal(ra.mode_index, rb.mode_index)
+    np.testing.assert_allclose(ra.sse, rb.sse, rtol=1e-9)
+    with pytest.raises(ValueError, match="shape"):
+        a.set_kernel(2, new[:10])
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"time_scales": []}, "time_scales"),
+    ({"time_scales": [0.3]}, "time_scales"),
+    ({"time_scales": [1.0, 1.0]}, "distinct"),
+    ({"offset_tolerance_deg": -1.0}, "offset_tolerance_deg"),
+    ({"backend": "cuda"}, "backend"),
+])
+def test_invalid_new_options(able_bodied, kwargs, message) -> None:
     with pytest.raises(ValueError, match=message):
         IncrementalMatcher(able_bodied, **kwargs)

@@ -91,9 +91,13 @@ def cmd_process(args: argparse.Namespace) -> int:
     rec = rec.slice(args.start, args.stop)
     if len(rec) == 0:
         raise GaitEstimatorError(f"{args.recording}: no samples in the selected range")
+    if args.save_adapted and config.adapt_rate <= 0:
+        raise GaitEstimatorError("--save-adapted needs personalisation on: --adapt-rate > 0")
     pred = predict(rec, lib, config)  # restarts the window at gaps > max_gap_s, like the node
     if args.out:
         write_predictions_csv(pred, args.out)
+    if args.save_adapted and pred.adapted is not None:
+        save_library(pred.adapted, args.save_adapted)
     bag_lines = finish_process(args, rec, pred)  # --out-bag; notes on bag stamps and gaps
     if not args.quiet:
         print(format_summary(pred, lib, str(args.recording)))
@@ -105,6 +109,10 @@ def cmd_process(args: argparse.Namespace) -> int:
             print(line)
         if args.out:
             print(f"wrote {args.out}")
+        if args.save_adapted and pred.adapted is not None:
+            strides = pred.adapted.provenance["adaptation"]["accepted_strides"]
+            print(f"wrote {args.save_adapted} (personalised kernels; strides adopted: "
+                  + ", ".join(f"{m} {n}" for m, n in strides.items()) + ")")
     return 0
 
 
@@ -167,6 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--stop", type=int, help="last sample index (exclusive)")
     proc.add_argument("--out", "-o", help="predictions CSV: time_s, sample, mode, phase, ready, sse_<mode>...")
     proc.add_argument("--quiet", "-q", action="store_true", help="no summary on stdout")
+    proc.add_argument("--save-adapted", metavar="LIB", help="with --adapt-rate > 0: write the personalised kernel "
+                      "library (.yaml or .npz) at the end")
     from ..core.estimator import add_estimator_arguments
     from .bag_commands import add_process_options
 

@@ -1,21 +1,23 @@
 """Online personalisation: confident strides pull their mode's kernel towards the wearer.
 
 At every right heel strike of the reported mode (its phase wraps from the end of a stride to the
-start of the next), the stride that just ended is read from the sample history aligned exactly as
-the matcher matched it (the best time scale and shift of that mode), time-normalised to the
-kernel's N_m samples, and, if it passes every guard, averaged into the kernel:
+start of the next), the stride that just ended (the samples since the previous heel strike of the
+same mode, on the library's clock) is time-normalised to the kernel's N_m samples and, if it
+passes every guard, averaged into the kernel:
 
     k <- k + rate * clip(stride - k, -max_step_deg, +max_step_deg)
 
 so one stride moves no kernel sample by more than ``rate * max_step_deg`` degrees, however bad it
-is. Guards (a stride failing one is skipped, counted by reason):
+is. Before averaging, the stride is shifted by the few samples that best align it with the kernel
+(``aligned``), so that the kernel's phase origin (0 = heel strike) stays put. Guards (a stride
+failing one is skipped, counted by reason):
 
 * ``held``: the reported mode was held (low confidence, dwell, transitions) at some sample of the
   stride, or it changed during the stride;
 * ``confidence``: the confidence margin fell below ``min_confidence`` during the stride;
-* ``duration``: the stride (time between two heel strikes of the mode) differs from the duration
-  of the matched kernel variant by more than 10 % (the duration floor of ``train``'s outlier
-  rule);
+* ``duration``: the stride (time between two heel strikes of the mode) differs from the length
+  of the kernel variant the matcher chose by more than 10 % (the duration floor of ``train``'s
+  outlier rule);
 * ``shape``: its RMS distance from the kernel exceeds the median distance of the mode's recent
   candidate strides by more than max(3.5 robust sigmas, the median) (``train``'s shape rule,
   applied to a sliding history of ``HISTORY`` strides); the first ``WARMUP`` candidates of a
@@ -37,6 +39,7 @@ SHAPE_SIGMAS = 3.5
 MAD_TO_SIGMA = 1.4826
 HISTORY = 16
 WARMUP = 3
+MAX_SHIFT = 0.05
 REASONS = ("held", "confidence", "duration", "shape")
 
 
@@ -55,19 +58,34 @@ class AdaptOptions:
     max_step_deg: float = 5.0
 
 
+def aligned(stride: np.ndarray, kernel: np.ndarray, max_shift: float = MAX_SHIFT) -> np.ndarray:
+    """``stride`` (N, 4) circularly shifted by the whole number of samples (at most
+    ``max_shift`` x N either way) that brings it closest (least squares) to ``kernel`` (N, 4).
+
+    The heel strikes that cut a stride out of the stream come from the estimated phase, which
+    may be a sample or two off; averaging unaligned strides would move the kernel's phase origin
+    a little with every update, and the updates would then follow it.
+    """
+    n = kernel.shape[0]
+    # sum_c sum_t stride[t - s] kernel[t]: circular cross-correlation, for every shift s
+    corr = np.fft.irfft((np.fft.rfft(kernel, axis=0) * np.conj(np.fft.rfft(stride, axis=0))).sum(axis=1), n=n)
+    limit = int(max_shift * n)
+    shifts = np.r_[0 : limit + 1, n - limit : n] if limit > 0 else np.zeros(1, dtype=np.int64)
+    best = int(shifts[np.argmax(corr[shifts])])
+    return np.roll(stride, best, axis=0)
+
+
 class KernelAdapter:
     """Tracks strides of the reported mode and updates kernels (see the module docstring).
 
     Args:
         library: The library being adapted (its kernels are the starting point).
         options: Rate and guards.
-        rate_hz: Sample rate of the history passed to ``update`` (the library's rate).
     """
 
-    def __init__(self, library: KernelLibrary, options: AdaptOptions, rate_hz: float) -> None:
+    def __init__(self, library: KernelLibrary, options: AdaptOptions) -> None:
         self.library = library
         self.options = options
-        self.rate_hz = float(rate_hz)
         self.kernels = [m.samples.copy() for m in library.modes]
         self.accepted = np.zeros(len(library), dtype=np.int64)
         self.skipped: Counter = Counter()
@@ -77,47 +95,35 @@ class KernelAdapter:
     def reset(self) -> None:
         """Forget the stride in progress (after a window restart); kernels stay adapted."""
         self._mode: int | None = None
-        self._start: float | None = None
+        self._start: int | None = None
         self._last_phase = math.nan
         self._clean = False
         self._min_conf = math.inf
 
+    @property
+    def stride_start(self) -> int | None:
+        """Sample number (in the estimator's count) of the heel strike that began the stride in
+        progress, if it is one being tracked."""
+        return self._start
+
     def ends_stride(self, mode: int, phase: float) -> bool:
         """True if an estimate of ``mode`` at ``phase`` is a heel strike that ends a tracked
-        stride of that mode (the phase wrapped); then call ``finish_stride`` before ``track``."""
+        stride of that mode (its phase wrapped); then call ``finish_stride`` before ``track``."""
         return self._mode == mode and self._start is not None and phase < self._last_phase - 0.5
 
-    def finish_stride(self, time_s: float, mode: int, samples: np.ndarray) -> np.ndarray | None:
-        """The stride of ``mode`` that ends at ``time_s``: ``samples`` (n, 4) degrees, aligned to
-        the columns of the matched kernel variant (n samples). Returns the updated
-        kernel (N_m, 4) if the stride passed every guard, else None (the reason is counted)."""
-        assert self._start is not None
-        return self._stride_ended(mode, time_s - self._start, samples)
-
-    def track(self, time_s: float, mode: int, phase: float, held: bool, confidence: float, ready: bool) -> None:
-        """Account for one estimate (reported mode, its phase, held flag, confidence)."""
-        if not ready:
-            self.reset()
-            return
-        if self._mode == mode and phase < self._last_phase - 0.5:  # heel strike: a stride starts
-            self._start, self._clean, self._min_conf = time_s, True, math.inf
-        elif self._mode != mode:
-            self._start, self._clean, self._min_conf = None, False, math.inf
-        self._mode = mode
-        self._last_phase = phase
-        self._clean = self._clean and not held
-        self._min_conf = min(self._min_conf, confidence)
-
-    def _stride_ended(self, mode: int, duration_s: float, samples: np.ndarray) -> np.ndarray | None:
+    def finish_stride(self, mode: int, samples: np.ndarray, expected_samples: float) -> np.ndarray | None:
+        """The stride of ``mode`` that just ended: ``samples`` (D, 4) degrees, from the heel strike
+        that began it to the sample before the one that ends it; ``expected_samples`` = the
+        length of the kernel variant the matcher chose. Returns the updated kernel (N_m, 4) if
+        the stride passed every guard, else None (the reason is counted)."""
         k = self.kernels[mode]
         if not self._clean:
             return self._skip("held")
         if self._min_conf < self.options.min_confidence:
             return self._skip("confidence")
-        expected = samples.shape[0] / self.rate_hz
-        if abs(duration_s / expected - 1.0) > DURATION_TOLERANCE:
+        if abs(samples.shape[0] / expected_samples - 1.0) > DURATION_TOLERANCE:
             return self._skip("duration")
-        obs = resample_stride(samples, k.shape[0])
+        obs = aligned(resample_stride(samples, k.shape[0]), k)
         dist = float(np.sqrt(np.mean((obs - k) ** 2)))
         history = self._dist[mode]
         history.append(dist)
@@ -132,6 +138,21 @@ class KernelAdapter:
         self.kernels[mode] = k + self.options.rate * step
         self.accepted[mode] += 1
         return self.kernels[mode]
+
+    def track(self, step: int, mode: int, phase: float, held: bool, confidence: float, ready: bool) -> None:
+        """Account for the estimate of sample number ``step`` (reported mode, its phase, held
+        flag, confidence)."""
+        if not ready:
+            self.reset()
+            return
+        if self._mode == mode and phase < self._last_phase - 0.5:  # heel strike: a stride starts
+            self._start, self._clean, self._min_conf = step, True, math.inf
+        elif self._mode != mode:
+            self._start, self._clean, self._min_conf = None, False, math.inf
+        self._mode = mode
+        self._last_phase = phase
+        self._clean = self._clean and not held
+        self._min_conf = min(self._min_conf, confidence)
 
     def _skip(self, reason: str) -> None:
         self.skipped[reason] += 1

@@ -230,8 +230,8 @@ class Estimator:
         self.adapter: KernelAdapter | None = None
         if c.adapt_rate > 0:
             options = AdaptOptions(c.adapt_rate, c.adapt_min_confidence, c.adapt_max_step_deg)
-            self.adapter = KernelAdapter(library, options, library.sample_rate_hz)
-            self._history = np.zeros((self.matcher.max_length, N_CHANNELS))
+            self.adapter = KernelAdapter(library, options)
+            self._history = np.zeros((2 * self.matcher.max_length, N_CHANNELS))  # the last stride, however long
         self.last_time: float | None = None
         self.resets = 0
         self._last: Estimate | None = None
@@ -284,7 +284,7 @@ class Estimator:
         result = self.matcher.step(x)
         est = self.supervisor.update(time_s, result)
         if self.adapter is not None:
-            self._adapt(time_s, x, est, result)
+            self._adapt(x, est, result)
         return est
 
     @staticmethod
@@ -302,33 +302,21 @@ class Estimator:
     # -----------------------------------------------------------------------------------------
     # Personalisation
 
-    def _adapt(self, time_s: float, x: np.ndarray, est: Estimate, result: Any) -> None:
+    def _adapt(self, x: np.ndarray, est: Estimate, result: Any) -> None:
         adapter = self.adapter
         assert adapter is not None
-        steps = self.matcher.steps
-        self._history[(steps - 1) % self._history.shape[0]] = x
-        m = est.mode_index
-        if est.ready and adapter.ends_stride(m, est.phase):
-            stride = self._aligned_stride(m, result)
-            if stride is not None:
-                new = adapter.finish_stride(time_s, m, stride)
-                if new is not None:
-                    self.matcher.set_kernel(m, new)
-        adapter.track(time_s, m, est.phase, est.held, est.confidence, est.ready)
-
-    def _aligned_stride(self, mode: int, result: Any) -> np.ndarray | None:
-        """The last n samples (n = length of the mode's best variant) at the kernel columns
-        the matcher aligned them with: row (j* - t) mod n holds d_{i-t}; degrees."""
-        variant = 0 if result.variant is None else int(result.variant[mode])
-        n = int(self.matcher.lengths[mode * self.matcher.n_scales + variant])
-        steps = self.matcher.steps
-        if steps < n:
-            return None
+        step = self.matcher.steps - 1  # this sample's number since the window (re)started
         h = self._history.shape[0]
-        t = np.arange(n)
-        out = np.empty((n, N_CHANNELS))
-        out[(int(result.column[mode]) - t) % n] = self._history[(steps - 1 - t) % h]
-        return out
+        self._history[step % h] = x
+        m = est.mode_index
+        start = adapter.stride_start
+        if est.ready and start is not None and adapter.ends_stride(m, est.phase) and step - start <= h:
+            stride = self._history[np.arange(start, step) % h]
+            variant = 0 if result.variant is None else int(result.variant[m])
+            new = adapter.finish_stride(m, stride, float(self.matcher.lengths[m * self.matcher.n_scales + variant]))
+            if new is not None:
+                self.matcher.set_kernel(m, new)
+        adapter.track(step, m, est.phase, est.held, est.confidence, est.ready)
 
     def adapted_library(self) -> KernelLibrary:
         """The library with the kernels as personalised so far (the original if adaptation is off)."""

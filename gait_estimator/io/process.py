@@ -20,6 +20,7 @@ class Predictions:
     time_s: np.ndarray  # (T,) seconds: the input samples' times
     sample: np.ndarray  # (T,) index in the source recording of the (latest) input sample
     trace: EstimateTrace
+    adapted: KernelLibrary | None = None  # the personalised library (adapt_rate > 0)
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,7 @@ def predict(recording: Recording, library: KernelLibrary, config: EstimatorConfi
     rate) counts as unstamped for ``resample: auto``."""
     est = Estimator(library, config, stamped=not recording.time_from_rate)
     trace = run_estimator(est, recording.time_s, recording.angles_deg, recording.index)
-    return Predictions(trace.time_s, trace.sample, trace)
+    return Predictions(trace.time_s, trace.sample, trace, est.adapted_library() if est.adapter else None)
 
 
 PREDICTION_COLUMNS = ("time_s", "sample", "mode", "phase", "ready")
