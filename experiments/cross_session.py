@@ -48,8 +48,8 @@ wall time of each ``Estimator.update`` call on input samples 500-2499 (a fixed s
 configurations interleaved sample by sample in one process, so they share the machine's state;
 median and p99 per call and mean per estimate.
 
-Runtime with the defaults (5 wearers, 11 settings, 2 jobs) ≈ 3 min on a 2-core AMD EPYC VM (174 s
-with a load average of 1-3 from other jobs); ``--tables-only`` rewrites tables.md from summary.json.
+Runtime with the defaults (5 wearers, 11 settings, 2 jobs) ≈ 3-4 min on a 2-core AMD EPYC VM (174-255 s
+with a load average of 1-5 from other jobs); ``--tables-only`` rewrites tables.md from summary.json.
 Writes ``summary.json`` (every metric, per data set, setting and part) and ``tables.md`` (the
 tables of docs/new_wearer.md, copied in by ``make docs``) into ``--out``.
 """
@@ -123,14 +123,14 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "default": {},
     "paper": PAPER,
     "resample": R,
-    "resample, window 0.75": {**R, "window_fraction": 0.75},
-    "resample, window 0.5": {**R, "window_fraction": 0.5},
-    "resample, thighs ½": {**R, "channel_weights": [0.5, 0.5, 1.0, 1.0]},
-    "resample, shanks ½": {**R, "channel_weights": [1.0, 1.0, 0.5, 0.5]},
-    "resample, min_confidence 0.1": {**R, "min_confidence": 0.1},
-    "resample, min_dwell_s 0.1": {**R, "min_dwell_s": 0.1},
-    "resample, window 0.5, min_dwell_s 0.1": {**R, "window_fraction": 0.5, "min_dwell_s": 0.1},
-    "resample, transitions table": {**R, "transitions": TABLE_VALUE},
+    "resample + window 0.75": {**R, "window_fraction": 0.75},
+    "resample + window 0.5": {**R, "window_fraction": 0.5},
+    "resample + thighs ½": {**R, "channel_weights": [0.5, 0.5, 1.0, 1.0]},
+    "resample + shanks ½": {**R, "channel_weights": [1.0, 1.0, 0.5, 0.5]},
+    "resample + min_confidence 0.1": {**R, "min_confidence": 0.1},
+    "resample + min_dwell_s 0.1": {**R, "min_dwell_s": 0.1},
+    "resample + window 0.5 + min_dwell_s 0.1": {**R, "window_fraction": 0.5, "min_dwell_s": 0.1},
+    "resample + transitions table": {**R, "transitions": TABLE_VALUE},
 }
 """Every setting is run on every data set except RATES (``RATE_SETTINGS`` only)."""
 
@@ -361,24 +361,39 @@ def time_updates(ds: Dataset, configs: dict[str, dict[str, Any]]) -> dict[str, d
                 "estimates": outputs[k]} for k, v in ns.items()}
 
 
-def compute(args: argparse.Namespace, out: Path) -> dict[str, Any]:
+def selected(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], list[str]]:
+    """(settings, data set keys) from --add/--settings/--datasets; ValueError names the flag."""
     settings = dict(SETTINGS)
     for item in args.add or []:
         name, _, text = item.partition("=")
-        settings[name.strip()] = json.loads(text)
+        try:
+            opts = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"--add {item!r}: expected NAME=JSON object ({exc})") from None
+        if not name.strip() or "," in name or not isinstance(opts, dict):
+            raise ValueError(f"--add {item!r}: expected NAME=JSON object (NAME without commas), "
+                             "e.g. 'mine={\"resample\": true}'")
+        settings[name.strip()] = opts
     if args.settings:
         names = [n.strip() for n in args.settings.split(",") if n.strip()]
         unknown = [n for n in names if n not in settings]
         if unknown:
-            raise SystemExit(f"--settings: unknown setting(s) {', '.join(unknown)} (known: {', '.join(settings)})")
+            raise ValueError(f"--settings: unknown setting(s) {', '.join(unknown)} (known: {', '.join(settings)})")
         settings = {n: settings[n] for n in names}
+    keys = list(DATASET_KEYS) if not args.datasets else [k.strip() for k in args.datasets.split(",") if k.strip()]
+    bad = [k for k in keys if k not in DATASET_KEYS]
+    if bad:
+        raise ValueError(f"--datasets: unknown data set(s) {', '.join(bad)} (known: {', '.join(DATASET_KEYS)})")
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
+    return settings, keys
+
+
+def compute(args: argparse.Namespace, out: Path) -> dict[str, Any]:
+    settings, keys = selected(args)
     settings, skipped = usable_settings(settings)
     for name, why in skipped.items():
         print(f"skipped setting {name!r}: {why}", flush=True)
-    keys = DATASET_KEYS if not args.datasets else [k.strip() for k in args.datasets.split(",") if k.strip()]
-    bad = [k for k in keys if k not in DATASET_KEYS]
-    if bad:
-        raise SystemExit(f"--datasets: unknown data set(s) {', '.join(bad)} (known: {', '.join(DATASET_KEYS)})")
 
     start = time.perf_counter()
     load = [os.getloadavg()[0]]
@@ -515,7 +530,7 @@ def targets(res: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def cost_cell(c: dict[str, Any] | None) -> str:
-    return "–" if not c else f"{c['median_us']:.0f} ({c['p99_us']:.0f})"
+    return "–" if not c else f"{c['median_us']:.0f} ({c['p99_us']:.0f}); {c['per_estimate_us']:.0f}"
 
 
 def delay_cells(m: dict[str, Any]) -> str:
@@ -587,7 +602,7 @@ def write_tables(res: dict[str, Any], out: Path) -> str:
                 f"{first['transitions']} truth mode changes ({60 * first['transitions'] / ds['duration_s']:.1f}/min).")
         parts.append(head + "\n\n" + md_table(
             ["setting", "accuracy", "steady", "phase error mean (max)", "transition delay mean / median",
-             "mode changes /min", "µs per update: median (p99)"], rows)
+             "mode changes /min", "µs per update: median (p99); mean per estimate"], rows)
             + "\n\nPer truth mode: accuracy (steady accuracy of N steady rows)\n\n" + md_table(["setting", *mode_cols], mrows))
 
     if "SYN-NEW" in R and res["notes"].get("wearers"):
@@ -634,6 +649,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="worker processes (default 2)")
     ap.add_argument("--tables-only", action="store_true", help="only rewrite tables.md from the --out summary.json")
     args = ap.parse_args(argv)
+    try:
+        selected(args)
+    except ValueError as exc:
+        ap.error(str(exc))  # one line, exit code 2
     start = time.perf_counter()
     out = Path(args.out)
     if args.tables_only:
