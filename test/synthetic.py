@@ -15,15 +15,25 @@ angle with one sharp maximum exactly at every right heel strike (phase 0) is add
 ``extra['right_foot_deg']`` for heel-strike detection.
 
 Sampling is uniform at ``rate_hz`` (stride durations are then whole numbers of samples, so every
-heel strike is a sample) or jittered (intervals uniform in [(1 - jitter), (1 + jitter)] / rate,
-with every heel strike inserted as a sample). Truth is exact: per-sample mode labels, heel-strike
+heel strike is a sample) or jittered: intervals uniform in [(1 - jitter), (1 + jitter)] / rate
+(``jitter``), or samples at the uniform grid times +- up to ``stamp_jitter_s`` (``stamp_jitter_s``),
+with every heel strike inserted as a sample. Truth is exact: per-sample mode labels, heel-strike
 flags and the phase (time since the heel strike / stride duration).
+
+A *new wearer* (``new_wearer``) differs from the person the kernels came from the way a new user
+or a re-donned sensor set does: one cadence factor c for the whole recording (every stride lasts
+its duration / c), a constant per-channel sensor offset (``channel_offset_deg``), a per-channel
+amplitude factor (``channel_gain``, multiplying a(t)), a sensor-noise level and a sampling rate
+with jitter, each drawn uniformly from the ranges of ``WearerConfig``. The defaults of
+``SyntheticConfig`` (c = 1, no offset, gain 1, no stamp jitter) leave ``generate`` as before:
+the same seed gives the same recording.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -47,6 +57,54 @@ class SyntheticConfig:
     blend: float = 0.25
     foot_amplitude_deg: float = 80.0
     foot_noise_sd_deg: float = 0.3
+    cadence: float = 1.0  # stride-frequency factor of the wearer: every stride lasts (duration / cadence)
+    channel_offset_deg: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0)  # constant sensor offset per channel
+    channel_gain: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)  # amplitude factor per channel (times a(t))
+    stamp_jitter_s: float = 0.0  # samples at the uniform grid times +- up to this; 0 = off
+
+
+@dataclass(frozen=True)
+class WearerConfig:
+    """Ranges (uniform) a new wearer is drawn from by ``new_wearer``.
+
+    Attributes:
+        offset_deg: Per-channel sensor offset in [-offset_deg, +offset_deg], degrees.
+        amplitude: Per-channel amplitude factor in [1 - amplitude, 1 + amplitude].
+        cadence: One stride-frequency factor in [1 - cadence, 1 + cadence] for every stride.
+        noise_sd_deg: White sensor-noise standard deviation range, degrees.
+        rate_hz: Sampling-rate range, Hz.
+        jitter: Interval-jitter range (fraction of the nominal interval, see ``SyntheticConfig``).
+    """
+
+    offset_deg: float = 8.0
+    amplitude: float = 0.15
+    cadence: float = 0.12
+    noise_sd_deg: tuple[float, float] = (0.2, 1.0)
+    rate_hz: tuple[float, float] = (100.0, 500.0)
+    jitter: tuple[float, float] = (0.0, 0.5)
+
+
+WEARER_STREAM = 0x5EA2E2
+"""First word of the seed of ``new_wearer``'s random stream (separate from ``generate``'s)."""
+
+
+def new_wearer(seed: int, ranges: WearerConfig | None = None, base: SyntheticConfig | None = None) -> SyntheticConfig:
+    """A new wearer: ``base`` (default ``SyntheticConfig()``) with cadence, per-channel offsets
+    and amplitude factors, noise level, sampling rate and jitter drawn from ``ranges``.
+
+    The same seed gives the same wearer; pass the config to ``generate`` (any seed) to walk.
+    """
+    r = ranges or WearerConfig()
+    rng = np.random.default_rng([WEARER_STREAM, seed])
+    return replace(
+        base or SyntheticConfig(),
+        cadence=float(rng.uniform(1.0 - r.cadence, 1.0 + r.cadence)),
+        channel_offset_deg=tuple(float(v) for v in rng.uniform(-r.offset_deg, r.offset_deg, 4)),
+        channel_gain=tuple(float(v) for v in rng.uniform(1.0 - r.amplitude, 1.0 + r.amplitude, 4)),
+        noise_sd_deg=float(rng.uniform(*r.noise_sd_deg)),
+        rate_hz=float(rng.uniform(*r.rate_hz)),
+        jitter=float(rng.uniform(*r.jitter)),
+    )
 
 
 @dataclass(frozen=True)
@@ -100,32 +158,43 @@ def generate(
     cfg = config or SyntheticConfig()
     rng = np.random.default_rng(seed)
     rate = float(cfg.rate_hz or library.sample_rate_hz)
+    if cfg.jitter and cfg.stamp_jitter_s:
+        raise ValueError("choose one of jitter and stamp_jitter_s")
+    if not 0.0 <= cfg.stamp_jitter_s < 0.5 / rate:
+        raise ValueError(f"stamp_jitter_s must be in [0, half the interval {0.5 / rate:g} s), got {cfg.stamp_jitter_s!r}")
+    if not cfg.cadence > 0:
+        raise ValueError(f"cadence must be > 0, got {cfg.cadence!r}")
+    uniform = cfg.jitter == 0 and cfg.stamp_jitter_s == 0
     modes = [library.mode(name) for name, count in segments for _ in range(count)]
     s = len(modes)
     if s == 0:
         raise ValueError("no strides requested")
-    nominal = np.array([m.length / library.sample_rate_hz for m in modes])
+    nominal = np.array([m.length / library.sample_rate_hz for m in modes]) / cfg.cadence
     dur = nominal * np.maximum(0.5, 1.0 + cfg.duration_cv * rng.standard_normal(s))
     for k, f in (duration_scale or {}).items():
         dur[k] *= f
-    if cfg.jitter == 0:
+    if uniform:
         n_samples = np.maximum(2, np.round(dur * rate)).astype(np.int64)
         hs_index = np.r_[0, np.cumsum(n_samples)]
         dur = n_samples / rate
         hs = hs_index / rate
     else:
         hs = np.r_[0.0, np.cumsum(dur)]
-    amp = 1.0 + cfg.amplitude_cv * rng.standard_normal((s + 1, 4))
+    amp = np.asarray(cfg.channel_gain, dtype=np.float64) * (1.0 + cfg.amplitude_cv * rng.standard_normal((s + 1, 4)))
     off = cfg.offset_sd_deg * rng.standard_normal((s + 1, 4))
 
-    if cfg.jitter == 0:
+    if uniform:
         t = np.arange(hs_index[-1] + 1) / rate
         heel = np.isin(np.arange(t.size), hs_index)
     else:
-        lo, hi = (1.0 - cfg.jitter) / rate, (1.0 + cfg.jitter) / rate
-        steps = rng.uniform(lo, hi, int(hs[-1] * rate / (1.0 - cfg.jitter)) + 10)
-        t = np.cumsum(np.r_[0.0, steps])
-        t = t[t < hs[-1]]
+        if cfg.jitter:
+            lo, hi = (1.0 - cfg.jitter) / rate, (1.0 + cfg.jitter) / rate
+            steps = rng.uniform(lo, hi, int(hs[-1] * rate / (1.0 - cfg.jitter)) + 10)
+            t = np.cumsum(np.r_[0.0, steps])
+        else:
+            t = np.arange(math.floor(hs[-1] * rate) + 1) / rate
+            t = t + rng.uniform(-cfg.stamp_jitter_s, cfg.stamp_jitter_s, t.size)
+        t = t[(t > 0) & (t < hs[-1])]
         near_hs = np.abs(t[:, None] - hs[None, :]).min(axis=1) < 0.25 / rate
         t = np.union1d(t[~near_hs], hs)
         heel = np.isin(t, hs)
@@ -152,6 +221,7 @@ def generate(
         w = 0.5 * (1.0 + np.cos(np.pi * frac[rows] / cfg.blend))
         angles[rows] += w[:, None] * (end_prev - start_new)
     angles += cfg.noise_sd_deg * rng.standard_normal(angles.shape)
+    angles += np.asarray(cfg.channel_offset_deg, dtype=np.float64)
 
     foot = cfg.foot_amplitude_deg * (np.exp(FOOT_SHARPNESS * (np.cos(2 * np.pi * frac) - 1.0)) - 0.6)
     foot += cfg.foot_noise_sd_deg * rng.standard_normal(t.size)

@@ -1,0 +1,676 @@
+#!/usr/bin/env python3
+"""Cross-session benchmark: the estimator measured the way a new wearer meets it (issue 10;
+docs/new_wearer.md).
+
+    python experiments/cross_session.py                     # -> experiments/results/cross_session/
+    python experiments/cross_session.py --settings default,resample --datasets SYN-NEW,LG2-AB --seeds 3
+    python experiments/cross_session.py --add 'mine={"resample": true, "window_fraction": 0.6}'
+
+Every data set is fed to ``Estimator.update`` sample by sample (``run_estimator``, the code behind
+``gait-estimator process``) under every *setting*: a named dict of options for
+``EstimatorConfig().with_options(**options)`` (``SETTINGS`` below; ``--add NAME=JSON`` adds one).
+A new option is benchmarked by adding a line to ``SETTINGS``: nothing else here knows option
+names, except ``PAPER`` (the paper's values of today's options) and the ``"<table>"`` value of
+``transitions`` (the data set's allowed-transitions file). ``default`` = ``{}`` is whatever
+``EstimatorConfig()`` is at the time of the run: the targets table checks it. Settings naming an
+option this ``EstimatorConfig`` does not have are skipped (listed in summary.json). Settings
+that resolve to the same configuration are run once.
+
+Metrics come from ``gait_estimator.analysis.evaluate.evaluate`` (the code behind
+``gait-estimator evaluate``) via bench_common.part_stats/pool. Kernels that are not bundled are
+trained here with ``gait_estimator.analysis.train.train_library`` (the code behind
+``gait-estimator train``) as experiments/run.sh trains them.
+
+Data sets (``--datasets``; see docs/new_wearer.md for in-sample vs out-of-sample):
+
+* ``SYN-NEW``: ``--seeds`` synthetic new wearers (test/synthetic.py ``new_wearer``: per-channel
+  offsets within +-8 deg, amplitude +-15 %, cadence +-12 %, noise 0.2-1 deg, 100-500 Hz with
+  interval jitter up to +-50 %) walking the 78-stride route of all 7 modes (bench_common.ROUTE,
+  12 mode changes), generated from and evaluated with the bundled able_bodied kernels, fed at
+  their own rate and stamps. Exact truth.
+* ``LG2-AB``: LG_2_Ramp with the bundled able_bodied kernels, fed at its raw stamps (1.7-10 ms
+  apart, median 267 Hz), labels experiments/lg2_ramp_labels.csv, ``level`` accepted as Slow, Med
+  or Fast; heel strikes from the right foot angle.
+* ``LG2-AB@230``: the same from the 230 Hz copy (``gait-estimator resample --rate 230``) as
+  experiments/run.sh makes it: the reference of the 82.2 % of docs/training.md.
+* ``MS-LG2``: Multispeed (230 Hz) with level/RA/RD kernels trained on LG_2_Ramp (267 Hz library);
+  every stride (0.6-2.5 s) is level walking, truth ``level``.
+* ``LG2-MS``: LG_2_Ramp (raw stamps) with Slow/Med/Fast kernels trained on Multispeed (steady
+  strides, first halves, as run.sh); only the level rows can be evaluated (``level`` = Slow, Med
+  or Fast): the RA/RD rows are left out (unevaluated), not counted wrong.
+* ``RATES``: one synthetic wearer (seed 0, generated at 100, 200, 230 and 500 Hz and at 230 Hz
+  sampled +-2 ms off the grid) and Multispeed (able_bodied kernels, every stride within 15 % of a
+  kernel duration labelled, as beyond_paper.py's MS; resampled by cubic spline to 100/200/500 Hz,
+  sampled +-2 ms off the grid, and with its stamps +-2 ms wrong), only for ``RATE_SETTINGS``.
+
+Per-step cost: after the accuracy runs, for every data set (first part) and configuration, the
+wall time of each ``Estimator.update`` call on input samples 500-2499 (a fixed subset), the
+configurations interleaved sample by sample in one process, so they share the machine's state;
+median and p99 per call and mean per estimate.
+
+Runtime with the defaults (5 wearers, 11 settings, 2 jobs) ≈ 3-4 min on a 2-core AMD EPYC VM (174-255 s
+with a load average of 1-5 from other jobs); ``--tables-only`` rewrites tables.md from summary.json.
+Writes ``summary.json`` (every metric, per data set, setting and part) and ``tables.md`` (the
+tables of docs/new_wearer.md, copied in by ``make docs``) into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing
+import os
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from bench_common import (
+    DATASETS,
+    DET,
+    MS_CSV,
+    REPO,
+    ROUTE,
+    TABLE,
+    Dataset,
+    Part,
+    column_hs,
+    data_root,
+    lg2_able_bodied,
+    lg2_uniform,
+    machine,
+    md_table,
+    multispeed,
+    part_stats,
+    pct,
+    pool,
+    rate_variants,
+    relabel,
+    sec,
+    train_lg2,
+)
+from synthetic import generate, new_wearer
+
+from gait_estimator.analysis.labels import LabelRange, duration_labels, merge_steady, with_ranges
+from gait_estimator.analysis.strides import heel_strikes, stride_bounds
+from gait_estimator.analysis.train import TrainOptions, train_library
+from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
+from gait_estimator.core.kernels import KernelLibrary
+from gait_estimator.io.library_io import load_library
+from gait_estimator.io.readers import read_recording
+from gait_estimator.io.recording import Recording
+
+# ---------------------------------------------------------------------------------------------
+# Settings: named option sets for EstimatorConfig().with_options(**options)
+
+TABLE_VALUE = "<table>"
+"""``transitions`` value replaced by the data set's allowed-transitions file ('' when it has none)."""
+
+PAPER: dict[str, Any] = {
+    "window_fraction": 1.0, "channels": ["right_thigh", "left_thigh", "right_shank", "left_shank"],
+    "channel_weights": [1.0, 1.0, 1.0, 1.0], "subsample_phase": False, "resample": False, "min_confidence": 0.0,
+    "min_dwell_samples": 0, "min_dwell_s": 0.0, "transitions": "",
+}
+"""The paper's (reference implementation's) values of the options that change estimates.
+An option added later is left at its default here: summary.json lists such fields."""
+
+R = {"resample": True}
+SETTINGS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "paper": PAPER,
+    "resample": R,
+    "resample + window 0.75": {**R, "window_fraction": 0.75},
+    "resample + window 0.5": {**R, "window_fraction": 0.5},
+    "resample + thighs ½": {**R, "channel_weights": [0.5, 0.5, 1.0, 1.0]},
+    "resample + shanks ½": {**R, "channel_weights": [1.0, 1.0, 0.5, 0.5]},
+    "resample + min_confidence 0.1": {**R, "min_confidence": 0.1},
+    "resample + min_dwell_s 0.1": {**R, "min_dwell_s": 0.1},
+    "resample + window 0.5 + min_dwell_s 0.1": {**R, "window_fraction": 0.5, "min_dwell_s": 0.1},
+    "resample + transitions table": {**R, "transitions": TABLE_VALUE},
+}
+"""Every setting is run on every data set except RATES (``RATE_SETTINGS`` only)."""
+
+RATE_SETTINGS = ("default", "paper", "resample")
+"""Settings run on the RATES variants (each variant is a whole recording: keep this short)."""
+
+WEARER_SETTINGS = ("default", "paper", "resample")
+"""Settings shown per wearer in the SYN-NEW wearers table (when run)."""
+
+DATASET_KEYS = ("SYN-NEW", "LG2-AB", "LG2-AB@230", "MS-LG2", "LG2-MS", "RATES")
+RATE_REFERENCE = "230 Hz"
+"""The library-rate variant the other RATES variants are compared with."""
+
+TIMED = (500, 2500)
+"""Input samples [start, stop) of each data set's first part whose update calls are timed."""
+
+LG2_TABLE_YAML = (
+    "# Allowed transitions for the 3-mode LG_2_Ramp library (written by experiments/cross_session.py):\n"
+    "# as config/transitions.yaml, no direct ramp ascent <-> ramp descent.\n"
+    "allowed_transitions:\n  level: [RA, RD]\n  RA: [level]\n  RD: [level]\n"
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# Data sets
+
+
+def syn_new(ab: KernelLibrary, seeds: int) -> tuple[Dataset, list[dict[str, Any]]]:
+    parts, wearers = [], []
+    for s in range(seeds):
+        cfg = new_wearer(s)
+        syn = generate(ab, ROUTE, cfg, seed=1000 + s, source=f"wearer {s}")
+        parts.append(Part(f"wearer {s}", syn.recording, syn.recording, column_hs(syn.recording), synthetic=syn))
+        wearers.append({"seed": s, "rate_hz": cfg.rate_hz, "jitter": cfg.jitter, "cadence": cfg.cadence,
+                        "offset_deg": list(cfg.channel_offset_deg), "gain": list(cfg.channel_gain),
+                        "noise_sd_deg": cfg.noise_sd_deg, "samples": len(syn.recording),
+                        "duration_s": float(syn.recording.time_s[-1])})
+    return Dataset("SYN-NEW", f"{seeds} synthetic new wearers, able_bodied kernels", ab, parts, str(TABLE)), wearers
+
+
+def lg2_raw_part(shared: Path) -> Part:
+    """LG_2_Ramp at its raw stamps, labelled, heel strikes from the right foot angle (median rate)."""
+    raw, _ = lg2_uniform(shared, None)
+    hs = heel_strikes(raw, "right_foot", None, DET)
+    return Part("LG_2_Ramp raw", raw, raw, hs, {"level": ("Slow", "Med", "Fast")})
+
+
+def every_stride_level(rec: Recording, source: str) -> Part:
+    """Multispeed with every stride (right-shank heel strikes, 0.6-2.5 s) labelled ``level``."""
+    hs = heel_strikes(rec, source, None, DET)
+    bounds, _ = stride_bounds(hs.times_s, DET)
+    ranges: list[LabelRange] = []
+    for a, b in bounds:
+        if ranges and math.isclose(ranges[-1].end_s, a, abs_tol=1e-9):
+            ranges[-1] = LabelRange(ranges[-1].start_s, float(b), "level")
+        else:
+            ranges.append(LabelRange(float(a), float(b), "level"))
+    truth = with_ranges(rec, ranges)
+    return Part("Multispeed", rec, truth, hs)
+
+
+def r4(x: float) -> float:
+    """Label files hold times with 4 decimals (write_label_ranges)."""
+    return float(f"{x:.4f}")
+
+
+def train_multispeed(shared: Path, ab: KernelLibrary) -> KernelLibrary:
+    """Slow/Med/Fast kernels as experiments/run.sh trains them: ``label-strides --modes
+    Slow,Med,Fast --heel-strikes right_shank`` (steady strides), split_ranges.py (first half of
+    every range), ``train --heel-strikes right_shank`` on the first halves."""
+    rec = read_recording(shared / MS_CSV, rate_hz=ab.sample_rate_hz)
+    hs = heel_strikes(rec, "right_shank", None, DET)
+    bounds, _ = stride_bounds(hs.times_s, DET)
+    durations = {n: ab.mode(n).stride_duration_s for n in ("Slow", "Med", "Fast")}
+    ranges = [LabelRange(r4(r.start_s), r4(r.end_s), r.mode) for r in merge_steady(duration_labels(bounds, durations, 0.15))]
+    first = [LabelRange(r.start_s, r4(0.5 * (r.start_s + r.end_s)), r.mode) for r in ranges]
+    return train_library([with_ranges(rec, first)], "multispeed", TrainOptions(heel_strikes="right_shank")).library
+
+
+def kernel_check(lib: KernelLibrary, path: Path) -> dict[str, Any]:
+    """Largest difference from the kernels experiments/run.sh wrote (same procedure, via the CLI)."""
+    if not path.is_file():
+        return {"file": str(path.relative_to(REPO)), "skipped": "not found"}
+    ref = load_library(str(path))
+    same = ref.mode_names == lib.mode_names and all(a.length == b.length for a, b in zip(ref.modes, lib.modes, strict=True))
+    diff = max(float(np.abs(a.samples - b.samples).max()) for a, b in zip(ref.modes, lib.modes, strict=True)) if same else None
+    return {"file": str(path.relative_to(REPO)), "same_modes_and_lengths": same, "max_abs_diff_deg": diff}
+
+
+def build_datasets(keys: Sequence[str], seeds: int, out: Path) -> dict[str, Any]:
+    """Fill DATASETS with the requested data sets; returns notes for the summary."""
+    shared = data_root()
+    ab = load_library("able_bodied")
+    notes: dict[str, Any] = {"kernel_checks": {}}
+    lg2_table = out / "transitions_lg2.yaml"
+    lg2_table.write_text(LG2_TABLE_YAML, encoding="utf-8")
+    if "SYN-NEW" in keys:
+        ds, notes["wearers"] = syn_new(ab, seeds)
+        DATASETS[ds.key] = ds
+    if "LG2-AB" in keys:
+        DATASETS["LG2-AB"] = Dataset("LG2-AB", "LG_2_Ramp (raw stamps), able_bodied kernels", ab, [lg2_raw_part(shared)],
+                                     str(TABLE))
+    if "LG2-AB@230" in keys:
+        ds = lg2_able_bodied(shared, ab)
+        ds.key, ds.title = "LG2-AB@230", "LG_2_Ramp (230 Hz copy), able_bodied kernels"
+        DATASETS[ds.key] = ds
+    if "MS-LG2" in keys:
+        lib = train_lg2(shared)
+        notes["kernel_checks"]["lg2"] = kernel_check(lib, REPO / "experiments/results/lg2_kernels.yaml")
+        rec = read_recording(shared / MS_CSV, rate_hz=ab.sample_rate_hz)
+        DATASETS["MS-LG2"] = Dataset("MS-LG2", "Multispeed, level/RA/RD kernels trained on LG_2_Ramp", lib,
+                                     [every_stride_level(rec, "right_shank")], str(lg2_table))
+    if "LG2-MS" in keys:
+        lib = train_multispeed(shared, ab)
+        notes["kernel_checks"]["multispeed"] = kernel_check(lib, REPO / "experiments/results/multispeed_kernels.yaml")
+        part = lg2_raw_part(shared)
+        part.label_map = {"level": ("Slow", "Med", "Fast"), "RA": (), "RD": ()}
+        DATASETS["LG2-MS"] = Dataset("LG2-MS", "LG_2_Ramp (raw stamps), Slow/Med/Fast kernels trained on Multispeed "
+                                     "(level rows only: accuracy is 100 % by construction)", lib, [part], "")
+    if "RATES" in keys:
+        base = replace(new_wearer(0), rate_hz=None, jitter=0.0)  # wearer 0 at the library rate, uniform
+        variants = {"100 Hz": {"rate_hz": 100.0}, "200 Hz": {"rate_hz": 200.0}, RATE_REFERENCE: {},
+                    "500 Hz": {"rate_hz": 500.0}, "230 Hz ±2 ms off the grid": {"stamp_jitter_s": 0.002}}
+        for name, change in variants.items():
+            syn = generate(ab, ROUTE, replace(base, **change), seed=1000, source=f"wearer 0 {name}")
+            key = f"RATES-SYN {name}"
+            DATASETS[key] = Dataset(key, name, ab, [Part(syn.recording.source, syn.recording, syn.recording,
+                                                          column_hs(syn.recording), synthetic=syn)], str(TABLE))
+        ms = multispeed(shared, ab)
+        for name, rec in rate_variants(ms.parts[0], ab.sample_rate_hz).items():
+            label = RATE_REFERENCE if name.endswith("(original)") else name
+            key = f"RATES-MS {label}"
+            DATASETS[key] = Dataset(key, label, ab, [relabel(ms.parts[0], rec)], str(TABLE))
+    return notes
+
+
+# ---------------------------------------------------------------------------------------------
+# Settings -> configurations
+
+
+def resolve(options: dict[str, Any], ds: Dataset) -> dict[str, Any]:
+    return {k: (ds.table if k == "transitions" and v == TABLE_VALUE else v) for k, v in options.items()}
+
+
+def config_key(options: dict[str, Any]) -> str:
+    """Identity of the configuration an option set gives (equal configurations run once)."""
+    return repr(EstimatorConfig().with_options(**options))
+
+
+def usable_settings(settings: dict[str, dict[str, Any]]) -> tuple[dict[str, dict[str, Any]], dict[str, str]]:
+    """(settings this EstimatorConfig accepts, skipped name -> reason)."""
+    ok, skipped = {}, {}
+    for name, opts in settings.items():
+        try:
+            EstimatorConfig().with_options(**{k: ("" if v == TABLE_VALUE else v) for k, v in opts.items()})
+        except (ValueError, TypeError) as exc:
+            skipped[name] = str(exc)
+            continue
+        ok[name] = opts
+    return ok, skipped
+
+
+def settings_of(key: str, settings: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    if key.startswith("RATES-"):
+        return {n: o for n, o in settings.items() if n in RATE_SETTINGS}
+    return settings
+
+
+# ---------------------------------------------------------------------------------------------
+# Running
+
+
+Run = tuple[str, int, str, dict[str, Any]]
+"""(data set key, part index, configuration key, options)."""
+
+
+def run_part(run: Run) -> dict[str, Any]:
+    key, i, _, options = run
+    ds = DATASETS[key]
+    part = ds.parts[i]
+    est = Estimator(ds.library, EstimatorConfig().with_options(**options))
+    trace = run_estimator(est, part.feed.time_s, part.feed.angles_deg, part.feed.index)
+    stats = part_stats(ds, part, trace, ("steady_modes",))
+    stats["resets"] = est.resets
+    stats["updates"] = len(part.feed)
+    stats["estimates"] = len(trace)
+    return stats
+
+
+def run_all(runs: Sequence[Run], jobs: int) -> list[dict[str, Any]]:
+    order = sorted(range(len(runs)), key=lambda k: -len(DATASETS[runs[k][0]].parts[runs[k][1]].feed))
+    todo = [runs[k] for k in order]
+    done = 0
+    results: list[dict[str, Any]] = [{}] * len(runs)
+    if jobs > 1:
+        with multiprocessing.get_context("fork").Pool(jobs) as p:
+            for k, res in zip(order, p.imap(run_part, todo, chunksize=1), strict=True):
+                results[k] = res
+                done += 1
+                if done % 20 == 0:
+                    print(f"  {done}/{len(runs)} runs", flush=True)
+    else:
+        for k, run in zip(order, todo, strict=True):
+            results[k] = run_part(run)
+    return results
+
+
+def time_updates(ds: Dataset, configs: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Wall time of each Estimator.update call on input samples TIMED of the first part, the
+    configurations interleaved sample by sample (see module docstring)."""
+    feed = ds.parts[0].feed
+    stop = min(TIMED[1], len(feed))
+    ests = {k: Estimator(ds.library, EstimatorConfig().with_options(**o)) for k, o in configs.items()}
+    ns = {k: np.zeros(stop - TIMED[0], dtype=np.int64) for k in configs}
+    outputs = dict.fromkeys(configs, 0)
+    clock = time.perf_counter_ns
+    for i in range(stop):
+        t, x = float(feed.time_s[i]), feed.angles_deg[i]
+        for k, est in ests.items():
+            t0 = clock()
+            n = len(est.update(t, x))
+            dt = clock() - t0
+            if i >= TIMED[0]:
+                ns[k][i - TIMED[0]] = dt
+                outputs[k] += n
+    return {k: {"median_us": float(np.median(v)) / 1e3, "p99_us": float(np.percentile(v, 99)) / 1e3,
+                "per_estimate_us": float(v.sum()) / 1e3 / max(outputs[k], 1), "updates": int(v.size),
+                "estimates": outputs[k]} for k, v in ns.items()}
+
+
+def selected(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], list[str]]:
+    """(settings, data set keys) from --add/--settings/--datasets; ValueError names the flag."""
+    settings = dict(SETTINGS)
+    for item in args.add or []:
+        name, _, text = item.partition("=")
+        try:
+            opts = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"--add {item!r}: expected NAME=JSON object ({exc})") from None
+        if not name.strip() or "," in name or not isinstance(opts, dict):
+            raise ValueError(f"--add {item!r}: expected NAME=JSON object (NAME without commas), "
+                             "e.g. 'mine={\"resample\": true}'")
+        settings[name.strip()] = opts
+    if args.settings:
+        names = [n.strip() for n in args.settings.split(",") if n.strip()]
+        unknown = [n for n in names if n not in settings]
+        if unknown:
+            raise ValueError(f"--settings: unknown setting(s) {', '.join(unknown)} (known: {', '.join(settings)})")
+        settings = {n: settings[n] for n in names}
+    keys = list(DATASET_KEYS) if not args.datasets else [k.strip() for k in args.datasets.split(",") if k.strip()]
+    bad = [k for k in keys if k not in DATASET_KEYS]
+    if bad:
+        raise ValueError(f"--datasets: unknown data set(s) {', '.join(bad)} (known: {', '.join(DATASET_KEYS)})")
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
+    return settings, keys
+
+
+def compute(args: argparse.Namespace, out: Path) -> dict[str, Any]:
+    settings, keys = selected(args)
+    settings, skipped = usable_settings(settings)
+    for name, why in skipped.items():
+        print(f"skipped setting {name!r}: {why}", flush=True)
+
+    start = time.perf_counter()
+    load = [os.getloadavg()[0]]
+    notes = build_datasets(keys, args.seeds, out)
+    print(f"data sets ready after {time.perf_counter() - start:.0f} s", flush=True)
+
+    # distinct configurations per data set
+    plan: dict[str, dict[str, str]] = {}  # data set -> setting -> config key
+    configs: dict[str, dict[str, dict[str, Any]]] = {}  # data set -> config key -> options
+    for key, ds in DATASETS.items():
+        for name, opts in settings_of(key, settings).items():
+            o = resolve(opts, ds)
+            ck = config_key(o)
+            plan.setdefault(key, {})[name] = ck
+            configs.setdefault(key, {}).setdefault(ck, o)
+    runs: list[Run] = [(key, i, ck, o) for key, cs in configs.items() for ck, o in cs.items()
+                       for i in range(len(DATASETS[key].parts))]
+    print(f"{len(runs)} runs ({sum(len(c) for c in configs.values())} data set x configuration) on {args.jobs} "
+          f"worker(s) ...", flush=True)
+    stats = run_all(runs, args.jobs)
+    print(f"estimation and evaluation done after {time.perf_counter() - start:.0f} s", flush=True)
+    by_config: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for (key, _, ck, _), st in zip(runs, stats, strict=True):
+        by_config.setdefault((key, ck), []).append(st)
+
+    timing: dict[str, dict[str, Any]] = {}
+    for key, cs in configs.items():
+        if key.startswith("RATES-"):
+            continue
+        t = time_updates(DATASETS[key], cs)
+        timing[key] = {name: t[ck] for name, ck in plan[key].items()}
+    print(f"timing done after {time.perf_counter() - start:.0f} s", flush=True)
+    load.append(os.getloadavg()[0])
+
+    results: dict[str, dict[str, Any]] = {}
+    per_part: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    for key, names in plan.items():
+        results[key], per_part[key] = {}, {}
+        for name, ck in names.items():
+            sts = by_config[(key, ck)]
+            m = pool(sts)
+            m["per_mode_steady_accuracy"], m["per_mode_steady_samples"] = per_mode_steady(sts)
+            m["resets"] = sum(s["resets"] for s in sts)
+            m["estimates"] = sum(s["estimates"] for s in sts)
+            m["same_configuration_as"] = next((n for n, c in names.items() if c == ck and n != name), None)
+            if key in timing:
+                m["cost"] = timing[key][name]
+            results[key][name] = m
+            if len(sts) > 1 or key == "SYN-NEW":
+                per_part[key][name] = [pool([s]) for s in sts]
+    paper_cfg = EstimatorConfig().with_options(**PAPER)
+    res: dict[str, Any] = {
+        "settings": settings, "skipped_settings": skipped,
+        "paper_unpinned_fields": [f.name for f in fields(paper_cfg) if f.name not in PAPER and f.name not in (
+            "phase_rate_tau_s", "max_gap_s")],
+        "default_configuration": repr(EstimatorConfig()),
+        "default_is_paper": EstimatorConfig() == paper_cfg,
+        "datasets": {k: {"title": ds.title, "library": ds.library.name, "modes": ds.library.mode_names,
+                         "library_rate_hz": ds.library.sample_rate_hz, "parts": [p.name for p in ds.parts],
+                         "feed_median_rate_hz": [p.feed.median_rate_hz for p in ds.parts],
+                         "duration_s": sum(float(p.feed.time_s[-1] - p.feed.time_s[0]) for p in ds.parts),
+                         "transitions_file": os.path.relpath(ds.table, REPO) if ds.table else ""}
+                     for k, ds in DATASETS.items()},
+        "results": results, "per_part": per_part, "notes": notes, "seeds": args.seeds, "timed_samples": list(TIMED),
+        "machine": {**machine(), "cpu_model": cpu_model(), "load_average_1min_start_end": load},
+    }
+    res["targets"] = targets(res)
+    return res
+
+
+def cpu_model() -> str:
+    try:
+        lines = Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines()
+    except OSError:
+        return ""
+    return next((ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")), "")
+
+
+def per_mode_steady(stats: Sequence[dict[str, Any]]) -> tuple[dict[str, float | None], dict[str, int]]:
+    """(steady accuracy, steady rows) per truth mode, pooled over parts."""
+    out: dict[str, list[int]] = {}
+    for s in stats:
+        for n, (c, e) in s.get("per_mode_steady", {}).items():
+            acc = out.setdefault(n, [0, 0])
+            acc[0] += c
+            acc[1] += e
+    return {n: (c / e if e else None) for n, (c, e) in out.items()}, {n: e for n, (_, e) in out.items()}
+
+
+# ---------------------------------------------------------------------------------------------
+# Targets (issue 10) for the default setting
+
+
+def targets(res: dict[str, Any]) -> list[dict[str, Any]]:
+    R = res["results"]
+    rows: list[dict[str, Any]] = []
+
+    def add(what: str, key: str, value: Any, limit: float, op: str, paper: Any = None) -> None:
+        ok = None if value is None else (value >= limit if op == ">=" else value <= limit)
+        rows.append({"target": what, "dataset": key, "op": op, "limit": limit, "default": value, "paper": paper,
+                     "pass": ok})
+
+    def get(key: str, setting: str, *path: str) -> Any:
+        v: Any = R.get(key, {}).get(setting)
+        for p in path:
+            v = None if v is None else v.get(p)
+        return v
+
+    for key in ("LG2-AB", "SYN-NEW"):
+        if key not in R or "default" not in R[key]:
+            continue
+        if key == "LG2-AB":
+            add("accuracy", key, get(key, "default", "accuracy"), 0.95, ">=", get(key, "paper", "accuracy"))
+            add("level accuracy", key, get(key, "default", "per_mode_accuracy", "level"), 0.90, ">=",
+                get(key, "paper", "per_mode_accuracy", "level"))
+        else:
+            add("accuracy", key, get(key, "default", "accuracy"), 0.97, ">=", get(key, "paper", "accuracy"))
+        add("phase error", key, get(key, "default", "phase_error_mean"), 0.015, "<=", get(key, "paper", "phase_error_mean"))
+    for base in ("RATES-SYN", "RATES-MS"):
+        ref = f"{base} {RATE_REFERENCE}"
+        if ref not in R or "default" not in R[ref]:
+            continue
+        for key in [k for k in R if k.startswith(base + " ") and k != ref]:
+            diffs = []
+            for setting in ("default", "paper"):
+                a, b = get(key, setting, "phase_error_mean"), get(ref, setting, "phase_error_mean")
+                diffs.append(None if a is None or b is None else abs(a - b))
+            add(f"phase error difference from {RATE_REFERENCE}", key, diffs[0], 0.005, "<=", diffs[1])
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# Output
+
+
+def cost_cell(c: dict[str, Any] | None) -> str:
+    return "–" if not c else f"{c['median_us']:.0f} ({c['p99_us']:.0f}); {c['per_estimate_us']:.0f}"
+
+
+def delay_cells(m: dict[str, Any]) -> str:
+    if not m["transitions"]:
+        return "–"
+    miss = f", {m['missed']} missed" if m["missed"] else ""
+    return f"{sec(m['mean_delay_s'])} / {sec(m['median_delay_s'])}{miss}"
+
+
+def write_tables(res: dict[str, Any], out: Path) -> str:
+    R, D = res["results"], res["datasets"]
+    mach = res["machine"]
+    load = ", ".join(f"{v:.1f}" for v in mach["load_average_1min_start_end"])
+    cpu = mach["cpu_model"] or mach["processor"]
+    parts = [f"Measured by `{res['command']}` in {res['runtime_s']:.0f} s on {cpu}, {mach['cpus']} CPUs "
+             f"(1-min load average {load} at the start / after timing), Python {mach['python']}, numpy {mach['numpy']}. "
+             "Defaults (`{}`) "
+             + ("= the paper's values." if res["default_is_paper"] else f"= `{res['default_configuration']}`.")]
+    if res["skipped_settings"]:
+        parts[0] += " Skipped (option unknown to this build): " + ", ".join(res["skipped_settings"]) + "."
+    if res["paper_unpinned_fields"]:
+        parts[0] += (" `paper` does not pin " + ", ".join(f"`{f}`" for f in res["paper_unpinned_fields"])
+                     + " (left at their defaults).")
+    checks = res["notes"].get("kernel_checks", {})
+    if checks:
+        parts[0] += " Kernels trained here vs the ones experiments/run.sh wrote: " + "; ".join(
+            f"{name}: " + (c.get("skipped") or (f"max difference {c['max_abs_diff_deg']:.1e} deg" if c["same_modes_and_lengths"]
+                                                else "DIFFERENT modes or lengths"))
+            for name, c in checks.items()) + "."
+    rows = [[name, "`" + json.dumps(opts, ensure_ascii=False) + "`"] for name, opts in res["settings"].items()]
+    parts[0] = ("### Run: command, machine, settings\n\n" + parts[0] + " Settings (options given to "
+                "`EstimatorConfig().with_options`; `\"<table>\"` = the data set's allowed-transitions file):\n\n"
+                + md_table(["setting", "options"], rows))
+
+    # targets
+    rows = []
+    for t in res["targets"]:
+        pass_cell = "–" if t["pass"] is None else ("**pass**" if t["pass"] else "fail")
+        op = "≥" if t["op"] == ">=" else "≤"
+        if "difference" in t["target"]:  # percentage points
+
+            def fmt(v: float | None, digits: int = 2) -> str:
+                return "–" if v is None else f"{100 * v:.{digits}f} points"
+        else:
+            fmt = pct
+        rows.append([t["dataset"], t["target"], f"{op} {fmt(t['limit'], 1)}", fmt(t["paper"], 2), fmt(t["default"], 2),
+                     pass_cell])
+    parts.append("### Targets: issue 10 targets with the default options\n\n"
+                 + md_table(["data", "metric", "target", "paper options", "defaults", "defaults pass?"], rows))
+
+    for key in [k for k in R if not k.startswith("RATES-")]:
+        ds = D[key]
+        mode_cols = list(dict.fromkeys(n for m in R[key].values() for n in m["per_mode_accuracy"]))
+        rows, mrows = [], []
+        first = next(iter(R[key].values()))
+        for name, m in R[key].items():
+            same = f" (= {m['same_configuration_as']})" if m["same_configuration_as"] and name != "default" else ""
+            rows.append([f"{name}{same}", pct(m["accuracy"]), pct(m["steady_accuracy"]),
+                         f"{pct(m['phase_error_mean'], 2)} ({pct(m['phase_error_max'], 0)})", delay_cells(m),
+                         f"{m['switches_per_min']:.1f}", cost_cell(m.get("cost"))])
+            cells = []
+            for n in mode_cols:
+                a, s = m["per_mode_accuracy"].get(n), m["per_mode_steady_accuracy"].get(n)
+                cells.append(f"{pct(a)} ({pct(s)} of {m['per_mode_steady_samples'].get(n, 0)})")
+            mrows.append([name, *cells])
+        rate = ", ".join(f"{r:.0f}" for r in ds["feed_median_rate_hz"])
+        head = (f"### {key}: {ds['title']}\n\n{len(ds['parts'])} recording(s), {ds['duration_s']:.0f} s, fed at "
+                f"{rate} Hz (median); library {ds['library']} at {ds['library_rate_hz']:.4g} Hz; "
+                f"{first['transitions']} truth mode changes ({60 * first['transitions'] / ds['duration_s']:.1f}/min).")
+        parts.append(head + "\n\n" + md_table(
+            ["setting", "accuracy", "steady", "phase error mean (max)", "transition delay mean / median",
+             "mode changes /min", "µs per update: median (p99); mean per estimate"], rows)
+            + "\n\nPer truth mode: accuracy (steady accuracy of N steady rows)\n\n" + md_table(["setting", *mode_cols], mrows))
+
+    if "SYN-NEW" in R and res["notes"].get("wearers"):
+        cols = [s for s in WEARER_SETTINGS if s in res["per_part"].get("SYN-NEW", {})]
+        rows = []
+        for i, w in enumerate(res["notes"]["wearers"]):
+            row = [str(w["seed"]), f"{w['rate_hz']:.0f} Hz ±{100 * w['jitter']:.0f} %", f"{w['cadence']:.3f}",
+                   ", ".join(f"{o:+.1f}" for o in w["offset_deg"]), ", ".join(f"{g:.2f}" for g in w["gain"]),
+                   f"{w['noise_sd_deg']:.2f}"]
+            for s in cols:
+                m = res["per_part"]["SYN-NEW"][s][i]
+                row.append(f"{pct(m['accuracy'])}; {pct(m['phase_error_mean'], 2)}")
+            rows.append(row)
+        parts.append("### Wearers of SYN-NEW: drawn parameters; accuracy; phase error per setting\n\n" + md_table(
+            ["seed", "rate (interval jitter)", "cadence", "offsets (deg)", "amplitude factors", "noise (deg)",
+             *cols], rows))
+
+    rate_keys = [k for k in R if k.startswith("RATES-")]
+    if rate_keys:
+        names = list(dict.fromkeys(n for k in rate_keys for n in R[k]))
+        rows = []
+        for k in rate_keys:
+            row = [k.split(" ", 1)[0], k.split(" ", 1)[1]]
+            for n in names:
+                m = R[k].get(n)
+                row.append("–" if m is None else f"{pct(m['accuracy'])}; {pct(m['phase_error_mean'], 2)}")
+            rows.append(row)
+        parts.append(f"### RATES: one walk at several stream rates; accuracy; phase error (reference {RATE_REFERENCE})\n\n"
+                     "RATES-SYN = synthetic wearer 0 generated at each rate; RATES-MS = Multispeed (able_bodied kernels) "
+                     "resampled by cubic spline.\n\n" + md_table(["data", "stream", *names], rows))
+    text = "\n\n".join(parts) + "\n"
+    (out / "tables.md").write_text(text, encoding="utf-8")
+    return text
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default=str(REPO / "experiments/results/cross_session"), help="output directory")
+    ap.add_argument("--settings", help=f"comma-separated setting names (default: all: {', '.join(SETTINGS)})")
+    ap.add_argument("--add", action="append", metavar="NAME=JSON",
+                    help="add a setting, e.g. 'mine={\"resample\": true}' (repeatable; select with --settings too)")
+    ap.add_argument("--datasets", help=f"comma-separated data sets (default: all: {', '.join(DATASET_KEYS)})")
+    ap.add_argument("--seeds", type=int, default=5, help="synthetic new wearers in SYN-NEW (default 5)")
+    ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="worker processes (default 2)")
+    ap.add_argument("--tables-only", action="store_true", help="only rewrite tables.md from the --out summary.json")
+    args = ap.parse_args(argv)
+    try:
+        selected(args)
+    except ValueError as exc:
+        ap.error(str(exc))  # one line, exit code 2
+    start = time.perf_counter()
+    out = Path(args.out)
+    if args.tables_only:
+        res = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+        res["targets"] = targets(res)
+        write_tables(res, out)
+        print(f"wrote {out}/tables.md from {out}/summary.json")
+        return 0
+    out.mkdir(parents=True, exist_ok=True)
+    res = compute(args, out)
+    res["command"] = "python experiments/cross_session.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    res["command"] = res["command"].strip()
+    res["runtime_s"] = round(time.perf_counter() - start, 1)
+    (out / "summary.json").write_text(json.dumps(res, indent=1, default=float) + "\n", encoding="utf-8")
+    print(write_tables(res, out))
+    print(f"wrote {out}/summary.json, tables.md in {time.perf_counter() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
