@@ -38,6 +38,7 @@ setup(
         "scipy>=1.11",
         "matplotlib>=3.6",
         "rosbags>=0.10",
+        "numba>=0.59",  # the compiled matcher step; without it the pure-numpy step runs (slower)
     ],
     extras_require={
         "ros": [

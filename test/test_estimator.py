@@ -378,3 +378,20 @@ def test_cli_save_adapted(tmp_path: Path, multispeed_csv: Path, capsys) -> None:
     assert f"wrote {out} (personalised kernels; strides adopted:" in text
     assert out.is_file()
     assert cli_main(["process", str(multispeed_csv), "--save-adapted", str(out), "-q"]) == 2
+
+
+def test_walking_calibration_finds_constant_sensor_offsets(able_bodied) -> None:
+    """Level walking with sensors that read differently (re-donned; the right thigh 6 deg up):
+    the default estimator learns the offsets from confident strides and keeps the mode; without
+    calibration and with the paper's zero tolerance the offsets cost it the mode."""
+    offsets = np.array([6.0, 1.0, 0.0, -1.0])
+    x = np.tile(able_bodied.mode("Med").samples, (25, 1)) + offsets
+    t = np.arange(len(x)) / 230.0
+    est = Estimator(able_bodied)
+    trace = run_estimator(est, t, x)
+    np.testing.assert_allclose(est.sensor_offset_deg, offsets, atol=0.3)
+    tail = trace.ready & (t > t[-1] - 5.0)
+    assert set(np.asarray(trace.modes)[tail]) == {"Med"}
+    assert Estimator(able_bodied, EstimatorConfig.preset("paper")).config.offset_calibration_rate == 0.0
+    off = run_estimator(Estimator(able_bodied, EstimatorConfig(offset_calibration_rate=0.0, offset_tolerance_deg=0.0)), t, x)
+    assert "Med" not in set(np.asarray(off.modes)[tail])

@@ -369,3 +369,21 @@ def test_set_kernel_continues_as_if_the_kernel_had_always_been_this_one(able_bod
 def test_invalid_new_options(able_bodied, kwargs, message) -> None:
     with pytest.raises(ValueError, match=message):
         IncrementalMatcher(able_bodied, **kwargs)
+
+
+@pytest.mark.parametrize("fraction", [1.0, 0.5])
+def test_mean_offset_and_sensor_offset(able_bodied, fraction) -> None:
+    """A kernel walked with constant sensor offsets: mean_offset reads them back, and assuming
+    them (set_sensor_offset) makes the paper's score what it is without the offsets."""
+    offsets = np.array([3.0, -2.0, 1.0, 5.0])
+    x = np.tile(able_bodied.mode("Med").samples, (2, 1))
+    m = IncrementalMatcher(able_bodied, window_fraction=fraction)
+    r = m.run(x + offsets)
+    assert r.modes[-1] == "Med"
+    np.testing.assert_allclose(m.mean_offset(1, int(m.step(x[0] + offsets).column[1])), offsets, atol=1e-9)
+    clean = IncrementalMatcher(able_bodied, window_fraction=fraction).run(x)
+    shifted = IncrementalMatcher(able_bodied, window_fraction=fraction)
+    shifted.set_sensor_offset(offsets)
+    np.testing.assert_allclose(shifted.sensor_offset_deg, offsets)
+    s = shifted.run(x + offsets)
+    np.testing.assert_allclose(s.sse[s.ready], clean.sse[clean.ready], rtol=1e-9, atol=1e-6)

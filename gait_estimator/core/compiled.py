@@ -34,8 +34,9 @@ except ImportError:  # pragma: no cover - depends on the environment
 
 @njit(cache=True, nogil=True, inline="always")
 def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover - compiled
-    """W * sum_c g(S_c / W - mu_c), g(x) = x^2 - max(|x| - tau_c, 0)^2: the part of the SSE
-    explained by a per-channel offset of at most tau_c between window and kernel means."""
+    """W * sum_c g(S_c / W - mu_c), g(x) = x^2 - max(|x - o_c| - tau_c, 0)^2 with tau = tau[0]
+    and the sensor offset o = tau[1]: the part of the SSE explained by a per-channel offset
+    within tau_c of o_c between window and kernel means."""
     total = 0.0
     for c in range(4):
         if c == 0:
@@ -46,7 +47,7 @@ def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover
             x = s2 / w - m2
         else:
             x = s3 / w - m3
-        a = abs(x) - tau[c]
+        a = abs(x - tau[1, c]) - tau[0, c]
         total += x * x - (a * a if a > 0.0 else 0.0)
     return total * w
 
@@ -64,7 +65,8 @@ def step_rows(
     norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,) the prefix
     sum before this sample; count: samples before this one; d (4,), dsq = ||d||^2; offset: apply
     the offset penalty (mu (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift means of the
-    window's kernel part when W < N, tau (4,)); normalize: divide by the window length.
+    window's kernel part when W < N, tau (2, 4): tolerances and sensor offsets); normalize: divide
+    by the window length.
     Writes per row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
     n_rows = lens.shape[0]

@@ -37,7 +37,10 @@ RESAMPLE_MODES = ("auto", "on", "off")
 """``resample``: ``auto`` = on when the input has time stamps (JointState stamps, a recording's
 time column), off for unstamped input (timed on arrival, or by sample index)."""
 
-DEFAULT_TIME_SCALES = (0.88, 0.94, 1.0, 1.06, 1.12)
+DEFAULT_TIME_SCALES = (0.88, 0.92, 0.96, 1.0, 1.04, 1.08, 1.12)
+CALIBRATION_CONFIDENCE = 0.1
+CALIBRATION_STEP_DEG = 5.0
+CALIBRATION_MAX_DEG = 15.0
 
 
 @dataclass(frozen=True)
@@ -61,8 +64,10 @@ OPTIONS: tuple[Option, ...] = (
     Option("time_scales", list(DEFAULT_TIME_SCALES), "stride-duration factors of the kernel variants matched per "
            "mode (cadence robustness; the chosen one gives cadence_ratio = 1/scale); [1.0] = the paper",
            [1.0]),
-    Option("offset_tolerance_deg", 4.0, "per-channel difference (deg) between window and kernel means that costs "
+    Option("offset_tolerance_deg", 2.0, "per-channel difference (deg) between window and kernel means that costs "
            "nothing (sensor mounting); .inf = shapes only; 0 = the paper", 0.0),
+    Option("offset_calibration_rate", 0.2, "walking self-calibration of the sensor offsets: weight of one confident "
+           "stride's window-vs-kernel mean difference in the running offset estimate, [0, 1]; 0 = off", 0.0),
     Option("normalize_error", True, "compare modes by mean squared error per window sample instead of SSE", False),
     Option("window_fraction", 1.0, "fraction of each stride compared, (0, 1]; 1.0 = the paper's full stride"),
     Option("channels", list(CHANNELS), "channels used for matching (subset of right_thigh, left_thigh, right_shank, "
@@ -107,7 +112,8 @@ class EstimatorConfig:
 
     resample: str = "auto"
     time_scales: tuple[float, ...] = DEFAULT_TIME_SCALES
-    offset_tolerance_deg: float = 4.0
+    offset_tolerance_deg: float = 2.0
+    offset_calibration_rate: float = 0.2
     normalize_error: bool = True
     window_fraction: float = 1.0
     channels: tuple[str, ...] = CHANNELS
@@ -142,6 +148,8 @@ class EstimatorConfig:
             raise ValueError(f"min_dwell_samples must be an integer >= 0, got {self.min_dwell_samples!r}")
         if not (self.phase_rate_tau_s > 0 and math.isfinite(self.phase_rate_tau_s)):
             raise ValueError(f"phase_rate_tau_s must be > 0, got {self.phase_rate_tau_s!r}")
+        if not (0.0 <= self.offset_calibration_rate <= 1.0):
+            raise ValueError(f"offset_calibration_rate must be in [0, 1], got {self.offset_calibration_rate!r}")
         if not (0.0 <= self.adapt_rate <= 1.0):
             raise ValueError(f"adapt_rate must be in [0, 1], got {self.adapt_rate!r}")
         if not (self.adapt_max_step_deg > 0 and math.isfinite(self.adapt_max_step_deg)):
@@ -232,6 +240,8 @@ class Estimator:
             options = AdaptOptions(c.adapt_rate, c.adapt_min_confidence, c.adapt_max_step_deg)
             self.adapter = KernelAdapter(library, options)
             self._history = np.zeros((2 * self.matcher.max_length, N_CHANNELS))  # the last stride, however long
+        self.sensor_offset_deg = np.zeros(N_CHANNELS)
+        self._calib_last: tuple[int, float] | None = None
         self.last_time: float | None = None
         self.resets = 0
         self._last: Estimate | None = None
@@ -283,9 +293,26 @@ class Estimator:
     def _step(self, time_s: float, x: np.ndarray) -> Estimate:
         result = self.matcher.step(x)
         est = self.supervisor.update(time_s, result)
+        if self.config.offset_calibration_rate > 0:
+            self._calibrate(est, result)
         if self.adapter is not None:
             self._adapt(x, est, result)
         return est
+
+    def _calibrate(self, est: Estimate, result: Any) -> None:
+        """At every heel strike of a confident, unheld mode: move the sensor offset estimate
+        towards that stride's window-vs-kernel mean difference."""
+        m = est.mode_index
+        last, self._calib_last = self._calib_last, (m, est.phase) if est.ready else None
+        if last is None or last[0] != m or est.phase >= last[1] - 0.5 or est.held or est.confidence < CALIBRATION_CONFIDENCE:
+            return
+
+        variant = 0 if result.variant is None else int(result.variant[m])
+        x = self.matcher.mean_offset(m * self.matcher.n_scales + variant, int(result.column[m]))
+        step = np.clip(x - self.sensor_offset_deg, -CALIBRATION_STEP_DEG, CALIBRATION_STEP_DEG)
+        self.sensor_offset_deg = np.clip(self.sensor_offset_deg + self.config.offset_calibration_rate * step,
+                                         -CALIBRATION_MAX_DEG, CALIBRATION_MAX_DEG)
+        self.matcher.set_sensor_offset(self.sensor_offset_deg)
 
     @staticmethod
     def _restamped(est: Estimate, time_s: float) -> Estimate:

@@ -174,8 +174,9 @@ class _MatcherBase:
         self.active_channels = int(np.count_nonzero(self.channel_weights))
         self._scale = np.sqrt(self.channel_weights)
         self._weighted = bool(np.any(self.channel_weights != 1.0))
+        # row 0: tolerance, row 1: sensor offset (set_sensor_offset), in the weighted units of d and k
+        self._tau = np.stack([self.offset_tolerance_deg * self._scale, np.zeros(N_CHANNELS)])
         self._offset = self.offset_tolerance_deg > 0
-        self._tau = self.offset_tolerance_deg * self._scale  # in the weighted units of d and k
         base = library.lengths
         # Rows are mode-major: row m * S + s is mode m at time scale s.
         self.lengths = np.maximum(2, np.rint(np.outer(base, self.time_scales))).astype(np.int64).reshape(-1)
@@ -191,7 +192,8 @@ class _MatcherBase:
         self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
         self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
         self._mu = np.zeros((self.n_rows, N_CHANNELS))
-        self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._offset and self._partial else 1))
+        # per-shift kernel means of short windows (the offset penalty may be switched on at any sample)
+        self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._partial else 1))
         for m in range(self.n_modes):
             self._set_rows(m, library.modes[m].samples)
         self._ring = np.zeros((self.max_window, N_CHANNELS))
@@ -221,6 +223,23 @@ class _MatcherBase:
         with np.errstate(divide="ignore", invalid="ignore"):
             k = self._kernels[row, :, :n].T / np.where(self._scale > 0, self._scale, 1.0)
         return k
+
+    @property
+    def sensor_offset_deg(self) -> np.ndarray:
+        """The sensor offset assumed by the offset penalty (4,), degrees; zeros by default."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self._scale > 0, self._tau[1] / np.where(self._scale > 0, self._scale, 1.0), 0.0)
+
+    def set_sensor_offset(self, offset_deg: Sequence[float] | np.ndarray) -> None:
+        """Assume the sensors read ``offset_deg`` (4,) degrees more than the kernels' (CHANNELS
+        order): the offset penalty then measures window-vs-kernel mean differences from it. The
+        running sums are untouched (the penalty is applied at read-out), so this may change at
+        any sample; non-zero turns the penalty on even with ``offset_tolerance_deg`` 0."""
+        o = np.asarray(offset_deg, dtype=np.float64).reshape(N_CHANNELS)
+        if not np.all(np.isfinite(o)):
+            raise ValueError(f"sensor offset must be finite, got {o.tolist()}")
+        self._tau[1] = o * self._scale
+        self._offset = self._offset or bool(np.any(o != 0.0))
 
     # -----------------------------------------------------------------------------------------
     # State
@@ -277,7 +296,8 @@ class _MatcherBase:
             else:
                 x = sums / w[:, None] - self._mu  # (R, 4)
                 w_ = w
-            excess = np.maximum(np.abs(x) - (self._tau[:, None] if self._partial else self._tau), 0.0)
+            tol, off = (self._tau[0, :, None], self._tau[1, :, None]) if self._partial else self._tau
+            excess = np.maximum(np.abs(x - off) - tol, 0.0)
             penalty = w_ * (x * x - excess * excess).sum(axis=1)
             penalty = np.where(filled if not self._partial else filled[:, None], penalty, 0.0)
             score = e - (penalty if self._partial else penalty[:, None])
@@ -519,12 +539,10 @@ class IncrementalMatcher(_MatcherBase):
             full = i >= self.windows
             old = self._ring[stale] * full[:, None]
             base = dsq - self._ring_sq[stale] * full
-        sums = None
-        if self._offset:
-            psum = self._psum + d
-            sums = psum - np.where((i >= self.windows)[:, None], self._psum_ring[stale], 0.0)
-            self._psum = psum
-            self._psum_ring[i % w] = psum
+        psum = self._psum + d  # kept always: the offset penalty may be switched on at any sample
+        sums = psum - np.where((i >= self.windows)[:, None], self._psum_ring[stale], 0.0) if self._offset else None
+        self._psum = psum
+        self._psum_ring[i % w] = psum
         self._ring[i % w] = d
         self._count += 1
         self._ring_sq[i % w] = dsq
@@ -572,10 +590,23 @@ class IncrementalMatcher(_MatcherBase):
 
     def _rebase_prefix_sums(self) -> None:
         """Keep the prefix sums small (their differences, the window sums, are what counts)."""
-        if self._offset:
-            shift = self._psum.copy()
-            self._psum -= shift
-            self._psum_ring -= shift
+        shift = self._psum.copy()
+        self._psum -= shift
+        self._psum_ring -= shift
+
+    def mean_offset(self, row: int, column: int) -> np.ndarray:
+        """Mean of the current window of ``row`` minus the mean of the kernel part it is compared
+        with at ``column`` (4,), degrees: the sensor offset under the hypothesis that the wearer
+        walks that row's mode and time scale. Valid once the row's window is full."""
+        w = int(self.windows[row])
+        i = self._count - 1
+        s = self._psum - (self._psum_ring[(i - w) % self.max_window] if i >= w else 0.0)
+        if self._partial:  # the kernel part of a short window depends on the shift
+            mu = self._kernels[row][:, (column - np.arange(w)) % int(self.lengths[row])].mean(axis=1)
+        else:
+            mu = self._mu[row]
+        safe = np.where(self._scale > 0, self._scale, 1.0)
+        return np.where(self._scale > 0, (s / w - mu) / safe, 0.0)
 
     def resync_all(self) -> None:
         """Recompute every column from the window now (O(N^2 M); not needed in normal use)."""
