@@ -132,42 +132,29 @@ def synthetic_part(lib: KernelLibrary, route: Sequence[tuple[str, int]], seed: i
 # ---------------------------------------------------------------------------------------------
 # Running and evaluating
 
-MATCHER_FIELDS = ("window_fraction", "channels", "channel_weights", "subsample_phase", "resample")
 DATASETS: dict[str, Dataset] = {}  # filled in main() before the worker pool forks
 
 
+def paper_config(options: dict[str, Any]) -> EstimatorConfig:
+    """The paper preset with ``options`` on top: the base of the issue-6 measurements."""
+    return EstimatorConfig.preset("paper", **{k: tuple(v) if isinstance(v, list) else v for k, v in options.items()})
+
+
 def matcher_key(options: dict[str, Any]) -> tuple:
-    c = EstimatorConfig().with_options(**options)
-    return tuple((f, getattr(c, f)) for f in MATCHER_FIELDS)
+    """Settings are grouped by this (one task each); every setting runs its own estimator."""
+    return tuple(sorted((k, repr(v)) for k, v in options.items()))
 
 
 def run_group(ds: Dataset, part: Part, settings: Sequence[dict[str, Any]]) -> list[EstimateTrace]:
-    """Estimate ``part`` under each option set of ``settings`` (all with the same matcher options).
-
-    The first setting runs through ``Estimator.update`` (as ``process`` does) while its matcher's
-    step results are recorded; the other settings' supervisors replay those results, which is
-    what ``Estimator.update`` would do with them (checked: no gap restarted the window).
-    """
-    est = Estimator(ds.library, EstimatorConfig().with_options(**settings[0]))
-    results: list[Any] = []
-    step = est.matcher.step
-
-    def recording_step(x: np.ndarray) -> Any:
-        results.append(step(x))
-        return results[-1]
-
-    est.matcher.step = recording_step  # type: ignore[method-assign]
-    rows = []
-    for i in range(len(part.feed)):
-        for e in est.update(float(part.feed.time_s[i]), part.feed.angles_deg[i]):
-            rows.append((int(part.feed.index[i]), e))
-    if est.resets:
-        raise RuntimeError(f"{part.name}: {est.resets} gap restart(s); replaying supervisors would be wrong")
-    traces = [trace_from_estimates(ds.library.mode_names, rows)]
-    for options in settings[1:]:
-        sup = Estimator(ds.library, EstimatorConfig().with_options(**options)).supervisor
-        replay = [(k, sup.update(e.time_s, r)) for (k, e), r in zip(rows, results, strict=True)]
-        traces.append(trace_from_estimates(ds.library.mode_names, replay))
+    """Estimate ``part`` under each option set of ``settings`` (on top of the paper preset), each
+    through its own ``Estimator.update`` as ``process`` does (a recording without time stamps
+    counts as unstamped)."""
+    traces = []
+    for options in settings:
+        est = Estimator(ds.library, paper_config(options), stamped=not part.feed.time_from_rate)
+        rows = [(int(part.feed.index[i]), est.update(float(part.feed.time_s[i]), part.feed.angles_deg[i]))
+                for i in range(len(part.feed))]
+        traces.append(trace_from_estimates(ds.library.mode_names, rows))
     return traces
 
 

@@ -121,17 +121,29 @@ def cmd_process(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from ..analysis.bench import bench, drift, load_times
+    from ..analysis.bench import bench, drift, load_times, time_reference
 
     lib = load_library(args.kernels)
-    report = bench(lib, args.modes, steps=args.steps, naive_max_modes=args.naive_max_modes)
+    if args.compare_reference and not args.reference_samples:
+        raise GaitEstimatorError("--compare-reference needs --reference-samples (samples the command processes)")
+    report = bench(lib, args.modes, steps=args.steps, naive_max_modes=args.naive_max_modes, backends=args.backends,
+                   preset_max_modes=args.preset_max_modes)
     report["library_load"] = load_times(lib, max(args.modes))
     if args.drift_steps:
         report["drift"] = drift(lib, args.drift_steps)
+    if args.compare_reference:
+        try:
+            report["reference"] = time_reference(args.compare_reference, args.reference_samples)
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise GaitEstimatorError(f"--compare-reference: {exc}") from None
+    mach = report["machine"]
+    print(f"{mach['processor']}, {mach['cpus_allowed']} of {mach['cpus']} CPUs, Python {mach['python']}, "
+          f"numpy {mach['numpy']}, numba {mach['numba'] or 'not installed'}")
     for r in report["results"]:
+        what = f"{r['impl']}, {r['preset']}" + (f" ({r['rows']} rows)" if "rows" in r else "")
         print(
-            f"M={r['modes']:<5} {r['impl']:<12} median {r['step_us_median']:9.1f} us  "
-            f"p99 {r['step_us_p99']:9.1f} us  state {r['state_bytes'] / 1e6:7.2f} MB"
+            f"M={r['modes']:<5} {what:<42} median {r['step_us_median']:9.1f} us  p99 {r['step_us_p99']:9.1f} us"
+            + (f"  state {r['state_bytes'] / 1e6:7.2f} MB" if "state_bytes" in r else "")
             + (f"  offline {r['offline_samples_per_s']:9.0f} samples/s" if "offline_samples_per_s" in r else "")
         )
     for r in report["library_load"]:
@@ -139,6 +151,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if "drift" in report:
         d = report["drift"]
         print(f"drift after {d['steps']} steps (M={d['modes']}): max relative error {d['max_relative_error']:.2e}")
+    if "reference" in report:
+        ref = report["reference"]
+        print(f"reference command: {ref['us_per_sample_best']:.2f} us per sample (best of {ref['runs']} runs of "
+              f"{ref['samples']} samples, process start-up included)")
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
         print(f"wrote {args.json}")
@@ -190,6 +206,14 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--steps", type=positive_int, default=5000, help="timed steps per mode count (default 5000)")
     b.add_argument("--naive-max-modes", type=int, default=7, help="also time the naive matcher up to this M (default 7)")
     b.add_argument("--drift-steps", type=int, default=0, help="also run this many steps and report drift vs recomputation")
+    b.add_argument("--backends", type=lambda v: [x.strip() for x in v.split(",") if x.strip()], default=["numba", "numpy"],
+                   help="matcher step implementations to time, e.g. numba,numpy (default; numba only if installed)")
+    b.add_argument("--preset-max-modes", type=int, default=70,
+                   help="also time the default preset's matcher and Estimator.update up to this M (default 70)")
+    b.add_argument("--compare-reference", metavar="CMD",
+                   help="also time this command (a reference implementation you built; never built here) as a black "
+                   "box, e.g. 'ref/swge_bench data.csv'; needs --reference-samples")
+    b.add_argument("--reference-samples", type=positive_int, help="samples the --compare-reference command processes")
     b.add_argument("--json", help="write the report as JSON")
     b.set_defaults(func=cmd_bench)
 

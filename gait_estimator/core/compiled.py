@@ -54,13 +54,13 @@ def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover
 
 @njit(cache=True, nogil=True)
 def step_rows(
-    e_in, e_out, kern, ksq, lens, wins, ring, ring_sq, psum_ring, psum, count, d, dsq,
+    e, kern, ksq, lens, wins, ring, ring_sq, psum_ring, psum, count, d, dsq,
     offset, mu, mu_seg, tau, normalize, subsample, n_scales,
     out_col, out_score, out_sse, out_phase, out_variant, out_column, out_window,
 ):  # pragma: no cover - compiled
     """One matcher step over every row; returns the best mode. See the module docstring.
 
-    e_in/e_out (R, Nmax): running sums before/after; kern (R, 4, Nmax); ksq (R, Nmax) = ||k_j||^2;
+    e (R, Nmax): running sums, updated in place; kern (R, 4, Nmax); ksq (R, Nmax) = ||k_j||^2;
     lens/wins (R,); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and their squared
     norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,) the prefix
     sum before this sample; count: samples before this one; d (4,), dsq = ||d||^2; offset: apply
@@ -84,29 +84,29 @@ def step_rows(
             o0, o1, o2, o3 = ring[s, 0], ring[s, 1], ring[s, 2], ring[s, 3]
             osq = ring_sq[s]
         base = dsq - osq
-        last = e_in[r, n - 1]
+        er = e[r]
+        k0, k1, k2, k3 = kern[r, 0], kern[r, 1], kern[r, 2], kern[r, 3]
+        last = er[n - 1]
+        # In place, from the last column down: e[j] takes the old e[j-1] before it is overwritten.
         if w == n and full:
             # e[j] = e[j-1] + ||d||^2 - ||old||^2 - 2 k_j . (d - old)
             c0, c1, c2, c3 = -2.0 * (d0 - o0), -2.0 * (d1 - o1), -2.0 * (d2 - o2), -2.0 * (d3 - o3)
-            e_out[r, 0] = last + base + c0 * kern[r, 0, 0] + c1 * kern[r, 1, 0] + c2 * kern[r, 2, 0] + c3 * kern[r, 3, 0]
-            for j in range(1, n):
-                e_out[r, j] = (
-                    e_in[r, j - 1] + base
-                    + c0 * kern[r, 0, j] + c1 * kern[r, 1, j] + c2 * kern[r, 2, j] + c3 * kern[r, 3, j]
-                )
+            for j in range(n - 1, 0, -1):
+                er[j] = er[j - 1] + base + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
+            er[0] = last + base + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
         else:
             # e[j] = e[j-1] + ||d - k_j||^2 - [full] ||old - k_{j-W}||^2
             c0, c1, c2, c3 = -2.0 * d0, -2.0 * d1, -2.0 * d2, -2.0 * d3
-            for j in range(n):
-                prev = last if j == 0 else e_in[r, j - 1]
-                v = prev + base + ksq[r, j] + c0 * kern[r, 0, j] + c1 * kern[r, 1, j] + c2 * kern[r, 2, j] + c3 * kern[r, 3, j]
+            kq = ksq[r]
+            for j in range(n - 1, -1, -1):
+                prev = er[j - 1] if j > 0 else last
+                v = prev + base + kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
                 if full:
                     lag = j - w
                     if lag < 0:
                         lag += n
-                    v += 2.0 * (o0 * kern[r, 0, lag] + o1 * kern[r, 1, lag] + o2 * kern[r, 2, lag] + o3 * kern[r, 3, lag])
-                    v -= ksq[r, lag]
-                e_out[r, j] = v
+                    v += 2.0 * (o0 * k0[lag] + o1 * k1[lag] + o2 * k2[lag] + o3 * k3[lag]) - kq[lag]
+                er[j] = v
 
         # Read-out of row r: score = (e - offset penalty) / window, its argmin over j.
         filled = i + 1 >= w
@@ -130,7 +130,7 @@ def step_rows(
         bj = 0
         if per_shift:
             for j in range(n):
-                v = e_out[r, j] - _offset_penalty(
+                v = er[j] - _offset_penalty(
                     s0, s1, s2, s3, float(w), mu_seg[r, 0, j], mu_seg[r, 1, j], mu_seg[r, 2, j], mu_seg[r, 3, j], tau
                 )
                 if v < best:
@@ -138,7 +138,7 @@ def step_rows(
                     bj = j
         else:
             for j in range(n):
-                v = e_out[r, j]
+                v = er[j]
                 if v < best:
                     best = v
                     bj = j
@@ -161,9 +161,9 @@ def step_rows(
         if subsample:
             w = wins[rb]
             shifted = per_shift_row(offset, i, w, n)
-            a = _row_score(e_out, rb, j - 1 if j > 0 else n - 1, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
-            b = _row_score(e_out, rb, j + 1 if j < n - 1 else 0, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
-            center = _row_score(e_out, rb, j, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
+            a = _row_score(e, rb, j - 1 if j > 0 else n - 1, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
+            b = _row_score(e, rb, j + 1 if j < n - 1 else 0, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
+            center = _row_score(e, rb, j, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
             curv = a - 2.0 * center + b
             if curv > 0.0:
                 off = 0.5 * (a - b) / curv

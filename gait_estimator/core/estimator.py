@@ -324,7 +324,7 @@ class Estimator:
             phase = (phase + est.phase_rate * dt) % 1.0
             if phase >= 1.0:
                 phase = 0.0
-        return replace(est, time_s=time_s, phase=phase)
+        return est.restamped(time_s, phase)
 
     # -----------------------------------------------------------------------------------------
     # Personalisation

@@ -512,15 +512,13 @@ class IncrementalMatcher(_MatcherBase):
     def _step_numba(self, d: np.ndarray, dsq: float) -> StepResult:
         m = self.n_modes
         sse, phases = np.empty(m), np.empty(m)
-        variant, column, window = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-        nxt = self._next.reshape(self._e.shape)
+        variant, column, window = np.empty((3, m), dtype=np.int64)  # fresh arrays: results outlive the step
         b = compiled.step_rows(
-            self._e, nxt, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
+            self._e, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d, dsq, self._offset, self._mu, self._mu_seg, self._tau,
             self.normalize, self.subsample, self.n_scales,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
-        self._e, self._next = nxt, self._e.reshape(self._next.shape)
         self._count += 1
         return StepResult(
             b, self.mode_names[b], float(phases[b]), sse, phases, self._count >= self.max_window, window,

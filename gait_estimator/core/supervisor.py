@@ -66,6 +66,13 @@ class Estimate:
     phase_rate: float
     cadence_ratio: float = math.nan
 
+    def restamped(self, time_s: float, phase: float) -> Estimate:
+        """This estimate at another time with another reported phase (dataclasses.replace is
+        several times slower, and this runs for every input sample between grid points)."""
+        return Estimate(time_s, self.mode_index, self.mode, phase, self.ready, self.sse, self.phases,
+                        self.raw_mode_index, self.confidence, self.fit_rms_deg, self.held, self.phase_rate,
+                        self.cadence_ratio)
+
 
 def load_transitions(path: str | Path, mode_names: Sequence[str]) -> np.ndarray:
     """Read an allowed-transitions YAML into an (M, M) bool matrix, allowed[from, to].
@@ -223,7 +230,10 @@ def _margin(sse: np.ndarray, candidate: int, argmin: int) -> float:
     """(SSE of the best mode other than ``candidate`` - SSE of ``candidate``) / SSE of ``candidate``."""
     if sse.size < 2:
         return math.inf
-    best_other = float(np.partition(sse, 1)[1]) if candidate == argmin else float(sse[argmin])
+    if candidate == argmin:  # the second smallest; a sort of a short list beats np.partition here
+        best_other = sorted(sse.tolist())[1] if sse.size <= 64 else float(np.partition(sse, 1)[1])
+    else:
+        best_other = float(sse[argmin])
     own = float(sse[candidate])
     if own <= 0.0:
         return math.inf if best_other > 0 else 0.0
