@@ -215,6 +215,7 @@ def part_stats(ds: Dataset, part: Part, trace: EstimateTrace, collect: Sequence[
         out["trace"] = {
             "time_s": trace.time_s.tolist(), "mode": trace.mode_index.tolist(), "phase": trace.phase.tolist(),
             "ready": trace.ready.tolist(), "confidence": trace.confidence.tolist(),
+            "phase_rate": trace.phase_rate.tolist(),
         }
     return out
 
@@ -374,16 +375,21 @@ def rate_variants(part: Part, rate_hz: float, seed: int = 7) -> dict[str, Record
 
 
 def compare_traces(ref: dict[str, list], other: dict[str, list], rate_hz: float, t0: float) -> dict[str, Any]:
-    """Mode agreement and phase difference of ``other`` against ``ref`` (the original-rate run),
-    at ref's grid times t0 + i / rate (nearest for non-grid rows); rows ready in both."""
+    """Mode agreement and phase difference of ``other`` against ``ref`` (the original-rate run,
+    one row per grid time t0 + i / rate): every ``other`` row at time t is compared with the
+    reference as the estimator reports it at t, i.e. its last row at or before t with the phase
+    advanced by its phase rate over the time since (as ``Estimator`` does between grid points);
+    rows ready in both."""
     rt, rm, rp, rr = (np.asarray(ref[k]) for k in ("time_s", "mode", "phase", "ready"))
+    rate_ref = np.nan_to_num(np.asarray(ref["phase_rate"], dtype=np.float64))
     ot, om, op, orr = (np.asarray(other[k]) for k in ("time_s", "mode", "phase", "ready"))
-    i = np.rint((ot - t0) * rate_hz).astype(np.int64)
+    i = np.floor((ot - t0) * rate_hz + 1e-6).astype(np.int64)
     ok = (i >= 0) & (i < rt.size)
     i = np.clip(i, 0, rt.size - 1)
-    ok &= orr & rr[i] & (np.abs(rt[i] - ot) < 0.5 / rate_hz)
+    ok &= orr & rr[i] & (np.abs(ot - rt[i]) < 1.0 / rate_hz)
     same = ok & (om == rm[i])
-    d = circular_error(op[same], rp[i][same])
+    ref_phase = np.mod(rp[i] + rate_ref[i] * np.maximum(ot - rt[i], 0.0), 1.0)
+    d = circular_error(op[same], ref_phase[same])
     margins = np.asarray(ref["confidence"])[i[ok & ~same]]
     return {
         "max_reference_margin_where_modes_differ": float(margins.max()) if margins.size else None,

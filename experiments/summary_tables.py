@@ -67,7 +67,7 @@ def reference_agreement() -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "pred.csv"
         cmd = [sys.executable, "-m", "gait_estimator.cli", "process", MULTISPEED, "--kernels", "able_bodied",
-               "--start", "4000", "--stop", "7000", "--out", str(out), "--quiet"]
+               "--start", "4000", "--stop", "7000", "--preset", "paper", "--out", str(out), "--quiet"]
         subprocess.run(cmd, cwd=ROOT, check=True)
         pred = np.genfromtxt(out, delimiter=",", names=True, dtype=None, encoding="utf-8")
     ref = np.loadtxt(ROOT / REFERENCE, delimiter=",", skiprows=1, usecols=(0, 1))
@@ -118,7 +118,7 @@ def evaluation_tables(ref: dict[str, Any]) -> str:
         "(deterministic: the same on any machine with the same code and data).",
         "### Reference agreement\n\n" + table(
             ["comparison", "samples", "same mode", "same phase (exactly)", "phase within one kernel column"],
-            [["`gait-estimator process " + MULTISPEED + " --start 4000 --stop 7000` vs `" + REFERENCE + "`",
+            [["`gait-estimator process " + MULTISPEED + " --start 4000 --stop 7000 --preset paper` vs `" + REFERENCE + "`",
               f"{n:,}", f"{ref['mode']:,}/{n:,}", f"{ref['phase_exact']:,}/{n:,}", f"{ref['phase_one_column']:,}/{n:,}"]]),
     ]
 
@@ -176,13 +176,40 @@ def missing(path: Path, command: str) -> list[str]:
 
 def step_row(path: Path, carried: dict[str, list[str]]) -> list[str]:
     if not path.is_file():
-        return carried.get(STEP_ROW) or missing(path, "gait-estimator bench --modes 7,70,700 --steps 5000")
+        return carried.get(STEP_ROW) or missing(path, "gait-estimator bench --modes 7,700")
     report = json.loads(path.read_text(encoding="utf-8"))
-    med = {r["modes"]: r["step_us_median"] for r in report["results"] if r["impl"] == "incremental"}
+    rows = {(r["modes"], r["impl"], r.get("preset", "paper")): r["step_us_median"] for r in report["results"]}
+    impl = next(i for _, i, _ in rows if i.startswith("incremental ("))
+    med = {m: v for (m, i, p), v in rows.items() if i == impl and p == "paper"}
     lo, hi = min(med), max(med)
+    est = {p: rows.get((lo, impl.replace("incremental", "estimator"), p)) for p in ("paper", "default")}
+    extra = (f"; whole `Estimator.update` at {lo} modes: {est['default']:,.1f} µs default preset, "
+             f"{est['paper']:,.1f} µs paper preset" if all(est.values()) else "")
     return [STEP_ROW if (lo, hi) == (7, 700) else f"matcher time per sample (median), {lo} / {hi} modes",
-            f"{med[lo]:,.1f} µs / {med[hi]:,.0f} µs (a sample arrives every 4,348 µs at 230 Hz)",
-            "2.91 µs, 7 modes (C++, Apple M3 Pro)", f"`gait-estimator bench --json` on {machine(report['machine'])}"]
+            f"{med[lo]:,.1f} µs / {med[hi]:,.0f} µs, paper preset, {impl[len('incremental '):].strip('()')} step{extra} "
+            "(a sample arrives every 4,348 µs at 230 Hz)",
+            "2.91 µs, 7 modes (C++, Apple M3 Pro)",
+            f"`gait-estimator bench --modes 7,700 --json` on {machine(report['machine'])}"]
+
+
+def new_wearer_rows(path: Path) -> list[list[str]]:
+    """Rows from experiments/cross_session.py's summary.json (default preset vs paper)."""
+    if not path.is_file():
+        sys.exit(f"{path}: missing; run python experiments/cross_session.py first")
+    res = json.loads(path.read_text(encoding="utf-8"))["results"]
+    cmd = "`python experiments/cross_session.py` (deterministic)"
+    rows = []
+    for key, what in (("SYN-NEW", "synthetic new wearers (offsets ±8°, amplitude ±15 %, cadence ±12 %, 100–500 Hz), 7 modes"),
+                      ("SYN-NEW-L", "the same, Slow/Med/Fast scored as one level-walking class"),
+                      ("LG2-AB", "LG_2_Ramp at its own stamps, bundled kernels of another session")):
+        if key not in res:
+            continue
+        d, p = res[key]["default"], res[key]["paper"]
+        rows.append([f"new wearer: {what}",
+                     f"accuracy {pct(d['accuracy'])} (steady {pct(d['steady_accuracy'])}), phase error "
+                     f"{pct(d['phase_error_mean'], 2)}; paper preset {pct(p['accuracy'])}, {pct(p['phase_error_mean'], 2)}",
+                     "—", cmd])
+    return rows
 
 
 def node_row(path: Path, carried: dict[str, list[str]]) -> list[str]:
@@ -194,7 +221,7 @@ def node_row(path: Path, carried: dict[str, list[str]]) -> list[str]:
             f"`gait-estimator bench-node --json` on {machine(report['machine'])}"]
 
 
-def headline(ref: dict[str, Any], bench: Path, bench_node: Path, current: Path) -> str:
+def headline(ref: dict[str, Any], bench: Path, bench_node: Path, current: Path, cross: Path) -> str:
     ms, ms_all, lg2 = metrics("multispeed"), metrics("multispeed_all"), metrics("lg2_able_bodied")
     carried = carried_rows(current)
     run = "`sh experiments/run.sh` (deterministic)"
@@ -208,11 +235,12 @@ def headline(ref: dict[str, Any], bench: Path, bench_node: Path, current: Path) 
         ["mode accuracy, Multispeed, every stride (speed changes included)",
          f"{pct(ms_all['accuracy'])} of {ms_all['samples']['evaluated']:,}; steady rows {pct(ms_all['steady']['accuracy'])}",
          "—", run],
-        ["mode accuracy, LG_2_Ramp level/ramp walk, kernels from another session",
+        ["mode accuracy, LG_2_Ramp level/ramp walk (230 Hz copy), kernels from another session",
          f"{pct(lg2['accuracy'])} of {lg2['samples']['evaluated']:,}; steady rows {pct(lg2['steady']['accuracy'])}", "—", run],
         ["phase error, Multispeed steady strides (% of a stride)",
          f"{pct(ms['phase_error_mean'], 2)} mean, {pct(ms['phase_error_max'])} max", "≤ 1.8 % level walking, < 4 % every mode",
          run],
+        *new_wearer_rows(cross),
         step_row(bench, carried),
         node_row(bench_node, carried),
     ]
@@ -225,6 +253,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="JSON of gait-estimator bench --modes 7,...,700 (default %(default)s)")
     ap.add_argument("--bench-node", type=Path, default=RESULTS / "node" / "bench_node.json",
                     help="JSON of gait-estimator bench-node (default %(default)s)")
+    ap.add_argument("--cross-session", type=Path, default=RESULTS / "cross_session" / "summary.json",
+                    help="summary.json of experiments/cross_session.py (default %(default)s)")
     args = ap.parse_args(argv)
     ref = reference_agreement()
     out = RESULTS / "evaluation" / "tables.md"
@@ -232,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     out.write_text(evaluation_tables(ref), encoding="utf-8")
     head = RESULTS / "headline" / "tables.md"
     head.parent.mkdir(parents=True, exist_ok=True)
-    text = headline(ref, args.bench, args.bench_node, head)
+    text = headline(ref, args.bench, args.bench_node, head, args.cross_session)
     head.write_text(text, encoding="utf-8")
     print(f"wrote {out.relative_to(ROOT)} and {head.relative_to(ROOT)}")
     return 0

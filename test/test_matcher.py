@@ -387,3 +387,29 @@ def test_mean_offset_and_sensor_offset(able_bodied, fraction) -> None:
     np.testing.assert_allclose(shifted.sensor_offset_deg, offsets)
     s = shifted.run(x + offsets)
     np.testing.assert_allclose(s.sse[s.ready], clean.sse[clean.ready], rtol=1e-9, atol=1e-6)
+
+
+def test_without_numba_the_numpy_step_runs(tmp_path) -> None:
+    """GAIT_ESTIMATOR_NO_NUMBA=1 (or numba missing): the numpy step, same results."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np\n"
+        "from gait_estimator import load_library\n"
+        "from gait_estimator.core import compiled\n"
+        "from gait_estimator.core.estimator import Estimator\n"
+        "lib = load_library('able_bodied')\n"
+        "est = Estimator(lib)\n"
+        "x = np.tile(lib.mode('Med').samples, (3, 1))\n"
+        "out = [est.update(i / 230.0, d) for i, d in enumerate(x)]\n"
+        "print(compiled.AVAILABLE, est.matcher.backend, out[-1].mode, repr(out[-1].phase))\n"
+    )
+    env = {**os.environ, "GAIT_ESTIMATOR_NO_NUMBA": "1"}
+    plain = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout.split()
+    assert plain[:3] == ["False", "numpy", "Med"]
+    if compiled.AVAILABLE:
+        fast = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+        assert fast[:3] == ["True", "numba", "Med"]
+        assert float(fast[3]) == pytest.approx(float(plain[3]), abs=1e-12)
