@@ -126,7 +126,9 @@ def test_params_file_float64_multi_array_degrees_and_sigterm(
     entry_point, local_ros, multispeed_csv: Path, able_bodied, tmp_path: Path
 ) -> None:
     params = yaml.safe_load((REPO / "config" / "estimator.yaml").read_text(encoding="utf-8"))
-    params["/**"]["ros__parameters"].update(input_type="float64_multi_array", input_units="deg")
+    # also the SingleThreadedExecutor (the other tests run the default EventsExecutor)
+    params["/**"]["ros__parameters"].update(input_type="float64_multi_array", input_units="deg",
+                                            executor="single_threaded")
     file = tmp_path / "params.yaml"
     file.write_text(yaml.safe_dump(params), encoding="utf-8")
     run = Running(22, entry_point, ["--params-file", str(file)], input_type="float64_multi_array")
@@ -165,6 +167,7 @@ def test_unusable_parameters_exit_nonzero_with_one_line(entry_point, tmp_path: P
         (["-p", f"kernels:={broken}"], "broken.yaml: invalid YAML"),
         (["-p", "input_units:=furlong"], "input_units"),
         (["-p", "max_gap_s:=abc"], "max_gap_s"),
+        (["-p", "executor:=multi_threaded"], "executor: must be one of events, single_threaded"),
     ]
     for ros_args, text in cases:
         proc = subprocess.run(

@@ -7,7 +7,9 @@ Shared by the live node and offline bag processing so both treat input identical
   ``SampleRejected`` with a reason code for bad input (including finite but absurd angles,
   ``out_of_range``, which would otherwise swamp the matcher's running sums);
 * ``StreamGuard`` checks time stamps (non-increasing -> rejected; a gap longer than
-  ``max_gap_s`` -> the matcher window must restart) and counts rejections by reason.
+  ``max_gap_s`` -> the matcher window must restart; optionally, a jump back by more than
+  ``restart_back_s`` -> a restarted stream, the window must restart too) and counts rejections by
+  reason.
 """
 
 from __future__ import annotations
@@ -31,6 +33,10 @@ WRONG_LENGTH = "wrong_length"
 NON_INCREASING_STAMP = "non_increasing_stamp"
 OUT_OF_RANGE = "out_of_range"
 REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP, OUT_OF_RANGE)
+
+STREAM_RESTART_S = 1.0
+"""Jump back (s) that restarts a live stream when ``max_gap_s`` is 0 (gap check off); see
+``restart_threshold``."""
 
 MAX_ABS_ANGLE_DEG = 1.0e4
 """Largest accepted |angle| (degrees, after unit conversion). Far beyond any segment angle, far
@@ -87,19 +93,34 @@ def angles_from_array(data: Sequence[float], units: str = "rad") -> np.ndarray:
     return _to_degrees(values, units)
 
 
+def restart_threshold(max_gap_s: float) -> float:
+    """How far (s) stamps must jump back to count as a restarted stream rather than a reordered or
+    duplicated sample: ``max_gap_s`` (the same discontinuity that restarts the window going
+    forward), or STREAM_RESTART_S while the gap check is off (``max_gap_s`` 0 or inf)."""
+    return max_gap_s if 0 < max_gap_s < math.inf else STREAM_RESTART_S
+
+
 @dataclass
 class StreamGuard:
     """Stamp checks and rejection counts for one input stream.
 
     Args:
         max_gap_s: A gap between accepted samples longer than this (seconds) means the window
-            must restart (``accept`` returns True); <= 0 or inf disables the check.
+            must restart (``accept`` returns True, counted in ``resets``); <= 0 or inf disables
+            the check.
+        restart_back_s: A stamp more than this (seconds) before the previous accepted one is a
+            restarted stream (a publisher that restarted its clock, a clock jump back): the
+            sample is accepted and the window must restart (``accept`` returns True, counted in
+            ``restarts``). A smaller step back, or any step back while this is <= 0, is a
+            reordered or duplicated sample: rejected (non_increasing_stamp).
     """
 
     max_gap_s: float = 0.5
+    restart_back_s: float = 0.0
     rejected: Counter = field(default_factory=Counter)
     accepted: int = 0
     resets: int = 0
+    restarts: int = 0
     last_stamp: float | None = None
 
     def check_stamp(self, stamp_s: float) -> bool:
@@ -110,14 +131,22 @@ class StreamGuard:
         if not math.isfinite(stamp_s):
             raise SampleRejected(NON_FINITE, f"non-finite stamp {stamp_s}")
         last = self.last_stamp
-        if last is not None and stamp_s <= last:
+        if last is None:
+            return False
+        if stamp_s <= last:
+            if 0 < self.restart_back_s < last - stamp_s:
+                return True
             raise SampleRejected(NON_INCREASING_STAMP, f"stamp {stamp_s:.6f} s is not after the previous {last:.6f} s")
-        return last is not None and 0 < self.max_gap_s < math.inf and stamp_s - last > self.max_gap_s
+        return 0 < self.max_gap_s < math.inf and stamp_s - last > self.max_gap_s
 
     def accept(self, stamp_s: float) -> bool:
-        """Record an accepted sample at ``stamp_s``; True if a gap reset happened before it."""
+        """Record an accepted sample at ``stamp_s``; True if the window must restart before it
+        (a gap, counted in ``resets``, or a jump back, counted in ``restarts``)."""
+        last = self.last_stamp
         reset = self.check_stamp(stamp_s)
-        if reset:
+        if reset and last is not None and stamp_s <= last:
+            self.restarts += 1
+        elif reset:
             self.resets += 1
         self.last_stamp = stamp_s
         self.accepted += 1
