@@ -206,11 +206,23 @@ def test_demo_command_streams_the_bundled_recording() -> None:
 def test_bench_node_command(tmp_path: Path) -> None:
     report = tmp_path / "bench.json"
     proc = _gait_estimator("bench-node", "--samples", "200", "--rates", "400", "--seconds", "0.5",
+                           "--executor", "events", "--outputs", "estimate,all", "--profile",
                            "--domain-id", "28", "--json", str(report))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "latency at 230 Hz" in proc.stdout and "highest input rate sustained without drops" in proc.stdout
     data = json.loads(report.read_text(encoding="utf-8"))
     lat = data["latency"]
     assert lat["samples"] == 200 and lat["answered"] >= 190 and 0 < lat["p50_ms"] <= lat["p99_ms"]
+    assert 0 < lat["dds_p50_ms"] <= lat["p50_ms"]
     assert data["modes"] == 7 and data["node_exit_code"] == 0
     assert data["throughput"]["steps"][0]["rate_hz"] == 400
+    assert [(v["executor"], v["outputs"]) for v in data["variants"]] == [("events", "estimate"), ("events", "all")]
+    assert data["executor"] == "events" and data["variants"][0]["latency"] == lat
+    assert "throughput" not in data["variants"][1]  # latency only when subscribing to all outputs
+    for v in data["variants"]:
+        prof = v["latency"]["profile"]
+        assert prof["samples"] >= 150, prof
+        stages = prof["stages"]
+        assert set(stages) >= {"dds_in_and_executor", "estimator", "publish", "dds_out", "bench_callback"}
+        assert 0 < stages["estimator"]["p50_ms"] < stages["total_to_callback"]["p99_ms"]
+        assert v["micro_us"]["fill_preallocated_estimate_us"] > 0
