@@ -27,6 +27,7 @@ from gait_estimator.ros.node_client import EstimatorClient, Received
 
 REPO = Path(__file__).resolve().parents[1]
 RATE_HZ = 230.0
+PERIOD_NS = round(1e9 / RATE_HZ)
 BASE_NS = 1_700_000_000 * 1_000_000_000  # first stamp: a realistic wall-clock time
 
 
