@@ -228,48 +228,6 @@ def _clock_offset_ns() -> int:
     return best[1]
 
 
-def _micro_costs(lib: Any, client: Any) -> dict[str, float]:
-    """Per-call costs in this process (µs): the publishing levers, without DDS."""
-    import timeit
-
-    from sensor_msgs.msg import JointState
-
-    from ..analysis.bench import synthetic_walk
-    from ..core.estimator import Estimator
-    from ..io.outputs import estimate_array, estimate_names
-    from ..ros.node import _double_array, _stamp_from_seconds
-
-    est = Estimator(lib)
-    x = synthetic_walk(lib, int(lib.lengths.max()) + 20, seed=1)
-    e = None
-    for i, row in enumerate(x):
-        e = est.update(i / lib.sample_rate_hz, row)[-1]
-    assert e is not None
-    names = estimate_names(lib.mode_names)
-    stamp = _stamp_from_seconds(1.0)
-    reused = JointState()
-    reused.name = names
-
-    def reuse() -> None:
-        reused.header.stamp = stamp
-        reused.position = _double_array(estimate_array(e))
-
-    def fresh() -> None:
-        m = JointState()
-        m.name = list(names)
-        m.header.stamp = stamp
-        m.position = [float(v) for v in estimate_array(e)]
-
-    n = 2000
-    count = client.publisher.get_subscription_count
-    t = {
-        "fill_preallocated_estimate_us": timeit.timeit(reuse, number=n) / n * 1e6,
-        "build_fresh_estimate_us": timeit.timeit(fresh, number=n) / n * 1e6,
-        "subscription_count_query_us": timeit.timeit(count, number=n) / n * 1e6,
-    }
-    return {k: float(v) for k, v in t.items()}
-
-
 def _profile(got: Any, stamps: np.ndarray, sent_wall: np.ndarray, recv_wall: np.ndarray) -> dict[str, Any]:
     """Where the time of one latency run went, per answered sample (see bench_node)."""
     from ..ros.node import PROFILE_COLUMNS
@@ -332,7 +290,7 @@ def _bench_variant(
     from ..analysis.bench import synthetic_walk
     from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
     from ..ros.node import NODE_NAME
-    from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient
+    from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient, publishing_costs_us
 
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
     node = _start_node(domain_id, kernels, ["-p", f"executor:={executor}"], node_cmd)
@@ -414,7 +372,7 @@ def _bench_variant(
             f"mean {lt.get('node_processing_mean_ms', math.nan):.3f} ms, max {lt.get('node_processing_max_ms', math.nan):.3f} ms"
         )
         if profile:
-            out["micro_us"] = _micro_costs(lib, client)
+            out["micro_us"] = publishing_costs_us(lib, client.publisher)
             stages = lt["profile"].get("stages", {})
             for name, text in PROFILE_LABELS.items():
                 st = stages.get(name)

@@ -71,7 +71,7 @@ from ..io.outputs import (
     MODE_TOPIC,
     PHASE_TOPIC,
     SSE_TOPIC,
-    estimate_array,
+    estimate_into,
     estimate_names,
     sse_label,
 )
@@ -80,10 +80,9 @@ from ..io.stream import (
     INPUT_TYPES,
     REASONS,
     UNITS,
+    AngleExtractor,
     SampleRejected,
     StreamGuard,
-    angles_from_array,
-    angles_from_named,
     restart_threshold,
 )
 
@@ -228,6 +227,7 @@ class EstimatorNode(Node):
         self._joint_names: tuple[str, ...] = tuple(self.get_parameter("joint_names").value)
         self._units: str = self.get_parameter("input_units").value
         self._input_type: str = self.get_parameter("input_type").value
+        self._extract = AngleExtractor(self._joint_names, self._units)
         # Stamp checks, jump-back restarts and rejection counts; gaps (forward) are the Estimator's.
         self._guard = StreamGuard(max_gap_s=0.0, restart_back_s=restart_threshold(self._config.max_gap_s))
         self._resets_before = 0  # gap restarts of estimators replaced by parameter changes
@@ -357,6 +357,8 @@ class EstimatorNode(Node):
                 self._joint_names = tuple(p.value)
             elif p.name == "input_units":
                 self._units = p.value
+        if names & {"joint_names", "input_units"}:
+            self._extract = AngleExtractor(self._joint_names, self._units)
         if pending is None:
             return
         lib, config, estimator = pending
@@ -383,6 +385,9 @@ class EstimatorNode(Node):
         self._sse_msg.layout.dim = [MultiArrayDimension(label=sse_label(names), size=len(names), stride=len(names))]
         self._estimate_msg = JointState()
         self._estimate_msg.name = estimate_names(names)
+        # buffer of the message's position, filled for every estimate (estimate_into)
+        self._estimate_values = array.array("d", bytes(8 * len(self._estimate_msg.name)))
+        self._estimate_view = np.frombuffer(self._estimate_values, dtype=np.float64)
         self._last_estimate: Estimate | None = None
 
     def _options_summary(self) -> str:
@@ -428,7 +433,7 @@ class EstimatorNode(Node):
         if stamp.sec == 0 and stamp.nanosec == 0:
             stamp = self.get_clock().now().to_msg()
         try:
-            angles = angles_from_named(msg.name, msg.position, self._joint_names, self._units)
+            angles = self._extract.named(msg.name, msg.position)
         except SampleRejected as exc:
             self._reject(exc)
             return
@@ -441,7 +446,7 @@ class EstimatorNode(Node):
         self._period_received += 1
         stamp = self.get_clock().now().to_msg()
         try:
-            angles = angles_from_array(msg.data, self._units)
+            angles = self._extract.array(msg.data)
         except SampleRejected as exc:
             self._reject(exc)
             return
@@ -521,7 +526,8 @@ class EstimatorNode(Node):
         if self._estimate_pub.get_subscription_count():
             msg = self._estimate_msg
             msg.header.stamp = stamp
-            msg.position = _double_array(estimate_array(e))
+            estimate_into(self._estimate_view, e)
+            msg.position = self._estimate_values  # (the setter copies it unless field checks are on)
             self._estimate_pub.publish(msg)
 
     def _reject(self, exc: SampleRejected) -> None:
