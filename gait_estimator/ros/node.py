@@ -94,7 +94,8 @@ WARN_THROTTLE_S = 2.0
 RATE_TOLERANCE = 0.2
 """Relative deviation of the input stamp rate from the library rate that raises a WARN."""
 MAX_BATCH = 50
-"""Most input messages handled per executor wake-up (see ``EstimatorNode._on_input``)."""
+"""Most input messages handled per executor wake-up (see ``EstimatorNode._on_input``) under a
+wait-set executor; ``main`` sets ``EstimatorNode.max_batch`` to 1 under the EventsExecutor."""
 EXECUTORS = ("events", "single_threaded")
 """Values of the ``executor`` parameter: rclpy.experimental.EventsExecutor, SingleThreadedExecutor."""
 SPIN_PERIOD_S = 0.25
@@ -244,6 +245,8 @@ class EstimatorNode(Node):
         self._period_last_stamp: float | None = None
         self._period_accepted = 0
         self._period_start = time.monotonic()
+        self.max_batch = MAX_BATCH
+        """Input messages handled per callback (1 = only the executor's own; see _on_input)."""
         self._profile: list[tuple[int, int, int, int, int, int]] | None = None  # rows while subscribed
 
         # No QoS event handlers on the outputs: each one costs executor time on every wake-up, and a
@@ -404,15 +407,18 @@ class EstimatorNode(Node):
     def _on_input(self, msg: JointState | Float64MultiArray) -> None:
         """Subscription callback: handle ``msg``, then the messages already queued behind it.
 
-        Taking the queued messages here, up to MAX_BATCH per wake-up, instead of returning to
-        the executor for each one keeps the executor's per-wake-up cost (hundreds of
-        microseconds in rclpy) from limiting the input rate; in order, one estimator update each.
+        Taking the queued messages here, up to ``max_batch`` per wake-up, instead of returning to
+        the executor for each one keeps a wait-set executor's per-wake-up cost (hundreds of
+        microseconds in rclpy's SingleThreadedExecutor) from limiting the input rate; in order,
+        one estimator update each. Not under the EventsExecutor (``max_batch`` 1): it queues one
+        event per message, and the events of messages taken here would pile up in its queue
+        (native memory growing with the input rate) and then each cost a take that finds nothing.
         """
         try:
             handle = self._handle
             handle(msg)
             sub = self._sub
-            for _ in range(MAX_BATCH - 1):
+            for _ in range(self.max_batch - 1):
                 with sub.handle:
                     taken = sub.handle.take_message(sub.msg_type, sub.raw)
                 if taken is None:
@@ -724,7 +730,10 @@ def main(args: Sequence[str] | None = None) -> int:
     code = 0
     try:
         node = EstimatorNode()
-        executor = make_executor(node.get_parameter("executor").value, node.context)
+        kind = node.get_parameter("executor").value
+        executor = make_executor(kind, node.context)
+        if kind == "events":
+            node.max_batch = 1  # one event per message already; see EstimatorNode._on_input
         gc.collect()
         gc.freeze()  # start-up objects stay out of later collections: shorter GC pauses
         spin(node, executor)
