@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 OLD_NUMPY ?= 1.26.4
 OLD_VENV ?= .venv-numpy126
 
-.PHONY: venv test test-core-old-numpy lint demo bench docs docs-check clean
+.PHONY: venv test test-core-old-numpy lint demo bench soak docs docs-check clean
 
 $(BIN)/.installed: setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
@@ -42,11 +42,18 @@ bench: venv
 	mkdir -p out
 	$(BIN)/gait-estimator bench --modes 7,70,700 --json out/bench.json
 
-# The measured tables in README.md and docs/: rebuild the evaluation and headline tables from the
-# results in experiments/results/, then copy every experiments/results/**/tables.md section into
+# The long soak of test/test_faults.py (not in CI, which runs 150,000 samples): 1.8 million
+# samples with 1 kHz stamps (30 minutes of input) through estimator_node, as fast as it answers.
+SOAK_SAMPLES ?= 1800000
+soak: venv
+	ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST GAIT_SOAK_SAMPLES=$(SOAK_SAMPLES) $(BIN)/pytest -q -s test/test_faults.py -k soak
+
+# The measured tables in README.md and docs/: rebuild the evaluation, headline and node tables from
+# the results in experiments/results/, then copy every experiments/results/**/tables.md section into
 # its <!-- BEGIN name --> block (docs/performance.md, "Regenerating the numbers").
 docs: venv
 	$(BIN)/python experiments/summary_tables.py
+	$(BIN)/python experiments/node_tables.py
 	$(BIN)/python experiments/update_docs.py
 
 docs-check: venv

@@ -217,8 +217,14 @@ def node_row(path: Path, carried: dict[str, list[str]]) -> list[str]:
         return carried.get(NODE_ROW) or missing(path, "gait-estimator bench-node")
     report = json.loads(path.read_text(encoding="utf-8"))
     lat, tp = report["latency"], report["throughput"]
-    return [NODE_ROW, f"{lat['p50_ms']:.2f} / {lat['p99_ms']:.2f} ms; {tp['max_sustained_rate_hz']:,.0f} Hz", "—",
-            f"`gait-estimator bench-node --json` on {machine(report['machine'])}"]
+    result = f"{lat['p50_ms']:.2f} / {lat['p99_ms']:.2f} ms"
+    if "dds_p50_ms" in lat:  # since bench-node also measures to the subscriber's DDS reader
+        result = (f"{lat['dds_p50_ms']:.2f} / {lat['dds_p99_ms']:.2f} ms at the subscriber's DDS reader, "
+                  f"{result} in its rclpy callback")
+    load = report.get("load_average_before")
+    return [NODE_ROW, f"{result}; {tp['max_sustained_rate_hz']:,.0f} Hz", "—",
+            f"`gait-estimator bench-node --json` on {machine(report['machine'])}"
+            + (f", load average {load[0]:.2f} before the run" if load else "")]
 
 
 def headline(ref: dict[str, Any], bench: Path, bench_node: Path, current: Path, cross: Path) -> str:

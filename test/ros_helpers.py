@@ -18,15 +18,18 @@ import rclpy
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 
+from gait_estimator.core.estimator import Estimator, trace_from_estimates
 from gait_estimator.core.kernels import KernelLibrary
 from gait_estimator.io.process import predict
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import Recording
+from gait_estimator.io.stream import StreamGuard, restart_threshold
 from gait_estimator.ros.node import EstimatorNode
 from gait_estimator.ros.node_client import EstimatorClient, Received
 
 REPO = Path(__file__).resolve().parents[1]
 RATE_HZ = 230.0
+PERIOD_NS = round(1e9 / RATE_HZ)
 BASE_NS = 1_700_000_000 * 1_000_000_000  # first stamp: a realistic wall-clock time
 
 
@@ -61,6 +64,25 @@ def offline(angles_deg: np.ndarray, lib: KernelLibrary, stamps: np.ndarray | Non
     sec = stamps // 1_000_000_000
     time_s = (sec - sec[0]) + (stamps % 1_000_000_000) * 1e-9  # as the node: seconds since its first stamp
     return predict(Recording(time_s=time_s, angles_deg=np.asarray(angles_deg)), lib).trace
+
+
+def offline_stream(angles_deg: np.ndarray, stamps: np.ndarray, lib: KernelLibrary):
+    """What the node computes for these accepted samples: one Estimator over the whole stream,
+    stamps converted as the node does, its window restarted where the node restarts it (a gap >
+    max_gap_s inside ``Estimator``, a jump back > ``restart_threshold`` here). Unlike offline() on
+    separate pieces, what the estimator learns across restarts (the sensor-offset calibration)
+    carries over, as in the node."""
+    stamps = np.asarray(stamps, dtype=np.int64)
+    sec = stamps // 1_000_000_000
+    time_s = (sec - sec[0]) + (stamps % 1_000_000_000) * 1e-9
+    est = Estimator(lib)
+    guard = StreamGuard(max_gap_s=0.0, restart_back_s=restart_threshold(est.config.max_gap_s))
+    rows = []
+    for i, (t, x) in enumerate(zip(time_s, np.asarray(angles_deg), strict=True)):
+        if guard.accept(float(t)):
+            est.reset()
+        rows.append((i, est.update(float(t), x)))
+    return trace_from_estimates(lib.mode_names, rows)
 
 
 def assert_same_trace(live, ref) -> None:

@@ -156,7 +156,9 @@ def test_bad_input_is_dropped_counted_warned_and_state_stays_valid(ros, multispe
         ("missing_joint", _joint_state(names[:3], [0.1, 0.2, 0.3], bad_stamp + 3)),
         ("wrong_length", _joint_state(names, [0.1, 0.2, 0.3], bad_stamp + 4)),
         ("non_increasing_stamp", _joint_state(names, x[0].tolist(), stamps[199])),  # equal to the last
-        ("non_increasing_stamp", _joint_state(names, x[0].tolist(), stamps[10])),  # earlier
+        # earlier, by less than max_gap_s (0.5 s): a reordered sample (further back restarts the
+        # window as a restarted stream, see test_faults.py)
+        ("non_increasing_stamp", _joint_state(names, x[0].tolist(), stamps[150])),
         ("out_of_range", _joint_state(names, [1e6, 0.1, 0.2, 0.3], bad_stamp + 5)),
     ]
     for i in range(200):
@@ -230,8 +232,9 @@ def test_parameters_validated_at_set_time(ros, tmp_path: Path) -> None:
         assert node.get_parameter(name).value == before
     (result,) = node.set_parameters([Parameter("max_gap_s", value=1)])  # wrong type
     assert not result.successful
-    (result,) = node.set_parameters([Parameter("input_type", value="float64_multi_array")])
-    assert not result.successful and "read-only" in result.reason.lower()
+    for name, value in (("input_type", "float64_multi_array"), ("executor", "single_threaded")):
+        (result,) = node.set_parameters([Parameter(name, value=value)])
+        assert not result.successful and "read-only" in result.reason.lower()
     broken = tmp_path / "broken.yaml"
     broken.write_text("format: gait_estimator/kernel_library\nformat_version: 1\nname: x\n", encoding="utf-8")
     (result,) = node.set_parameters([Parameter("kernels", value=str(broken))])
@@ -278,6 +281,7 @@ def test_invalid_values_at_startup_raise_one_line_errors(ros, tmp_path: Path) ->
         ({"kernels": str(tmp_path / "nope.yaml")}, "nope.yaml: no such file or directory"),
         ({"input_units": "furlong"}, "input_units"),
         ({"input_type": "imu"}, "input_type"),
+        ({"executor": "multi_threaded"}, "executor: must be one of events, single_threaded"),
         ({"max_gap_s": "soon"}, "max_gap_s"),
     ]:
         with pytest.raises(StartupError) as info:

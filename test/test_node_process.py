@@ -127,7 +127,9 @@ def test_params_file_float64_multi_array_degrees_and_sigterm(
     entry_point, local_ros, multispeed_csv: Path, able_bodied, tmp_path: Path
 ) -> None:
     params = yaml.safe_load((REPO / "config" / "estimator.yaml").read_text(encoding="utf-8"))
-    params["/**"]["ros__parameters"].update(input_type="float64_multi_array", input_units="deg")
+    # also the SingleThreadedExecutor (the other tests run the default EventsExecutor)
+    params["/**"]["ros__parameters"].update(input_type="float64_multi_array", input_units="deg",
+                                            executor="single_threaded")
     file = tmp_path / "params.yaml"
     file.write_text(yaml.safe_dump(params), encoding="utf-8")
     run = Running(22, entry_point, ["--params-file", str(file)], input_type="float64_multi_array")
@@ -166,6 +168,7 @@ def test_unusable_parameters_exit_nonzero_with_one_line(entry_point, tmp_path: P
         (["-p", f"kernels:={broken}"], "broken.yaml: invalid YAML"),
         (["-p", "input_units:=furlong"], "input_units"),
         (["-p", "max_gap_s:=abc"], "max_gap_s"),
+        (["-p", "executor:=multi_threaded"], "executor: must be one of events, single_threaded"),
     ]
     for ros_args, text in cases:
         proc = subprocess.run(
@@ -204,11 +207,23 @@ def test_demo_command_streams_the_bundled_recording() -> None:
 def test_bench_node_command(tmp_path: Path) -> None:
     report = tmp_path / "bench.json"
     proc = _gait_estimator("bench-node", "--samples", "200", "--rates", "400", "--seconds", "0.5",
+                           "--executor", "events", "--outputs", "estimate,all", "--profile",
                            "--domain-id", "28", "--json", str(report))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "latency at 230 Hz" in proc.stdout and "highest input rate sustained without drops" in proc.stdout
     data = json.loads(report.read_text(encoding="utf-8"))
     lat = data["latency"]
     assert lat["samples"] == 200 and lat["answered"] >= 190 and 0 < lat["p50_ms"] <= lat["p99_ms"]
+    assert 0 < lat["dds_p50_ms"] <= lat["p50_ms"]
     assert data["modes"] == 7 and data["node_exit_code"] == 0
     assert data["throughput"]["steps"][0]["rate_hz"] == 400
+    assert [(v["executor"], v["outputs"]) for v in data["variants"]] == [("events", "estimate"), ("events", "all")]
+    assert data["executor"] == "events" and data["variants"][0]["latency"] == lat
+    assert "throughput" not in data["variants"][1]  # latency only when subscribing to all outputs
+    for v in data["variants"]:
+        prof = v["latency"]["profile"]
+        assert prof["samples"] >= 150, prof
+        stages = prof["stages"]
+        assert set(stages) >= {"dds_in_and_executor", "estimator", "publish", "dds_out", "bench_callback"}
+        assert 0 < stages["estimator"]["p50_ms"] < stages["total_to_callback"]["p99_ms"]
+        assert v["micro_us"]["fill_preallocated_estimate_us"] > 0

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import signal
 import sys
 import time
@@ -36,6 +37,17 @@ def _domain_id(text: str) -> int:
         raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
     return v
 
+
+
+def _choices(allowed: tuple[str, ...]) -> Any:
+    def parse(text: str) -> list[str]:
+        values = [v.strip() for v in text.split(",") if v.strip()]
+        bad = [v for v in values if v not in allowed]
+        if not values or bad:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(allowed)}, got {text!r}")
+        return values
+
+    return parse
 
 
 def _rates(text: str) -> list[float]:
@@ -189,46 +201,107 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # bench-node
 
 
-def bench_node(
-    kernels: str = DEFAULT_LIBRARY,
-    latency_samples: int = 2300,
-    rate_hz: float = 230.0,
-    rates: list[float] | tuple[float, ...] = DEFAULT_RATES,
-    rate_seconds: float = 2.0,
-    domain_id: int = BENCH_DOMAIN_ID,
-    node_cmd: str | None = None,
-    log: Any = print,
-) -> dict[str, Any]:
-    """Measure estimator_node in a child process over DDS on this machine.
+EXECUTORS = ("events", "single_threaded")
+"""Values of estimator_node's ``executor`` parameter (gait_estimator.ros.node.EXECUTORS)."""
+OUTPUT_SETS = ("estimate", "all")
+"""bench-node --outputs: the bench subscribes to ``estimate`` only (like a controller), or to
+``mode``, ``phase``, ``sse`` and ``estimate`` (the node publishes all four per sample)."""
 
-    1. Latency: ``latency_samples`` inputs at ``rate_hz``; latency = arrival of the ``estimate``
-       message carrying an input's stamp - publication of that input (same clock, this process).
-    2. Throughput: for each rate in ``rates`` (ascending), ``rate_seconds`` of input; sustained =
-       the node processed every input (its diagnostics ``samples_received``, so nothing was lost in
-       its best-effort input queue), the input went out at >= 95% of the requested rate, and the
-       median latency stayed below KEEP_UP_MS (no growing backlog). Stops at the first rate that
-       fails twice.
 
-    Input: JointState (rad) of synthetic strides of the library's kernels with noise, stamped on
-    the library's time base, published reliably; this process subscribes to ``estimate`` (like a
-    controller) and ``/diagnostics`` only.
-    """
-    from ..analysis.bench import machine_info, synthetic_walk
-    from ..io.library_io import load_library
-    from ..io.outputs import ESTIMATE_TOPIC
-    from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient, use_local_ros
+def _stats_ms(values_ms: np.ndarray) -> dict[str, float]:
+    if values_ms.size == 0:
+        return {}
+    p50, p99 = np.percentile(values_ms, [50, 99])
+    return {"mean_ms": float(values_ms.mean()), "p50_ms": float(p50), "p99_ms": float(p99)}
 
-    lib = load_library(kernels)
-    use_local_ros(domain_id)
-    node = _start_node(domain_id, lib.path or kernels, [], node_cmd)
-    client = EstimatorClient(domain_id, reliable=True, record=False, outputs=(ESTIMATE_TOPIC, DIAGNOSTICS_TOPIC))
-    report: dict[str, Any] = {
-        "machine": machine_info(),
-        "library": lib.name,
-        "modes": len(lib),
-        "node_cmd": node.cmd,
-        "domain_id": domain_id,
+
+def _clock_offset_ns() -> int:
+    """time.time_ns() - time.perf_counter_ns(), from the closest of a few back-to-back readings."""
+    best = None
+    for _ in range(20):
+        a = time.perf_counter_ns()
+        w = time.time_ns()
+        b = time.perf_counter_ns()
+        if best is None or b - a < best[0]:
+            best = (b - a, w - (a + b) // 2)
+    assert best is not None
+    return best[1]
+
+
+def _profile(got: Any, stamps: np.ndarray, sent_wall: np.ndarray, recv_wall: np.ndarray) -> dict[str, Any]:
+    """Where the time of one latency run went, per answered sample (see bench_node)."""
+    from ..ros.node import PROFILE_COLUMNS
+
+    if not got.profile:
+        return {"error": "no ~/profile data from the node"}
+    rows = np.concatenate(got.profile)
+    col = {c: i for i, c in enumerate(PROFILE_COLUMNS)}
+    prof_stamp = rows[:, col["stamp_sec"]].astype(np.int64) * 1_000_000_000 + rows[:, col["stamp_nanosec"]].astype(np.int64)
+    start = rows[:, col["start_sec"]].astype(np.int64) * 1_000_000_000 + rows[:, col["start_nanosec"]].astype(np.int64)
+    by_stamp = {int(st): k for k, st in enumerate(prof_stamp)}
+    index = {int(st): i for i, st in enumerate(stamps)}
+    est_stamp = np.array(got.estimate_stamp_ns, dtype=np.int64)
+    dds = np.array(got.estimate_dds_ns, dtype=np.int64)
+    src = np.array(got.estimate_source_ns, dtype=np.int64)
+    pairs = [(j, index[int(st)], by_stamp[int(st)]) for j, st in enumerate(est_stamp) if int(st) in index and int(st) in by_stamp]
+    if not pairs:
+        return {"error": "no answered sample found in the node's ~/profile"}
+    j, i, k = (np.array(v, dtype=np.int64) for v in zip(*pairs, strict=True))
+    est_ns = rows[k, col["estimator_ns"]]
+    pub_ns = rows[k, col["publish_ns"]]
+    stages = {
+        "dds_in_and_executor": (start[k] - sent_wall[i]) / 1e6,
+        "estimator": est_ns / 1e6,
+        "publish": pub_ns / 1e6,
+        "dds_out": (dds[j] - src[j]) / 1e6,
+        "bench_callback": (recv_wall[j] - dds[j]) / 1e6,
+        "total_to_dds": (dds[j] - sent_wall[i]) / 1e6,
+        "total_to_callback": (recv_wall[j] - sent_wall[i]) / 1e6,
     }
+    return {"samples": len(pairs), "stages": {name: _stats_ms(v) for name, v in stages.items()}}
+
+
+PROFILE_LABELS = {
+    "dds_in_and_executor": "input publish -> node starts handling it (DDS in, executor wake-up, take)",
+    "estimator": "node: angle extraction, stamp checks, estimator update",
+    "publish": "node: publishing (count queries, filling, publish calls)",
+    "dds_out": "estimate written by the node -> bench's DDS reader (DDS out)",
+    "bench_callback": "bench's DDS reader -> bench's Python callback (bench executor)",
+    "total_to_dds": "total: input publish -> estimate at the bench's DDS reader",
+    "total_to_callback": "total: input publish -> bench's callback (the latency above)",
+}
+
+
+def _bench_variant(
+    lib: Any,
+    kernels: str,
+    executor: str,
+    outputs: str,
+    latency_samples: int,
+    rate_hz: float,
+    rates: list[float] | tuple[float, ...],
+    rate_seconds: float,
+    domain_id: int,
+    node_cmd: str | None,
+    profile: bool,
+    throughput: bool,
+    log: Any,
+) -> dict[str, Any]:
+    from ..analysis.bench import synthetic_walk
+    from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
+    from ..ros.node import NODE_NAME
+    from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient, publishing_costs_us
+
+    topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
+    node = _start_node(domain_id, kernels, ["-p", f"executor:={executor}"], node_cmd)
+    client = EstimatorClient(
+        domain_id,
+        reliable=True,
+        record=False,
+        outputs=(*topics, DIAGNOSTICS_TOPIC),
+        profile_topic=f"/{NODE_NAME}/profile" if profile else None,
+    )
+    out: dict[str, Any] = {"executor": executor, "outputs": outputs, "node_cmd": node.cmd}
     next_stamp = [time.time_ns()]
 
     def node_received() -> int:
@@ -237,7 +310,7 @@ def bench_node(
             raise GaitEstimatorError("no diagnostics from estimator_node")
         return int(d["samples_received"])
 
-    def run(n: int, rate: float) -> dict[str, Any]:
+    def run(n: int, rate: float, with_profile: bool = False) -> dict[str, Any]:
         x = np.radians(synthetic_walk(lib, n, seed=n))
         period = int(1e9 / lib.sample_rate_hz)  # stamps keep the library's time base
         stamps = next_stamp[0] + period * np.arange(1, n + 1, dtype=np.int64)
@@ -247,6 +320,7 @@ def bench_node(
         got = client.received
         got.clear()
         first = client.estimate_count
+        offset = _clock_offset_ns()
         sent = client.stream(x, stamps, rate)
         achieved = (n - 1) / max((sent[-1] - sent[0]) / 1e9, 1e-9) if n > 1 else rate
         last, last_change = client.estimate_count, time.monotonic()
@@ -254,13 +328,19 @@ def bench_node(
             client.spin_once(0.05)
             if client.estimate_count != last:
                 last, last_change = client.estimate_count, time.monotonic()
-        processed = node_received() - before
+        processed = node_received()
+        if with_profile:  # the rows of the last samples come with the next diagnostics period
+            client.latest_diagnostics(timeout_s=3.0)
+            client.spin_for(0.2)
+        processed -= before
         index = {int(s): i for i, s in enumerate(stamps)}
         idx = np.array([index.get(s, -1) for s in got.estimate_stamp_ns], dtype=np.int64)
         ok = idx >= 0
-        lat = (np.array(got.estimate_recv_ns, dtype=np.int64)[ok] - sent[idx[ok]]) / 1e6
+        recv = np.array(got.estimate_recv_ns, dtype=np.int64)
+        lat = (recv[ok] - sent[idx[ok]]) / 1e6
+        dds_lat = (np.array(got.estimate_dds_ns, dtype=np.int64)[ok] - (sent[idx[ok]] + offset)) / 1e6
         busy = [d for d in client.received.diagnostics[n_diag:] if float(d["input_rate_hz"]) > 0]
-        out: dict[str, Any] = {
+        res: dict[str, Any] = {
             "rate_hz": rate,
             "samples": n,
             "achieved_rate_hz": float(achieved),
@@ -268,60 +348,147 @@ def bench_node(
             "input_drops": n - processed,
             "answered": int(ok.sum()),
             **_percentiles(lat),
+            **{f"dds_{k}": v for k, v in _percentiles(dds_lat).items()},
         }
         if busy:
-            out["node_processing_mean_ms"] = float(np.mean([float(d["processing_time_mean_ms"]) for d in busy]))
-            out["node_processing_max_ms"] = float(max(float(d["processing_time_max_ms"]) for d in busy))
-        return out
+            res["node_processing_mean_ms"] = float(np.mean([float(d["processing_time_mean_ms"]) for d in busy]))
+            res["node_processing_max_ms"] = float(max(float(d["processing_time_max_ms"]) for d in busy))
+        if with_profile:
+            res["profile"] = _profile(got, stamps, sent + offset, recv + offset)
+        return res
 
+    label = f"[executor {executor}, outputs {outputs}]"
     try:
         _wait_node(client, node, 30.0)
         run(int(lib.lengths.max()) + 50, rate_hz)  # warm-up: fill the window, first-call costs
-        lt = run(latency_samples, rate_hz)
-        report["latency"] = lt
+        lt = run(latency_samples, rate_hz, with_profile=profile)
+        out["latency"] = lt
         log(
-            f"latency at {rate_hz:g} Hz: {lt['samples']} samples, {lt['answered']} answered: "
+            f"{label} latency at {rate_hz:g} Hz: {lt['samples']} samples, {lt['answered']} answered: "
             f"p50 {lt.get('p50_ms', math.nan):.3f} ms, p90 {lt.get('p90_ms', math.nan):.3f} ms, "
-            f"p99 {lt.get('p99_ms', math.nan):.3f} ms, max {lt.get('max_ms', math.nan):.3f} ms; node processing "
+            f"p99 {lt.get('p99_ms', math.nan):.3f} ms, max {lt.get('max_ms', math.nan):.3f} ms "
+            f"(to the bench's DDS reader: p50 {lt.get('dds_p50_ms', math.nan):.3f}, "
+            f"p99 {lt.get('dds_p99_ms', math.nan):.3f} ms); node processing "
             f"mean {lt.get('node_processing_mean_ms', math.nan):.3f} ms, max {lt.get('node_processing_max_ms', math.nan):.3f} ms"
         )
-        steps = []
-        best = 0.0
-        ok = True
-        for rate in sorted(rates):
-            n = max(500, int(rate * rate_seconds))
-            for attempt in (1, 2):  # one retry: the machine is noisy
-                step = run(n, rate)
-                step["attempt"] = attempt
-                keeps_up = step.get("p50_ms", math.inf) < KEEP_UP_MS
-                ok = step["input_drops"] == 0 and step["achieved_rate_hz"] >= 0.95 * rate and keeps_up
-                step["sustained"] = ok
-                steps.append(step)
-                log(
-                    f"rate {rate:6.0f} Hz (attempt {attempt}): sent {n} at {step['achieved_rate_hz']:6.0f} Hz, node processed "
-                    f"{step['node_processed']}, estimates received {step['answered']}"
-                    + (f", latency p50 {step['p50_ms']:.3f} ms p99 {step['p99_ms']:.3f} ms" if "p50_ms" in step else "")
-                    + (
-                        ""
-                        if ok
-                        else "  <- input drops"
-                        if step["input_drops"]
-                        else "  <- falling behind"
-                        if not keeps_up
-                        else "  <- publisher too slow"
+        if profile:
+            out["micro_us"] = publishing_costs_us(lib, client.publisher)
+            stages = lt["profile"].get("stages", {})
+            for name, text in PROFILE_LABELS.items():
+                st = stages.get(name)
+                if st:
+                    log(f"{label}   {text:<76} mean {st['mean_ms']:6.3f}  p50 {st['p50_ms']:6.3f}  p99 {st['p99_ms']:6.3f} ms")
+            if "error" in lt["profile"]:
+                log(f"{label}   profile: {lt['profile']['error']}")
+            log(f"{label}   in this process: " + ", ".join(f"{k} {v:.2f}" for k, v in out["micro_us"].items()))
+        if throughput:
+            steps = []
+            best = 0.0
+            ok = True
+            for rate in sorted(rates):
+                n = max(500, int(rate * rate_seconds))
+                for attempt in (1, 2):  # one retry: the machine is noisy
+                    step = run(n, rate)
+                    step["attempt"] = attempt
+                    keeps_up = step.get("p50_ms", math.inf) < KEEP_UP_MS
+                    ok = step["input_drops"] == 0 and step["achieved_rate_hz"] >= 0.95 * rate and keeps_up
+                    step["sustained"] = ok
+                    steps.append(step)
+                    log(
+                        f"{label} rate {rate:6.0f} Hz (attempt {attempt}): sent {n} at {step['achieved_rate_hz']:6.0f} Hz, "
+                        f"node processed {step['node_processed']}, estimates received {step['answered']}"
+                        + (f", latency p50 {step['p50_ms']:.3f} ms p99 {step['p99_ms']:.3f} ms" if "p50_ms" in step else "")
+                        + (
+                            ""
+                            if ok
+                            else "  <- input drops"
+                            if step["input_drops"]
+                            else "  <- falling behind"
+                            if not keeps_up
+                            else "  <- publisher too slow"
+                        )
                     )
-                )
-                if ok:
+                    if ok:
+                        break
+                if not ok:
                     break
-            if not ok:
-                break
-            best = rate
-        report["throughput"] = {"steps": steps, "max_sustained_rate_hz": best, "rates_tried": sorted(rates)}
-        log(f"highest input rate sustained without drops: {best:g} Hz" + (" (the highest tried)" if ok else ""))
-        report["node_exit_code"] = node.stop(signal.SIGINT)
+                best = rate
+            out["throughput"] = {"steps": steps, "max_sustained_rate_hz": best, "rates_tried": sorted(rates)}
+            log(f"{label} highest input rate sustained without drops: {best:g} Hz" + (" (the highest tried)" if ok else ""))
+        out["node_exit_code"] = node.stop(signal.SIGINT)
     finally:
         client.close()
         node.close()
+    return out
+
+
+def bench_node(
+    kernels: str = DEFAULT_LIBRARY,
+    latency_samples: int = 2300,
+    rate_hz: float = 230.0,
+    rates: list[float] | tuple[float, ...] = DEFAULT_RATES,
+    rate_seconds: float = 2.0,
+    domain_id: int = BENCH_DOMAIN_ID,
+    node_cmd: str | None = None,
+    log: Any = print,
+    executors: list[str] | tuple[str, ...] = EXECUTORS,
+    outputs: list[str] | tuple[str, ...] = OUTPUT_SETS,
+    profile: bool = False,
+) -> dict[str, Any]:
+    """Measure estimator_node in a child process over DDS on this machine, once per variant
+    (``executors`` x ``outputs``, a fresh node process each).
+
+    1. Latency: ``latency_samples`` inputs at ``rate_hz``; latency = arrival of the ``estimate``
+       message carrying an input's stamp in the bench's callback - publication of that input
+       (same clock, this process); ``dds_*``: arrival at the bench's DDS reader instead (the
+       message info's ``received_timestamp``), i.e. without the bench's own executor.
+    2. Throughput (variants with outputs ``estimate``): for each rate in ``rates`` (ascending),
+       ``rate_seconds`` of input; sustained = the node processed every input (its diagnostics
+       ``samples_received``, so nothing was lost in its best-effort input queue), the input went
+       out at >= 95% of the requested rate, and the median latency stayed below KEEP_UP_MS (no
+       growing backlog). Stops at the first rate that fails twice.
+    3. With ``profile``: the latency run's time split per sample (node's ``~/profile`` topic and
+       the message info of ``estimate``; see PROFILE_LABELS), and the per-call costs of the
+       publishing levers in this process.
+
+    Input: JointState (rad) of synthetic strides of the library's kernels with noise, stamped on
+    the library's time base, published reliably; this process subscribes to ``estimate`` (like a
+    controller) or to all four outputs, and to ``/diagnostics``. The report's top-level
+    ``latency``/``throughput`` are the first variant's (by default the node's default executor,
+    ``estimate`` only).
+    """
+    from ..analysis.bench import machine_info
+    from ..io.library_io import load_library
+    from ..ros.node_client import use_local_ros
+
+    lib = load_library(kernels)
+    use_local_ros(domain_id)
+    machine = machine_info()
+    machine["cpus_allowed"] = len(os.sched_getaffinity(0))
+    report: dict[str, Any] = {
+        "machine": machine,
+        "load_average_before": list(os.getloadavg()),
+        "library": lib.name,
+        "modes": len(lib),
+        "domain_id": domain_id,
+        "variants": [],
+    }
+    for executor in executors:
+        for out in outputs:
+            v = _bench_variant(
+                lib, lib.path or kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
+                node_cmd, profile, throughput=out == "estimate", log=log,
+            )
+            report["variants"].append(v)
+    first = report["variants"][0]
+    report["node_cmd"] = first["node_cmd"]
+    report["executor"], report["outputs"] = first["executor"], first["outputs"]
+    report["latency"] = first["latency"]
+    if "throughput" in first:
+        report["throughput"] = first["throughput"]
+    codes = [v["node_exit_code"] for v in report["variants"]]
+    report["node_exit_code"] = next((c for c in codes if c != 0), 0)
+    report["load_average_after"] = list(os.getloadavg())
     return report
 
 
@@ -335,10 +502,25 @@ def cmd_bench_node(args: argparse.Namespace) -> int:
         rate_seconds=args.seconds,
         domain_id=args.domain_id,
         node_cmd=args.node_cmd,
+        executors=args.executor,
+        outputs=args.outputs,
+        profile=args.profile,
     )
     m = report["machine"]
-    print(f"machine: {m['processor']}, {m['cpus']} CPUs, Python {m['python']}; "
-          f"library {report['library']} ({report['modes']} modes)")
+    print(f"machine: {m['processor']}, {m['cpus']} CPUs ({m['cpus_allowed']} allowed), Python {m['python']}; "
+          f"library {report['library']} ({report['modes']} modes); load average before "
+          f"{report['load_average_before'][0]:.2f}, after {report['load_average_after'][0]:.2f}")
+    print(f"summary (latency at {args.rate:g} Hz, p50 / p99 ms, to the bench's callback | to its DDS reader; "
+          "highest rate):")
+    for v in report["variants"]:
+        lt = v["latency"]
+        tp = v.get("throughput")
+        print(
+            f"  executor {v['executor']:<15} outputs {v['outputs']:<8} "
+            f"{lt.get('p50_ms', math.nan):6.3f} / {lt.get('p99_ms', math.nan):6.3f} | "
+            f"{lt.get('dds_p50_ms', math.nan):6.3f} / {lt.get('dds_p99_ms', math.nan):6.3f}"
+            + (f"; {tp['max_sustained_rate_hz']:g} Hz" if tp else "")
+        )
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
         print(f"wrote {args.json}")
@@ -389,5 +571,14 @@ def add_commands(sub: Any) -> None:
     b.add_argument("--seconds", type=positive_float, default=2.0, help="duration of each rate step (default 2 s)")
     b.add_argument("--domain-id", type=_domain_id, default=BENCH_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
     b.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
+    b.add_argument("--executor", type=_choices(EXECUTORS), default=list(EXECUTORS), metavar="LIST",
+                   help="node executors to measure, side by side (default " + ",".join(EXECUTORS) + "; the first "
+                   "one's numbers are the report's top-level latency/throughput)")
+    b.add_argument("--outputs", type=_choices(OUTPUT_SETS), default=list(OUTPUT_SETS), metavar="LIST",
+                   help="what the bench subscribes to: estimate (like a controller) and/or all (mode, phase, sse, "
+                   "estimate; latency only); default " + ",".join(OUTPUT_SETS))
+    b.add_argument("--profile", action="store_true",
+                   help="split the latency run's time per sample: DDS in + executor, estimator, publish, DDS out, "
+                   "bench callback (from the node's ~/profile topic)")
     b.add_argument("--json", help="write the report as JSON")
     b.set_defaults(func=cmd_bench_node)

@@ -64,6 +64,19 @@ def estimate_names(mode_names: Sequence[str]) -> list[str]:
     return [*ESTIMATE_HEAD, *(f"sse/{m}" for m in mode_names), *(f"phase/{m}" for m in mode_names), *ESTIMATE_TAIL]
 
 
+def estimate_into(out: np.ndarray, est: Estimate) -> np.ndarray:
+    """``estimate_array(est)`` for one Estimate, written into ``out`` (float64, (K,)) without
+    allocating: the node fills the buffer behind its preallocated ``estimate`` message."""
+    m = len(est.sse)
+    out[0] = est.mode_index
+    out[1] = est.phase
+    out[2] = est.ready
+    out[3 : 3 + m] = est.sse
+    out[3 + m : 3 + 2 * m] = est.phases
+    out[3 + 2 * m :] = [getattr(est, k) for k in ESTIMATE_TAIL]
+    return out
+
+
 def estimate_array(est: Estimate | EstimateTrace) -> np.ndarray:
     """Values of the ``estimate`` message (JointState ``position``) in the order of
     ``estimate_names``: float64 (K,) for one Estimate, (T, K) for a whole EstimateTrace.

@@ -7,7 +7,9 @@ Shared by the live node and offline bag processing so both treat input identical
   ``SampleRejected`` with a reason code for bad input (including finite but absurd angles,
   ``out_of_range``, which would otherwise swamp the matcher's running sums);
 * ``StreamGuard`` checks time stamps (non-increasing -> rejected; a gap longer than
-  ``max_gap_s`` -> the matcher window must restart) and counts rejections by reason.
+  ``max_gap_s`` -> the matcher window must restart; optionally, a jump back by more than
+  ``restart_back_s`` -> a restarted stream, the window must restart too) and counts rejections by
+  reason.
 """
 
 from __future__ import annotations
@@ -31,6 +33,10 @@ WRONG_LENGTH = "wrong_length"
 NON_INCREASING_STAMP = "non_increasing_stamp"
 OUT_OF_RANGE = "out_of_range"
 REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP, OUT_OF_RANGE)
+
+STREAM_RESTART_S = 1.0
+"""Jump back (s) that restarts a live stream when ``max_gap_s`` is 0 (gap check off); see
+``restart_threshold``."""
 
 MAX_ABS_ANGLE_DEG = 1.0e4
 """Largest accepted |angle| (degrees, after unit conversion). Far beyond any segment angle, far
@@ -87,19 +93,88 @@ def angles_from_array(data: Sequence[float], units: str = "rad") -> np.ndarray:
     return _to_degrees(values, units)
 
 
+class AngleExtractor:
+    """``angles_from_named`` / ``angles_from_array`` for a live stream, with the same results
+    and the same rejections, in a few microseconds: the index of each joint in the message is
+    kept while the message's names stay the same, and the common case (4 finite angles in range)
+    takes no Python loop and two small numpy calls. Anything unusual goes through the reference
+    functions, which raise the proper SampleRejected.
+
+    Args:
+        joint_names: Names of right_thigh, left_thigh, right_shank, left_shank (CHANNELS order).
+        units: Input units, ``rad`` or ``deg``.
+    """
+
+    def __init__(self, joint_names: Sequence[str] = CHANNELS, units: str = "rad") -> None:
+        if units not in UNITS:
+            raise ValueError(f"units must be one of {UNITS}, got {units!r}")
+        self.joint_names = tuple(joint_names)
+        self.units = units
+        # |value| limit in input units, a little inside MAX_ABS_ANGLE_DEG so that the exact check
+        # (after conversion) decides every borderline value
+        self._limit = MAX_ABS_ANGLE_DEG * (0.999 * math.pi / 180.0 if units == "rad" else 0.999)
+        self._names: list[str] | None = None
+        self._index: tuple[int, int, int, int] = (0, 1, 2, 3)
+
+    def named(self, names: Sequence[str], positions: Sequence[float]) -> np.ndarray:
+        """Same as ``angles_from_named(names, positions, joint_names, units)``."""
+        if names != self._names:
+            values = angles_from_named(names, positions, self.joint_names, self.units)  # raises if bad
+            index = {n: i for i, n in enumerate(names)}
+            i0, i1, i2, i3 = (index[j] for j in self.joint_names)
+            self._index = (i0, i1, i2, i3)
+            self._names = list(names)
+            return values
+        i0, i1, i2, i3 = self._index
+        lim = self._limit
+        if len(positions) == len(names):
+            a, b, c, d = positions[i0], positions[i1], positions[i2], positions[i3]
+            if -lim < a < lim and -lim < b < lim and -lim < c < lim and -lim < d < lim:  # False for nan/inf
+                return self._convert((a, b, c, d))
+        return angles_from_named(names, positions, self.joint_names, self.units)  # raises
+
+    def array(self, data: Sequence[float]) -> np.ndarray:
+        """Same as ``angles_from_array(data, units)``."""
+        lim = self._limit
+        if len(data) == N_CHANNELS:
+            a, b, c, d = data
+            if -lim < a < lim and -lim < b < lim and -lim < c < lim and -lim < d < lim:
+                return self._convert((a, b, c, d))
+        return angles_from_array(data, self.units)  # raises
+
+    def _convert(self, values: tuple[float, float, float, float]) -> np.ndarray:
+        x = np.array(values, dtype=np.float64)
+        return np.degrees(x) if self.units == "rad" else x
+
+
+def restart_threshold(max_gap_s: float) -> float:
+    """How far (s) stamps must jump back to count as a restarted stream rather than a reordered or
+    duplicated sample: ``max_gap_s`` (the same discontinuity that restarts the window going
+    forward), or STREAM_RESTART_S while the gap check is off (``max_gap_s`` 0 or inf)."""
+    return max_gap_s if 0 < max_gap_s < math.inf else STREAM_RESTART_S
+
+
 @dataclass
 class StreamGuard:
     """Stamp checks and rejection counts for one input stream.
 
     Args:
         max_gap_s: A gap between accepted samples longer than this (seconds) means the window
-            must restart (``accept`` returns True); <= 0 or inf disables the check.
+            must restart (``accept`` returns True, counted in ``resets``); <= 0 or inf disables
+            the check.
+        restart_back_s: A stamp more than this (seconds) before the previous accepted one is a
+            restarted stream (a publisher that restarted its clock, a clock jump back): the
+            sample is accepted and the window must restart (``accept`` returns True, counted in
+            ``restarts``). A smaller step back, or any step back while this is <= 0, is a
+            reordered or duplicated sample: rejected (non_increasing_stamp).
     """
 
     max_gap_s: float = 0.5
+    restart_back_s: float = 0.0
     rejected: Counter = field(default_factory=Counter)
     accepted: int = 0
     resets: int = 0
+    restarts: int = 0
     last_stamp: float | None = None
 
     def check_stamp(self, stamp_s: float) -> bool:
@@ -110,14 +185,22 @@ class StreamGuard:
         if not math.isfinite(stamp_s):
             raise SampleRejected(NON_FINITE, f"non-finite stamp {stamp_s}")
         last = self.last_stamp
-        if last is not None and stamp_s <= last:
+        if last is None:
+            return False
+        if stamp_s <= last:
+            if 0 < self.restart_back_s < last - stamp_s:
+                return True
             raise SampleRejected(NON_INCREASING_STAMP, f"stamp {stamp_s:.6f} s is not after the previous {last:.6f} s")
-        return last is not None and 0 < self.max_gap_s < math.inf and stamp_s - last > self.max_gap_s
+        return 0 < self.max_gap_s < math.inf and stamp_s - last > self.max_gap_s
 
     def accept(self, stamp_s: float) -> bool:
-        """Record an accepted sample at ``stamp_s``; True if a gap reset happened before it."""
+        """Record an accepted sample at ``stamp_s``; True if the window must restart before it
+        (a gap, counted in ``resets``, or a jump back, counted in ``restarts``)."""
+        last = self.last_stamp
         reset = self.check_stamp(stamp_s)
-        if reset:
+        if reset and last is not None and stamp_s <= last:
+            self.restarts += 1
+        elif reset:
             self.resets += 1
         self.last_stamp = stamp_s
         self.accepted += 1

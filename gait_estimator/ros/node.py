@@ -12,12 +12,21 @@ publishes (reliable, keep last 10):
   modes) once the window is full;
 * ``estimate`` (sensor_msgs/JointState as stamped key/values, see ``outputs.py``) for every
   estimate, ``header.stamp`` = the input stamp, ``ready`` = 0 while the window fills;
-* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) at 1 Hz.
+* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) at 1 Hz;
+* ``~/profile`` (std_msgs/Float64MultiArray) at 1 Hz, only while something subscribes to it: the
+  per-sample timing of the last second (see ``PROFILE_COLUMNS``; ``gait-estimator bench-node
+  --profile``).
 
 Time comes from the input stamps (JointState ``header.stamp``); inputs without a stamp
 (Float64MultiArray, or a zero JointState stamp) are stamped with the node clock on arrival, which
-follows ``/clock`` under ``use_sim_time``. Bad input is dropped, counted and reported (throttled
-warning naming the problem) without touching the estimator state.
+follows ``/clock`` under ``use_sim_time``. A stamp that is not after the previous one is a
+reordered or duplicated sample (dropped), unless it jumps back by more than ``max_gap_s`` (1 s
+while the gap check is off): then the publisher or its clock restarted, and the window restarts
+with that sample (``stream_restarts`` in the diagnostics). Bad input is dropped, counted and
+reported (throttled warning naming the problem) without touching the estimator state.
+
+``main`` spins the node with rclpy's EventsExecutor (parameter ``executor``, default ``events``)
+or the SingleThreadedExecutor (``single_threaded``).
 
 This module needs rclpy at import time; the offline tools (``gait-estimator``) do not.
 """
@@ -42,7 +51,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import InvalidHandle, ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -62,7 +71,7 @@ from ..io.outputs import (
     MODE_TOPIC,
     PHASE_TOPIC,
     SSE_TOPIC,
-    estimate_array,
+    estimate_into,
     estimate_names,
     sse_label,
 )
@@ -71,10 +80,10 @@ from ..io.stream import (
     INPUT_TYPES,
     REASONS,
     UNITS,
+    AngleExtractor,
     SampleRejected,
     StreamGuard,
-    angles_from_array,
-    angles_from_named,
+    restart_threshold,
 )
 
 NODE_NAME = "estimator_node"
@@ -85,7 +94,22 @@ WARN_THROTTLE_S = 2.0
 RATE_TOLERANCE = 0.2
 """Relative deviation of the input stamp rate from the library rate that raises a WARN."""
 MAX_BATCH = 50
-"""Most input messages handled per executor wake-up (see ``EstimatorNode._on_input``)."""
+"""Most input messages handled per executor wake-up (see ``EstimatorNode._on_input``) under a
+wait-set executor; ``main`` sets ``EstimatorNode.max_batch`` to 1 under the EventsExecutor."""
+EXECUTORS = ("events", "single_threaded")
+"""Values of the ``executor`` parameter: rclpy.experimental.EventsExecutor, SingleThreadedExecutor."""
+SPIN_PERIOD_S = 0.25
+"""``main`` spins with this timeout, never without one: rclpy 7.1's EventsExecutor runs no
+callback at all in ``spin()`` or ``spin_once()`` without a timeout (it busy-waits instead)."""
+PROFILE_TOPIC = "~/profile"
+PROFILE_COLUMNS = ("stamp_sec", "stamp_nanosec", "start_sec", "start_nanosec", "estimator_ns", "publish_ns")
+"""``~/profile`` rows, one per accepted sample: the input stamp; when the node began handling the
+message (system clock; the message was taken from DDS just before); the time spent on angle
+extraction, checks and the estimator update; the time spent publishing. The layout's dim[1]
+label lists the columns. (The message info with the DDS arrival time is not available to the
+callback under rclpy 7.1's EventsExecutor, so the arrival itself is not recorded.)"""
+MAX_PROFILE_ROWS = 20_000
+"""Most ``~/profile`` rows kept per diagnostics period (later samples are not profiled)."""
 
 INPUT_QOS = QoSProfile(
     reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -108,6 +132,7 @@ DEFAULTS: dict[str, Any] = {
     "joint_names": list(CHANNELS),
     "input_units": "rad",
     "input_type": "joint_state",
+    "executor": "events",
     **{o.name: o.default for o in OPTIONS},
 }
 """Parameter defaults, in declaration order; ``config/estimator.yaml`` holds the same values."""
@@ -120,13 +145,15 @@ DESCRIPTIONS: dict[str, str] = {
     "input_units": "Units of the input angles: rad (REP 103) or deg.",
     "input_type": "Input message type on segment_angles (read-only): joint_state (sensor_msgs/JointState) or "
     "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]).",
+    "executor": "Executor of the estimator_node process (read-only): events (rclpy's EventsExecutor, lower "
+    "latency) or single_threaded (rclpy's SingleThreadedExecutor).",
     **{
         o.name: o.description[0].upper() + o.description[1:]
         + ("" if o.name == "max_gap_s" else ". Changing it at run time restarts the window.")
         for o in OPTIONS
     },
 }
-READ_ONLY = frozenset({"input_type"})
+READ_ONLY = frozenset({"input_type", "executor"})
 
 
 class StartupError(GaitEstimatorError):
@@ -192,7 +219,9 @@ class EstimatorNode(Node):
         self._joint_names: tuple[str, ...] = tuple(self.get_parameter("joint_names").value)
         self._units: str = self.get_parameter("input_units").value
         self._input_type: str = self.get_parameter("input_type").value
-        self._guard = StreamGuard(max_gap_s=0.0)  # stamp checks and rejection counts; gaps: Estimator
+        self._extract = AngleExtractor(self._joint_names, self._units)
+        # Stamp checks, jump-back restarts and rejection counts; gaps (forward) are the Estimator's.
+        self._guard = StreamGuard(max_gap_s=0.0, restart_back_s=restart_threshold(self._config.max_gap_s))
         self._resets_before = 0  # gap restarts of estimators replaced by parameter changes
         self._epoch_sec: int | None = None
 
@@ -208,6 +237,9 @@ class EstimatorNode(Node):
         self._period_last_stamp: float | None = None
         self._period_accepted = 0
         self._period_start = time.monotonic()
+        self.max_batch = MAX_BATCH
+        """Input messages handled per callback (1 = only the executor's own; see _on_input)."""
+        self._profile: list[tuple[int, int, int, int, int, int]] | None = None  # rows while subscribed
 
         # No QoS event handlers on the outputs: each one costs executor time on every wake-up, and a
         # subscriber with incompatible QoS logs the problem itself.
@@ -217,6 +249,7 @@ class EstimatorNode(Node):
         self._sse_pub = self.create_publisher(Float64MultiArray, SSE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
         self._estimate_pub = self.create_publisher(JointState, ESTIMATE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS, event_callbacks=quiet)
+        self._profile_pub = self.create_publisher(Float64MultiArray, PROFILE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
         self._mode_msg = String()
         self._phase_msg = Float64()
         if self._input_type == "joint_state":
@@ -306,6 +339,8 @@ class EstimatorNode(Node):
             return f"must be one of {', '.join(UNITS)}, got {v!r}"
         elif p.name == "input_type" and v not in INPUT_TYPES:
             return f"must be one of {', '.join(INPUT_TYPES)}, got {v!r}"
+        elif p.name == "executor" and v not in EXECUTORS:
+            return f"must be one of {', '.join(EXECUTORS)}, got {v!r}"
         return ""
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
@@ -317,12 +352,15 @@ class EstimatorNode(Node):
                 self._joint_names = tuple(p.value)
             elif p.name == "input_units":
                 self._units = p.value
+        if names & {"joint_names", "input_units"}:
+            self._extract = AngleExtractor(self._joint_names, self._units)
         if pending is None:
             return
         lib, config, estimator = pending
         if lib is not None:
             self._library = lib
         self._config = config
+        self._guard.restart_back_s = restart_threshold(config.max_gap_s)
         restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - {"max_gap_s"})
         if restart and estimator is not None:
             self._resets_before += self._estimator.resets
@@ -348,6 +386,9 @@ class EstimatorNode(Node):
         self._sse_msg.layout.dim = [MultiArrayDimension(label=sse_label(names), size=len(names), stride=len(names))]
         self._estimate_msg = JointState()
         self._estimate_msg.name = estimate_names(names)
+        # buffer of the message's position, filled for every estimate (estimate_into)
+        self._estimate_values = array.array("d", bytes(8 * len(self._estimate_msg.name)))
+        self._estimate_view = np.frombuffer(self._estimate_values, dtype=np.float64)
         self._last_estimate: Estimate | None = None
 
     def _options_summary(self) -> str:
@@ -363,22 +404,28 @@ class EstimatorNode(Node):
     def _on_input(self, msg: JointState | Float64MultiArray) -> None:
         """Subscription callback: handle ``msg``, then the messages already queued behind it.
 
-        Taking the queued messages here, up to MAX_BATCH per wake-up, instead of returning to
-        the executor for each one keeps the executor's per-wake-up cost (hundreds of
-        microseconds in rclpy) from limiting the input rate; in order, one estimator update each.
+        Taking the queued messages here, up to ``max_batch`` per wake-up, instead of returning to
+        the executor for each one keeps a wait-set executor's per-wake-up cost (hundreds of
+        microseconds in rclpy's SingleThreadedExecutor) from limiting the input rate; in order,
+        one estimator update each. Not under the EventsExecutor (``max_batch`` 1): it queues one
+        event per message, and the events of messages taken here would pile up in its queue
+        (native memory growing with the input rate) and then each cost a take that finds nothing.
         """
-        handle = self._handle
-        handle(msg)
-        sub = self._sub
-        for _ in range(MAX_BATCH - 1):
-            try:
+        try:
+            handle = self._handle
+            handle(msg)
+            sub = self._sub
+            for _ in range(self.max_batch - 1):
                 with sub.handle:
                     taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            except InvalidHandle:  # destroyed during shutdown
-                return
-            if taken is None:
-                return
-            handle(taken[0])
+                if taken is None:
+                    return
+                handle(taken[0])
+        except (RuntimeError, InvalidHandle):
+            if self.context.ok():
+                raise
+            # SIGINT/SIGTERM shut the context down while we were publishing or taking (rclpy's
+            # signal handling runs in another thread): nothing left to do.
 
     def _handle_joint_state(self, msg: JointState) -> None:
         """One JointState sample: angles by name, time from ``header.stamp``."""
@@ -389,7 +436,7 @@ class EstimatorNode(Node):
         if stamp.sec == 0 and stamp.nanosec == 0:
             stamp = self.get_clock().now().to_msg()
         try:
-            angles = angles_from_named(msg.name, msg.position, self._joint_names, self._units)
+            angles = self._extract.named(msg.name, msg.position)
         except SampleRejected as exc:
             self._reject(exc)
             return
@@ -402,7 +449,7 @@ class EstimatorNode(Node):
         self._period_received += 1
         stamp = self.get_clock().now().to_msg()
         try:
-            angles = angles_from_array(msg.data, self._units)
+            angles = self._extract.array(msg.data)
         except SampleRejected as exc:
             self._reject(exc)
             return
@@ -411,31 +458,57 @@ class EstimatorNode(Node):
     def _process(self, angles_deg: np.ndarray, stamp: TimeMsg, t0: float) -> None:
         """Stamp check, one estimator update, publish; ``t0`` = callback start (perf_counter)."""
         t = self._seconds(stamp)
-        prev = self._guard.last_stamp
+        guard = self._guard
+        prev = guard.last_stamp
         try:
-            self._guard.accept(t)
+            restart = guard.accept(t)
         except SampleRejected as exc:
             self._reject(exc)
             return
         est = self._estimator
+        if restart:  # stamps jumped back by more than restart_back_s: a restarted stream
+            est.reset()
+            self._log_restart("back", f"input stamps jumped back by {(prev or t) - t:.3f} s (> {guard.restart_back_s:g} s)")
         resets = est.resets
         estimate = est.update(t, angles_deg)
         if est.resets != resets:
-            self.get_logger().info(
+            self._log_restart(
+                "gap",
                 f"gap of {t - (prev if prev is not None else t):.3f} s in input stamps > max_gap_s "
-                f"{est.config.max_gap_s:g} s: window restarted"
+                f"{est.config.max_gap_s:g} s"
             )
+        t1 = time.perf_counter()
         self._publish(estimate, stamp)
 
         if self._period_first_stamp is None:
             self._period_first_stamp = t
         self._period_last_stamp = t
         self._period_accepted += 1
-        dt = time.perf_counter() - t0
+        t2 = time.perf_counter()
+        dt = t2 - t0
         self._proc_sum += dt
         self._proc_count += 1
         if dt > self._proc_max:
             self._proc_max = dt
+        profile = self._profile
+        if profile is not None and len(profile) < MAX_PROFILE_ROWS:
+            start_sec, start_ns = divmod(time.time_ns() - round(dt * 1e9), 1_000_000_000)  # system clock
+            profile.append((stamp.sec, stamp.nanosec, start_sec, start_ns, round((t1 - t0) * 1e9), round((t2 - t1) * 1e9)))
+
+    def _log_restart(self, kind: str, why: str) -> None:
+        """One line per window restart caused by the stream (``kind``: gap or back), throttled
+        per kind like the warnings."""
+        key = f"restart_{kind}"
+        now = time.monotonic()
+        last = self._warned_at.get(key)
+        if last is not None and now - last < WARN_THROTTLE_S:
+            self._suppressed[key] += 1
+            return
+        self._warned_at[key] = now
+        more = self._suppressed.pop(key, 0)
+        self.get_logger().info(
+            f"{why}: window restarted" + (f" ({more} more restarts since the last message)" if more else "")
+        )
 
     def _seconds(self, stamp: TimeMsg) -> float:
         """A stamp in seconds since the whole second of the first stamp the node saw: float64
@@ -462,7 +535,8 @@ class EstimatorNode(Node):
         if self._estimate_pub.get_subscription_count():
             msg = self._estimate_msg
             msg.header.stamp = stamp
-            msg.position = _double_array(estimate_array(e))
+            estimate_into(self._estimate_view, e)
+            msg.position = self._estimate_values  # (the setter copies it unless field checks are on)
             self._estimate_pub.publish(msg)
 
     def _reject(self, exc: SampleRejected) -> None:
@@ -515,6 +589,11 @@ class EstimatorNode(Node):
         """Dropped samples so far, by reason (every reason listed)."""
         return {r: int(self._guard.rejected.get(r, 0)) for r in REASONS}
 
+    @property
+    def window_resets(self) -> int:
+        """Window restarts caused by the input stream: gaps > max_gap_s and jumps back."""
+        return self._resets_before + self._estimator.resets + self._guard.restarts
+
     def diagnostics_status(self) -> DiagnosticStatus:
         """The node's status; rates and processing times cover the time since the previous call."""
         now = time.monotonic()
@@ -553,7 +632,8 @@ class EstimatorNode(Node):
             "samples_accepted": str(self._guard.accepted),
             "samples_rejected": str(self._guard.rejected_total),
             **{f"rejected_{reason}": str(n) for reason, n in self.rejected.items()},
-            "window_resets": str(self._resets_before + self._estimator.resets),
+            "window_resets": str(self.window_resets),
+            "stream_restarts": str(self._guard.restarts),
             "max_gap_s": f"{self._config.max_gap_s:g}",
         }
         problems = []
@@ -590,10 +670,56 @@ class EstimatorNode(Node):
         )
 
     def _publish_diagnostics(self) -> None:
-        msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [self.diagnostics_status()]
-        self._diag_pub.publish(msg)
+        try:
+            msg = DiagnosticArray()
+            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.status = [self.diagnostics_status()]
+            self._diag_pub.publish(msg)
+            self._publish_profile()
+        except (RuntimeError, InvalidHandle):
+            if self.context.ok():
+                raise  # (a timer event can still be dispatched after the context shut down)
+
+    def _publish_profile(self) -> None:
+        """Publish the period's ``~/profile`` rows; record the next period's only while
+        something subscribes (no cost otherwise)."""
+        rows, self._profile = self._profile, [] if self._profile_pub.get_subscription_count() else None
+        if rows:
+            msg = Float64MultiArray()
+            n, k = len(rows), len(PROFILE_COLUMNS)
+            msg.layout.dim = [
+                MultiArrayDimension(label="samples", size=n, stride=n * k),
+                MultiArrayDimension(label=",".join(PROFILE_COLUMNS), size=k, stride=k),
+            ]
+            msg.data = _double_array(np.array(rows, dtype=np.float64).reshape(n, k))
+            self._profile_pub.publish(msg)
+
+
+def make_executor(kind: str, context: Any = None) -> Executor:
+    """An rclpy executor by ``executor`` parameter value (EXECUTORS)."""
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    if kind == "single_threaded":
+        return SingleThreadedExecutor(context=context)
+    raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {kind!r}")
+
+
+def spin(node: Node, executor: Executor) -> None:
+    """Run ``node``'s callbacks until its context shuts down (SIGINT/SIGTERM, rclpy.shutdown).
+
+    Always with a finite timeout (SPIN_PERIOD_S): rclpy 7.1's EventsExecutor dispatches nothing
+    from ``spin()`` or ``spin_once()`` without one (it busy-waits on the clock instead; timers
+    and subscriptions never run). That, not the steady-clock diagnostics timer, is why an earlier
+    attempt with ``rclpy.spin(node, EventsExecutor())`` published no diagnostics.
+    """
+    executor.add_node(node)
+    try:
+        while node.context.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+    finally:
+        executor.remove_node(node)
 
 
 def main(args: Sequence[str] | None = None) -> int:
@@ -607,9 +733,13 @@ def main(args: Sequence[str] | None = None) -> int:
     code = 0
     try:
         node = EstimatorNode()
+        kind = node.get_parameter("executor").value
+        executor = make_executor(kind, node.context)
+        if kind == "events":
+            node.max_batch = 1  # one event per message already; see EstimatorNode._on_input
         gc.collect()
         gc.freeze()  # start-up objects stay out of later collections: shorter GC pauses
-        rclpy.spin(node)
+        spin(node, executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as exc:

@@ -26,12 +26,14 @@ from rclpy.context import Context
 from rclpy.exceptions import InvalidHandle
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from ..core.channels import CHANNELS
+from ..core.kernels import KernelLibrary
 from ..core.matcher import MatchTrace
 from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
 
@@ -127,12 +129,19 @@ class NodeProcess:
 
 @dataclass
 class Received:
-    """What a client collected from the node. Times are ``time.perf_counter_ns()`` on arrival."""
+    """What a client collected from the node.
+
+    ``estimate_recv_ns``: ``time.perf_counter_ns()`` when the client's callback got the message;
+    ``estimate_dds_ns`` / ``estimate_source_ns``: the system-clock times (``time.time_ns()``) at
+    which the message reached the client's DDS reader / was written by the node (message info).
+    """
 
     estimate_stamp_ns: list[int] = field(default_factory=list)
     estimate_values: list[np.ndarray] = field(default_factory=list)
     estimate_names: list[str] = field(default_factory=list)
     estimate_recv_ns: list[int] = field(default_factory=list)
+    estimate_dds_ns: list[int] = field(default_factory=list)
+    estimate_source_ns: list[int] = field(default_factory=list)
     modes: list[str] = field(default_factory=list)
     phases: list[float] = field(default_factory=list)
     sse: list[np.ndarray] = field(default_factory=list)
@@ -140,9 +149,14 @@ class Received:
     diagnostics: list[dict[str, str]] = field(default_factory=list)
     diagnostics_level: list[int] = field(default_factory=list)
     diagnostics_message: list[str] = field(default_factory=list)
+    profile: list[np.ndarray] = field(default_factory=list)
+    """``~/profile`` blocks of the node (rows x PROFILE_COLUMNS), if subscribed."""
 
     def clear(self) -> None:
-        for name in ("estimate_stamp_ns", "estimate_values", "estimate_recv_ns", "modes", "phases", "sse"):
+        for name in (
+            "estimate_stamp_ns", "estimate_values", "estimate_recv_ns", "estimate_dds_ns", "estimate_source_ns",
+            "modes", "phases", "sse", "profile",
+        ):
             getattr(self, name).clear()
 
     def estimates(self) -> np.ndarray:
@@ -163,13 +177,14 @@ class Received:
         )
 
 
-def _drained(callback: Callable[[Any], None], box: list[Subscription]) -> Callable[[Any], None]:
-    """Wrap a subscription callback to also take the messages queued behind the first one
-    (rclpy's executor costs hundreds of microseconds per wake-up; see EstimatorNode._on_input).
-    ``box`` receives the subscription once created."""
+def _drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscription]) -> Callable[[Any, Any], None]:
+    """Wrap a subscription callback ``callback(msg, info)`` to also take the messages queued
+    behind the first one (rclpy's executor costs hundreds of microseconds per wake-up; see
+    EstimatorNode._on_input). ``box`` receives the subscription once created. The wrapper takes
+    the message info (a SingleThreadedExecutor passes it; rclpy 7.1's EventsExecutor cannot)."""
 
-    def on_message(msg: Any) -> None:
-        callback(msg)
+    def on_message(msg: Any, info: Any) -> None:
+        callback(msg, info)
         sub = box[0]
         for _ in range(200):
             try:
@@ -179,7 +194,7 @@ def _drained(callback: Callable[[Any], None], box: list[Subscription]) -> Callab
                 return
             if taken is None:
                 return
-            callback(taken[0])
+            callback(taken[0], taken[1])
 
     return on_message
 
@@ -210,6 +225,8 @@ class EstimatorClient:
         outputs: The estimator topics to subscribe to (the node skips topics nobody listens to).
         estimator_name: Keep only diagnostics of the estimator node with this fully qualified name
             (e.g. ``/estimator_node``; default: any).
+        profile_topic: Also subscribe to the node's ``~/profile`` topic under this full name
+            (e.g. ``/estimator_node/profile``), which makes the node record it.
     """
 
     def __init__(
@@ -225,6 +242,7 @@ class EstimatorClient:
         node_name: str = "gait_estimator_client",
         outputs: Sequence[str] = (ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, DIAGNOSTICS_TOPIC),
         estimator_name: str | None = None,
+        profile_topic: str | None = None,
     ) -> None:
         self._own_context = context is None
         if context is None:
@@ -264,6 +282,9 @@ class EstimatorClient:
         unknown = set(outputs) - set(subs)
         if unknown:
             raise ValueError(f"unknown output topic(s) {sorted(unknown)}")
+        if profile_topic:
+            subs[profile_topic] = (Float64MultiArray, self._on_profile, 10)
+            outputs = (*outputs, profile_topic)
         self._subs = []
         for topic in outputs:
             msg_type, callback, qos = subs[topic]
@@ -277,37 +298,44 @@ class EstimatorClient:
 
     # -- callbacks
 
-    def _on_estimate(self, msg: JointState) -> None:
+    def _on_estimate(self, msg: JointState, info: dict[str, Any]) -> None:
         self.estimate_count += 1
         r = self.received
         r.estimate_recv_ns.append(time.perf_counter_ns())
+        r.estimate_dds_ns.append(info["received_timestamp"])
+        r.estimate_source_ns.append(info["source_timestamp"])
         r.estimate_stamp_ns.append(stamp_to_ns(msg.header.stamp))
         if self.record:
             r.estimate_values.append(np.frombuffer(msg.position, dtype=np.float64).copy())
             if not r.estimate_names:
                 r.estimate_names = list(msg.name)
 
-    def _on_mode(self, msg: String) -> None:
+    def _on_mode(self, msg: String, _info: Any = None) -> None:
         self.mode_count += 1
         if self.record:
             self.received.modes.append(msg.data)
         if self.on_mode is not None:
             self.on_mode(msg.data)
 
-    def _on_phase(self, msg: Float64) -> None:
+    def _on_phase(self, msg: Float64, _info: Any = None) -> None:
         self.phase_count += 1
         if self.record:
             self.received.phases.append(msg.data)
         if self.on_phase is not None:
             self.on_phase(msg.data)
 
-    def _on_sse(self, msg: Float64MultiArray) -> None:
+    def _on_sse(self, msg: Float64MultiArray, _info: Any = None) -> None:
         if self.record:
             self.received.sse.append(np.frombuffer(msg.data, dtype=np.float64).copy())
             if msg.layout.dim:
                 self.received.sse_label = msg.layout.dim[0].label
 
-    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+    def _on_profile(self, msg: Float64MultiArray, _info: Any = None) -> None:
+        if len(msg.layout.dim) == 2:
+            k = msg.layout.dim[1].size
+            self.received.profile.append(np.frombuffer(msg.data, dtype=np.float64).reshape(-1, k).copy())
+
+    def _on_diagnostics(self, msg: DiagnosticArray, _info: Any = None) -> None:
         for st in msg.status:
             if st.name.startswith(self._diag_prefix) if self._diag_prefix else st.name.endswith(": gait estimator"):
                 self.received.diagnostics.append({kv.key: kv.value for kv in st.values})
@@ -427,3 +455,47 @@ class EstimatorClient:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def publishing_costs_us(lib: KernelLibrary, publisher: Publisher) -> dict[str, float]:
+    """Per-call costs in this process, µs, of the node's publishing levers (no DDS involved):
+    filling its preallocated ``estimate`` message (what the node does) vs building a fresh one,
+    and a subscriber-count query (the node's check before each publish)."""
+    import timeit
+
+    from builtin_interfaces.msg import Time as TimeMsg
+
+    from ..analysis.bench import synthetic_walk
+    from ..core.estimator import Estimator
+    from ..io.outputs import estimate_array, estimate_into
+
+    est = Estimator(lib)
+    e = None
+    for i, row in enumerate(synthetic_walk(lib, int(lib.lengths.max()) + 20, seed=1)):
+        e = est.update(i / lib.sample_rate_hz, row)
+    assert e is not None
+    names = estimate_names(lib.mode_names)
+    stamp = TimeMsg(sec=1, nanosec=0)
+    reused = JointState()
+    reused.name = names
+    buffer = array.array("d", bytes(8 * len(names)))
+    view = np.frombuffer(buffer, dtype=np.float64)
+
+    def reuse() -> None:  # what the node does
+        reused.header.stamp = stamp
+        estimate_into(view, e)
+        reused.position = buffer
+
+    def fresh() -> None:
+        m = JointState()
+        m.name = list(names)
+        m.header.stamp = stamp
+        m.position = [float(v) for v in estimate_array(e)]
+
+    n = 2000
+    t = {
+        "fill_preallocated_estimate_us": timeit.timeit(reuse, number=n) / n * 1e6,
+        "build_fresh_estimate_us": timeit.timeit(fresh, number=n) / n * 1e6,
+        "subscription_count_query_us": timeit.timeit(publisher.get_subscription_count, number=n) / n * 1e6,
+    }
+    return {k: float(v) for k, v in t.items()}

@@ -1,0 +1,209 @@
+#!/usr/bin/env python3
+"""experiments/results/node/tables.md from the JSON reports of ``gait-estimator bench-node``.
+
+    python experiments/node_tables.py      # part of `make docs`
+
+Reads, in experiments/results/node/ (a missing report leaves its column or section out):
+
+* ``bench_node.json``: ``gait-estimator bench-node --profile --json ...`` on a quiet machine;
+* ``bench_node_busy.json``: the same while two CPU burners (``python -c 'while True: pass'``)
+  keep both cores busy;
+* ``bench_node_busy_rt.json``: with the same burners, ``chrt -f 10 gait-estimator bench-node
+  --executor events --outputs estimate --rates 1000,2000,3000 --profile --json ...`` (the bench and
+  the node it starts under SCHED_FIFO priority 10, as a controller would run);
+* ``bench_node_one_core.json``: ``taskset -c 0 gait-estimator bench-node --profile --json ...``
+  on a quiet machine (the node and the bench process share one core).
+
+Writes ``tables.md`` with the sections ``Two cores`` (docs/performance.md, block
+``node#Two cores``) and ``One core`` (for the embedded-proxy section).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+NODE = ROOT / "experiments" / "results" / "node"
+REPORTS = {"quiet": "bench_node.json", "busy": "bench_node_busy.json", "busy_rt": "bench_node_busy_rt.json",
+           "one_core": "bench_node_one_core.json"}
+PERIODS_MS = {230: 1000 / 230, 1000: 1.0}
+STAGES = {
+    "dds_in_and_executor": "input published → node starts handling it (DDS in, executor wake-up, take)",
+    "estimator": "node: angle extraction, stamp checks, estimator update",
+    "publish": "node: publishing `estimate` (count query, fill, publish)",
+    "dds_out": "`estimate` written by the node → the bench's DDS reader (DDS out)",
+    "bench_callback": "the bench's DDS reader → its rclpy callback (the bench's own executor)",
+    "total_to_dds": "**total, to the bench's DDS reader**",
+    "total_to_callback": "total, to the bench's callback",
+}
+
+
+def table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def ms(x: float | None, digits: int = 2) -> str:
+    return "—" if x is None else f"{x:.{digits}f}"
+
+
+def variant(report: dict[str, Any], executor: str, outputs: str) -> dict[str, Any] | None:
+    return next((v for v in report.get("variants", []) if v["executor"] == executor and v["outputs"] == outputs), None)
+
+
+def step_at(v: dict[str, Any], rate: float) -> dict[str, Any] | None:
+    """The sustained (or last) step at ``rate`` of a variant's throughput sweep."""
+    steps = [s for s in v.get("throughput", {}).get("steps", []) if s["rate_hz"] == rate]
+    return next((s for s in steps if s.get("sustained")), steps[-1] if steps else None)
+
+
+def lat4(d: dict[str, Any], prefix: str = "") -> str:
+    return " / ".join(ms(d.get(f"{prefix}{k}_ms")) for k in ("p50", "p90", "p99", "max")) + " ms"
+
+
+def lat2(d: dict[str, Any] | None, prefix: str = "") -> str:
+    if not d:
+        return "—"
+    return f"{ms(d.get(prefix + 'p50_ms'))} / {ms(d.get(prefix + 'p99_ms'))} ms"
+
+
+def rate(v: dict[str, Any]) -> str:
+    tp = v.get("throughput")
+    if not tp:
+        return "—"
+    best = tp["max_sustained_rate_hz"]
+    tried = tp["rates_tried"]
+    higher = [r for r in tried if r > best]
+    return f"{best:,.0f} Hz" + ("" if higher else " (the highest tried)")
+
+
+def machine_line(r: dict[str, Any]) -> str:
+    m = r["machine"]
+    return (f"{m['processor']}, {m['cpus']} vCPUs, Python {m['python']}, numpy {m['numpy']}; "
+            f"load average {r['load_average_before'][0]:.2f} before the run, {r['load_average_after'][0]:.2f} after")
+
+
+def two_cores(reports: dict[str, dict[str, Any]]) -> str:
+    quiet = reports["quiet"]
+    busy = reports.get("busy")
+    busy_rt = reports.get("busy_rt")
+    states = [("quiet machine", quiet)] + ([("both cores busy (two CPU burners)", busy)] if busy else [])
+    states += [("both cores busy, bench and node under `chrt -f 10`", busy_rt)] if busy_rt else []
+    default = quiet["executor"], quiet["outputs"]
+    out = [
+        "## Two cores",
+        "",
+        "`gait-estimator bench-node --profile --json experiments/results/node/bench_node.json` on the development "
+        f"machine, quiet: {machine_line(quiet)}."
+        + (" The same command with two `python -c 'while True: pass'` burners running gives "
+           f"`bench_node_busy.json` (load average {busy['load_average_before'][0]:.2f} before, "
+           f"{busy['load_average_after'][0]:.2f} after)." if busy else "")
+        + (" With the same burners, `chrt -f 10 gait-estimator bench-node --executor events --outputs estimate "
+           "--rates 1000,2000,3000 --profile --json experiments/results/node/bench_node_busy_rt.json` runs the bench "
+           "and the node it starts with real-time (SCHED_FIFO) priority, as a controller would be run." if busy_rt else "")
+        + f" Library `{quiet['library']}` ({quiet['modes']} modes). Latency is measured from the publication of an input "
+        "to the arrival of its `estimate` at the bench's DDS reader (the message info's `received_timestamp`), "
+        "and, as in earlier versions of this table, to the bench's rclpy callback (which adds the bench's own "
+        "executor, a SingleThreadedExecutor).",
+        "",
+        f"### Default node (executor `{default[0]}`), the bench subscribing to `estimate` only",
+        "",
+    ]
+    rows = []
+    vs = [(name, variant(r, *default)) for name, r in states]
+    rows.append(["latency at 230 Hz to the bench's DDS reader, p50 / p90 / p99 / max",
+                 *(lat4(v["latency"], "dds_") for _, v in vs)])
+    rows.append(["latency at 230 Hz to the bench's callback, p50 / p90 / p99 / max", *(lat4(v["latency"]) for _, v in vs)])
+    rows.append(["latency at 1000 Hz, p50 / p99, to the DDS reader; to the callback",
+                 *(f"{lat2(step_at(v, 1000), 'dds_')}; {lat2(step_at(v, 1000))}" for _, v in vs)])
+    rows.append(["highest input rate sustained without drops", *(rate(v) for _, v in vs)])
+    rows.append(["node processing time at 230 Hz, mean / max (diagnostics)",
+                 *(f"{ms(v['latency'].get('node_processing_mean_ms'), 3)} / {ms(v['latency'].get('node_processing_max_ms'))} ms"
+                   for _, v in vs)])
+    out += [table(["measure", *(name for name, _ in states)], rows), ""]
+
+    out += ["### Executors and outputs side by side", ""]
+    rows = []
+    for name, r in states:
+        for v in r["variants"]:
+            lt = v["latency"]
+            rows.append([name, f"`{v['executor']}`", "all four" if v["outputs"] == "all" else "`estimate`",
+                         lat2(lt, "dds_"), lat2(lt), rate(v),
+                         f"{ms(lt.get('node_processing_mean_ms'), 3)} ms"])
+    out += [table(["machine", "node executor", "bench subscribes to", "230 Hz latency to DDS reader, p50 / p99",
+                   "to callback, p50 / p99", "highest rate without drops", "node processing mean"], rows), ""]
+
+    prof = variant(quiet, *default)
+    stages = (prof or {}).get("latency", {}).get("profile", {}).get("stages")
+    if stages:
+        out += [f"### Where the time goes (quiet machine, 230 Hz, executor `{default[0]}`)", "",
+                "`--profile` joins the node's `~/profile` rows with the `estimate` message info, per sample "
+                f"({prof['latency']['profile']['samples']:,} samples):", ""]
+        rows = [[label, ms(stages[k]["mean_ms"], 3), ms(stages[k]["p50_ms"], 3), ms(stages[k]["p99_ms"], 3)]
+                for k, label in STAGES.items() if k in stages]
+        out += [table(["stage", "mean ms", "p50 ms", "p99 ms"], rows), ""]
+        micro = prof.get("micro_us")
+        if micro:
+            out += ["Per call in the bench process (no DDS): filling the node's preallocated `estimate` message "
+                    f"{micro['fill_preallocated_estimate_us']:.1f} µs, building a fresh one "
+                    f"{micro['build_fresh_estimate_us']:.1f} µs; a subscriber-count query "
+                    f"{micro['subscription_count_query_us']:.1f} µs.", ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def one_core(r: dict[str, Any]) -> str:
+    v = variant(r, r["executor"], r["outputs"])
+    assert v is not None
+    lt = v["latency"]
+    out = [
+        "## One core (`taskset -c 0`)",
+        "",
+        "`taskset -c 0 gait-estimator bench-node --profile --json experiments/results/node/bench_node_one_core.json` "
+        f"on the quiet development machine ({machine_line(r)}; {r['machine']['cpus_allowed']} CPU allowed): the node "
+        "and the bench process share one core, a stand-in for a Raspberry Pi-class computer (the bench's own "
+        f"publishing and receiving compete with the node). Executor `{v['executor']}`, the bench subscribing to "
+        "`estimate`.",
+        "",
+    ]
+    rows = [
+        ["latency at 230 Hz to the bench's DDS reader, p50 / p90 / p99 / max", lat4(lt, "dds_")],
+        ["latency at 230 Hz to the bench's callback, p50 / p90 / p99 / max", lat4(lt)],
+        ["highest input rate sustained without drops", rate(v)],
+    ]
+    budget = []
+    for hz, period in PERIODS_MS.items():
+        d = lt if hz == 230 else step_at(v, hz)
+        if not d or d.get("node_processing_mean_ms") is None:
+            continue
+        mean, mx = d["node_processing_mean_ms"], d.get("node_processing_max_ms")
+        rows.append([f"node processing time at {hz:,} Hz, mean / max (diagnostics)", f"{ms(mean, 3)} / {ms(mx)} ms"])
+        budget.append(f"at {hz:,} Hz a sample arrives every {period:.2f} ms; the node's mean processing time of "
+                      f"{mean:.3f} ms leaves {period - mean:.2f} ms ({100 * (1 - mean / period):.0f} %) of each period")
+    stages = lt.get("profile", {}).get("stages", {})
+    if "estimator" in stages and "publish" in stages:
+        rows.append(["estimator / publish per sample at 230 Hz, p50 / p99 (`--profile`)",
+                     f"{lat2(stages['estimator'])}; {lat2(stages['publish'])}"])
+    out += [table(["measure", "one core"], rows), ""]
+    if budget:
+        out += ["Per-sample budget: " + "; ".join(budget) + ".", ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def main() -> int:
+    reports = {k: json.loads((NODE / f).read_text(encoding="utf-8")) for k, f in REPORTS.items() if (NODE / f).is_file()}
+    if "quiet" not in reports:
+        sys.exit(f"{NODE / REPORTS['quiet']}: missing; run gait-estimator bench-node --profile --json {NODE / REPORTS['quiet']}")
+    parts = [two_cores(reports)]
+    if "one_core" in reports:
+        parts.append(one_core(reports["one_core"]))
+    (NODE / "tables.md").write_text("\n".join(parts), encoding="utf-8")
+    print(f"wrote {(NODE / 'tables.md').relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
