@@ -361,3 +361,58 @@ def test_config_yaml_holds_the_declared_defaults(ros, tmp_path: Path) -> None:
     finally:
         rclpy.try_shutdown(context=ctx)
 
+
+
+def test_preset_services_and_new_wearer_outputs(ros, multispeed_csv: Path, able_bodied, tmp_path: Path) -> None:
+    """preset: paper at start-up gives the paper's options (explicit ones still win); the
+    estimate carries cadence_ratio; save_library writes the personalised kernels (or says why
+    not); reset_calibration zeroes the learnt sensor offsets."""
+    from std_srvs.srv import Trigger
+
+    from gait_estimator.core.estimator import EstimatorConfig
+
+    h = ros(26)
+    paper = h.estimator(preset="paper", window_fraction=0.5)
+    assert paper.config == EstimatorConfig.preset("paper", window_fraction=0.5)
+    assert paper.get_parameter("resample").value == "off" and list(paper.get_parameter("time_scales").value) == [1.0]
+    (result,) = paper.set_parameters([Parameter("preset", value="default")])
+    assert not result.successful and "read-only" in result.reason.lower()
+    paper.destroy_node()
+    h.nodes.remove(paper)
+
+    path = tmp_path / "adapted.yaml"
+    node = h.estimator(adapt_rate=0.2, adapted_library_path=str(path))
+    assert node.config == EstimatorConfig(adapt_rate=0.2)
+    client = h.client(node)
+    assert client.wait_for_node(10.0, settle_s=0.0)
+    rec = load_multispeed(multispeed_csv, 5500, 8500)  # steady slow walking
+    lockstep(client, np.radians(rec.angles_deg), 2000.0, stamps_ns(rec))
+    got = client.received
+    assert "cadence_ratio" in got.estimate_names
+    ratio = np.array(got.estimate_values)[:, got.estimate_names.index("cadence_ratio")]
+    ready = np.array(got.estimate_values)[:, 2] == 1.0
+    assert np.all((ratio[ready] >= 1 / 1.12 - 1e-9) & (ratio[ready] <= 1 / 0.88 + 1e-9))
+
+    def call(name: str) -> Trigger.Response:
+        cli = client.node.create_client(Trigger, f"{h.namespace}/{h.node_name}/{name}")
+        assert cli.wait_for_service(timeout_sec=5.0)
+        future = cli.call_async(Trigger.Request())
+        assert client.spin_until(future.done, 5.0)
+        return future.result()
+
+    saved = call("save_library")
+    assert saved.success and str(path) in saved.message and path.is_file(), saved.message
+    lib = load_library(path)
+    assert lib.mode_names == able_bodied.mode_names and sum(
+        lib.provenance["adaptation"]["accepted_strides"].values()) > 0
+    assert np.any(node._estimator.sensor_offset_deg != 0)
+    reset = call("reset_calibration")
+    assert reset.success and "reset to 0" in reset.message
+    assert not np.any(node._estimator.sensor_offset_deg)
+    diag = client.latest_diagnostics(3.0)
+    assert diag is not None and diag["sensor_offset_deg"] == "0.00,0.00,0.00,0.00" and int(diag["adapted_strides"]) > 0
+
+    (result,) = node.set_parameters([Parameter("adapt_rate", value=0.0)])
+    assert result.successful
+    off = call("save_library")
+    assert not off.success and "personalisation is off" in off.message

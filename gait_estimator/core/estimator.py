@@ -299,6 +299,18 @@ class Estimator:
             self._adapt(x, est, result)
         return est
 
+    def reset_calibration(self) -> None:
+        """Forget the learnt sensor offsets (e.g. after the sensors were re-donned)."""
+        self.sensor_offset_deg = np.zeros(N_CHANNELS)
+        self.matcher.set_sensor_offset(self.sensor_offset_deg)
+        self._calib_last = None
+
+    def adopt_calibration(self, other: Estimator) -> None:
+        """Start from the sensor offsets ``other`` has learnt (same sensors, new options)."""
+        if self.config.offset_calibration_rate > 0 and np.any(other.sensor_offset_deg != 0):
+            self.sensor_offset_deg = other.sensor_offset_deg.copy()
+            self.matcher.set_sensor_offset(self.sensor_offset_deg)
+
     def _calibrate(self, est: Estimate, result: Any) -> None:
         """At every heel strike of a confident, unheld mode: move the sensor offset estimate
         towards that stride's window-vs-kernel mean difference."""

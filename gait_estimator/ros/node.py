@@ -41,6 +41,7 @@ import time
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -58,13 +59,14 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
+from std_srvs.srv import Trigger
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import GaitEstimatorError
-from ..core.estimator import OPTIONS, Estimator, EstimatorConfig
+from ..core.estimator import OPTIONS, PRESETS, Estimator, EstimatorConfig
 from ..core.kernels import KernelLibrary
 from ..core.supervisor import Estimate
-from ..io.library_io import load_library
+from ..io.library_io import load_library, save_library
 from ..io.outputs import (
     ESTIMATE_TOPIC,
     INPUT_TOPIC,
@@ -87,6 +89,8 @@ from ..io.stream import (
 )
 
 NODE_NAME = "estimator_node"
+SAVE_LIBRARY_SERVICE = "~/save_library"
+RESET_CALIBRATION_SERVICE = "~/reset_calibration"
 DIAGNOSTICS_TOPIC = "/diagnostics"
 DIAGNOSTICS_PERIOD_S = 1.0
 WARN_THROTTLE_S = 2.0
@@ -133,6 +137,8 @@ DEFAULTS: dict[str, Any] = {
     "input_units": "rad",
     "input_type": "joint_state",
     "executor": "events",
+    "adapted_library_path": "",
+    "preset": "default",
     **{o.name: o.default for o in OPTIONS},
 }
 """Parameter defaults, in declaration order; ``config/estimator.yaml`` holds the same values."""
@@ -147,13 +153,18 @@ DESCRIPTIONS: dict[str, str] = {
     "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]).",
     "executor": "Executor of the estimator_node process (read-only): events (rclpy's EventsExecutor, lower "
     "latency) or single_threaded (rclpy's SingleThreadedExecutor).",
+    "adapted_library_path": "Where the save_library service writes the personalised kernels (.yaml or .npz); '' = "
+    "~/.ros/gait_estimator/<library>_adapted.yaml.",
+    "preset": "Values the estimator options start from (read-only): default (robust for a new wearer: resampling, "
+    "time-scaled kernels, offset tolerance and calibration) or paper (the paper's algorithm, reproduces the reference "
+    "implementation). Options set explicitly (command line, params file) override it.",
     **{
         o.name: o.description[0].upper() + o.description[1:]
         + ("" if o.name == "max_gap_s" else ". Changing it at run time restarts the window.")
         for o in OPTIONS
     },
 }
-READ_ONLY = frozenset({"input_type", "executor"})
+READ_ONLY = frozenset({"input_type", "executor", "preset"})
 
 
 class StartupError(GaitEstimatorError):
@@ -193,12 +204,15 @@ class EstimatorNode(Node):
         super().__init__(node_name, **kwargs)
         self._library: KernelLibrary | None = None
         self._config = EstimatorConfig()
+        self._config_preset = "default"
         self._pending: tuple[KernelLibrary | None, EstimatorConfig, Estimator | None] | None = None
         self._last_rejection = ""
         self.add_on_set_parameters_callback(self._validate_parameters)
         try:
             for name, default in DEFAULTS.items():
                 self._last_rejection = ""
+                if name in OPTION_NAMES:  # the preset's value unless overridden
+                    default = PRESETS[self._config_preset][name]
                 self.declare_parameter(
                     name, default, ParameterDescriptor(description=DESCRIPTIONS[name], read_only=name in READ_ONLY)
                 )
@@ -206,6 +220,9 @@ class EstimatorNode(Node):
                 if self._pending is not None:
                     self._library, self._config = self._pending[0] or self._library, self._pending[1]
                 self._pending = None
+                if name == "preset":
+                    self._config_preset = self.get_parameter("preset").value
+                    self._config = EstimatorConfig.preset(self._config_preset)
             assert self._library is not None
             self._set_estimator(self._new_estimator(self._library, self._config))
         except ParameterException as exc:
@@ -264,6 +281,8 @@ class EstimatorNode(Node):
             qos_overriding_options=QoSOverridingOptions.with_default_policies(),
         )
         self.add_post_set_parameters_callback(self._apply_parameters)
+        self._save_srv = self.create_service(Trigger, SAVE_LIBRARY_SERVICE, self._save_library)
+        self._calib_srv = self.create_service(Trigger, RESET_CALIBRATION_SERVICE, self._reset_calibration)
         # Diagnostics describe the process (rates, processing time), so they run on the steady
         # clock: they keep coming while simulated time is paused.
         self._diag_timer = self.create_timer(
@@ -341,6 +360,8 @@ class EstimatorNode(Node):
             return f"must be one of {', '.join(INPUT_TYPES)}, got {v!r}"
         elif p.name == "executor" and v not in EXECUTORS:
             return f"must be one of {', '.join(EXECUTORS)}, got {v!r}"
+        elif p.name == "preset" and v not in PRESETS:
+            return f"must be one of {', '.join(PRESETS)}, got {v!r}"
         return ""
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
@@ -364,6 +385,8 @@ class EstimatorNode(Node):
         restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - {"max_gap_s"})
         if restart and estimator is not None:
             self._resets_before += self._estimator.resets
+            if "kernels" not in names:  # same kernels, same sensors: keep what calibration learnt
+                estimator.adopt_calibration(self._estimator)
             self._set_estimator(estimator)
             lib = self._library
             self.get_logger().info(
@@ -379,6 +402,40 @@ class EstimatorNode(Node):
         input_type = self.get_parameter("input_type").value if self.has_parameter("input_type") else "joint_state"
         return Estimator(library, config, stamped=input_type == "joint_state")
 
+    # -----------------------------------------------------------------------------------------
+    # Services
+
+    def _save_library(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """``~/save_library``: write the personalised kernels to ``adapted_library_path``."""
+        est = self._estimator
+        if est.adapter is None:
+            response.success = False
+            response.message = "personalisation is off (adapt_rate is 0): no adapted kernels to save"
+            return response
+        path = self.get_parameter("adapted_library_path").value or str(
+            Path.home() / ".ros" / "gait_estimator" / f"{self.library.name}_adapted.yaml")
+        try:
+            Path(path).expanduser().parent.mkdir(parents=True, exist_ok=True)
+            lib = est.adapted_library()
+            out = save_library(lib, Path(path).expanduser())
+        except (GaitEstimatorError, OSError, ValueError) as exc:
+            response.success, response.message = False, f"{path}: {_one_line(exc)}"
+            return response
+        strides = lib.provenance["adaptation"]["accepted_strides"]
+        response.success = True
+        response.message = f"wrote {out} (strides adopted: " + ", ".join(f"{m} {n}" for m, n in strides.items()) + ")"
+        self.get_logger().info(response.message)
+        return response
+
+    def _reset_calibration(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """``~/reset_calibration``: forget the learnt sensor offsets (after re-donning)."""
+        before = self._estimator.sensor_offset_deg.copy()
+        self._estimator.reset_calibration()
+        response.success = True
+        response.message = "sensor offsets reset to 0 (were " + ", ".join(f"{v:.2f}" for v in before) + " deg)"
+        self.get_logger().info(response.message)
+        return response
+
     def _set_estimator(self, estimator: Estimator) -> None:
         self._estimator = estimator
         names = estimator.mode_names
@@ -392,11 +449,9 @@ class EstimatorNode(Node):
         self._last_estimate: Estimate | None = None
 
     def _options_summary(self) -> str:
-        preset = self._config.preset_name()
-        if preset:
-            return f"preset {preset}"
-        changed = self._config.changed_from("default")
-        return "preset default with " + ", ".join(f"{k}={v}" for k, v in changed.items())
+        changed = self._config.changed_from(self._config_preset)
+        return f"preset {self._config_preset}" + (
+            " with " + ", ".join(f"{k}={v}" for k, v in changed.items()) if changed else "")
 
     # -----------------------------------------------------------------------------------------
     # Input
@@ -635,6 +690,9 @@ class EstimatorNode(Node):
             "window_resets": str(self.window_resets),
             "stream_restarts": str(self._guard.restarts),
             "max_gap_s": f"{self._config.max_gap_s:g}",
+            "cadence_ratio": f"{e.cadence_ratio:.3f}" if shown and math.isfinite(e.cadence_ratio) else "",
+            "sensor_offset_deg": ",".join(f"{v:.2f}" for v in self._estimator.sensor_offset_deg),
+            "adapted_strides": str(int(self._estimator.adapter.accepted.sum())) if self._estimator.adapter else "",
         }
         problems = []
         if self._period_received == 0:
