@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 OLD_NUMPY ?= 1.26.4
 OLD_VENV ?= .venv-numpy126
 
-.PHONY: venv test test-core-old-numpy lint demo bench soak docs docs-check clean
+.PHONY: venv test test-core-old-numpy lint demo bench bench-one-core soak docs docs-check clean
 
 $(BIN)/.installed: setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
@@ -42,6 +42,12 @@ bench: venv
 	mkdir -p out
 	$(BIN)/gait-estimator bench --modes 7,70,700 --json out/bench.json
 
+# The embedded proxy (docs/performance.md): the matcher benchmark and bench-node on one core.
+bench-one-core: venv
+	mkdir -p out
+	taskset -c 0 $(BIN)/gait-estimator bench --modes 7,70,700 --json out/bench_one_core.json
+	taskset -c 0 $(BIN)/gait-estimator bench-node --profile --json out/bench_node_one_core.json
+
 # The long soak of test/test_faults.py (not in CI, which runs 150,000 samples): 1.8 million
 # samples with 1 kHz stamps (30 minutes of input) through estimator_node, as fast as it answers.
 SOAK_SAMPLES ?= 1800000
@@ -53,6 +59,7 @@ soak: venv
 # its <!-- BEGIN name --> block (docs/performance.md, "Regenerating the numbers").
 docs: venv
 	$(BIN)/python experiments/summary_tables.py
+	$(BIN)/python experiments/matcher_tables.py
 	$(BIN)/python experiments/node_tables.py
 	$(BIN)/python experiments/update_docs.py
 

@@ -3,18 +3,19 @@
 docs/new_wearer.md).
 
     python experiments/cross_session.py                     # -> experiments/results/cross_session/
-    python experiments/cross_session.py --settings default,resample --datasets SYN-NEW,LG2-AB --seeds 3
-    python experiments/cross_session.py --add 'mine={"resample": true, "window_fraction": 0.6}'
+    python experiments/cross_session.py --settings "default,paper + resample" --datasets SYN-NEW,LG2-AB --seeds 3
+    python experiments/cross_session.py --add 'mine={"offset_tolerance_deg": 4.0, "window_fraction": 0.75}'
 
 Every data set is fed to ``Estimator.update`` sample by sample (``run_estimator``, the code behind
-``gait-estimator process``) under every *setting*: a named dict of options for
-``EstimatorConfig().with_options(**options)`` (``SETTINGS`` below; ``--add NAME=JSON`` adds one).
-A new option is benchmarked by adding a line to ``SETTINGS``: nothing else here knows option
-names, except ``PAPER`` (the paper's values of today's options) and the ``"<table>"`` value of
-``transitions`` (the data set's allowed-transitions file). ``default`` = ``{}`` is whatever
-``EstimatorConfig()`` is at the time of the run: the targets table checks it. Settings naming an
-option this ``EstimatorConfig`` does not have are skipped (listed in summary.json). Settings
-that resolve to the same configuration are run once.
+``gait-estimator process``) under every *setting*: a named dict of options, applied on top of the
+preset its ``preset`` key names (``default`` if none; ``EstimatorConfig.preset``), as
+``gait-estimator process --preset P --option ...`` does (``SETTINGS`` below; ``--add NAME=JSON``
+adds one). A new option is benchmarked by adding a line to ``SETTINGS``: nothing else here knows
+option names, except the ``"<table>"`` value of ``transitions`` (the data set's
+allowed-transitions file). ``default`` = ``{}`` is the default preset: the targets table checks
+it; ``paper`` = ``{"preset": "paper"}``. Settings naming an option this ``EstimatorConfig`` does
+not have are skipped (listed in summary.json). Settings that resolve to the same configuration
+are run once.
 
 Metrics come from ``gait_estimator.analysis.evaluate.evaluate`` (the code behind
 ``gait-estimator evaluate``) via bench_common.part_stats/pool. Kernels that are not bundled are
@@ -98,14 +99,20 @@ from synthetic import generate, new_wearer
 from gait_estimator.analysis.labels import LabelRange, duration_labels, merge_steady, with_ranges
 from gait_estimator.analysis.strides import heel_strikes, stride_bounds
 from gait_estimator.analysis.train import TrainOptions, train_library
-from gait_estimator.core.estimator import Estimator, EstimatorConfig, config_from_values, run_estimator
+from gait_estimator.core.estimator import (
+    DEFAULT_TIME_SCALES,
+    Estimator,
+    EstimatorConfig,
+    config_from_values,
+    run_estimator,
+)
 from gait_estimator.core.kernels import KernelLibrary
 from gait_estimator.io.library_io import load_library
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import Recording
 
 # ---------------------------------------------------------------------------------------------
-# Settings: named option sets for EstimatorConfig().with_options(**options)
+# Settings: named option sets on top of a preset (config_of)
 
 TABLE_VALUE = "<table>"
 """``transitions`` value replaced by the data set's allowed-transitions file ('' when it has none)."""
@@ -118,26 +125,25 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "default": {},
     "paper": PAPER,
     "paper + resample": {**P, "resample": "auto"},
-    "paper + resample + time scales": {**P, "resample": "auto", "time_scales": [0.88, 0.94, 1.0, 1.06, 1.12],
+    "paper + resample + time scales": {**P, "resample": "auto", "time_scales": list(DEFAULT_TIME_SCALES),
                                        "normalize_error": True},
-    "paper + resample + offset 4°": {**P, "resample": "auto", "offset_tolerance_deg": 4.0},
+    "paper + resample + offset calibration": {**P, "resample": "auto", "offset_tolerance_deg": 2.0,
+                                              "offset_calibration_rate": 0.2},
     "default: one time scale": {"time_scales": [1.0]},
     "default: 3 time scales ±8 %": {"time_scales": [0.92, 1.0, 1.08]},
-    "default: 7 time scales ±18 %": {"time_scales": [0.82, 0.88, 0.94, 1.0, 1.06, 1.12, 1.18]},
-    "default: offset tolerance 0°": {"offset_tolerance_deg": 0.0},
-    "default: offset tolerance 2°": {"offset_tolerance_deg": 2.0},
-    "default: offset tolerance 8°": {"offset_tolerance_deg": 8.0},
-    "default: shapes only": {"offset_tolerance_deg": math.inf},
+    "default: 5 time scales ±12 %": {"time_scales": [0.88, 0.94, 1.0, 1.06, 1.12]},
+    "default: no calibration": {"offset_calibration_rate": 0.0},
+    "default: no calibration + tolerance 4°": {"offset_calibration_rate": 0.0, "offset_tolerance_deg": 4.0},
+    "default: calibration 0.1": {"offset_calibration_rate": 0.1},
+    "default: tolerance 0°": {"offset_tolerance_deg": 0.0},
+    "default: tolerance 4°": {"offset_tolerance_deg": 4.0},
+    "default: shapes only": {"offset_tolerance_deg": math.inf, "offset_calibration_rate": 0.0},
     "default: SSE (not per sample)": {"normalize_error": False},
     "default + window 0.75": {"window_fraction": 0.75},
     "default + window 0.5": {"window_fraction": 0.5},
     "default + subsample phase": {"subsample_phase": True},
     "default + min_dwell_s 0.1": {"min_dwell_s": 0.1},
     "default + transitions table": {"transitions": TABLE_VALUE},
-    "default + calibration 0.2": {"offset_calibration_rate": 0.2},
-    "default + calibration 0.2 + tol 2°": {"offset_calibration_rate": 0.2, "offset_tolerance_deg": 2.0},
-    "default + calibration 0.2 + tol 0°": {"offset_calibration_rate": 0.2, "offset_tolerance_deg": 0.0},
-    "default + calibration 0.1 + tol 2°": {"offset_calibration_rate": 0.1, "offset_tolerance_deg": 2.0},
     "default + personalisation 0.1": {"adapt_rate": 0.1},
     "default + personalisation 0.3": {"adapt_rate": 0.3},
 }
@@ -590,8 +596,8 @@ def write_tables(res: dict[str, Any], out: Path) -> str:
                                                 else "DIFFERENT modes or lengths"))
             for name, c in checks.items()) + "."
     rows = [[name, "`" + json.dumps(opts, ensure_ascii=False) + "`"] for name, opts in res["settings"].items()]
-    parts[0] = ("### Run: command, machine, settings\n\n" + parts[0] + " Settings (options given to "
-                "`EstimatorConfig().with_options`; `\"<table>\"` = the data set's allowed-transitions file):\n\n"
+    parts[0] = ("### Run: command, machine, settings\n\n" + parts[0] + " Settings (options on top of the preset "
+                "their `preset` key names, `default` if none; `\"<table>\"` = the data set's allowed-transitions file):\n\n"
                 + md_table(["setting", "options"], rows))
 
     # targets

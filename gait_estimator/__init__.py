@@ -4,7 +4,8 @@ Architecture (data flows left to right; a subpackage imports only those to its l
 
     core  ->  io  ->  analysis  ->  ros  ->  cli
 
-* ``core``: kernels, matcher, resampling, supervision, the estimator pipeline (numpy only);
+* ``core``: kernels, matcher (numba-compiled step optional), resampling, supervision, calibration,
+  personalisation, the estimator pipeline (numpy);
 * ``io``: kernel library and recording formats (CSV, rosbag2), stream input checks, output
   layouts, bundled data;
 * ``analysis``: strides, labels, training, evaluation, figures, benchmarks;
