@@ -53,7 +53,8 @@ def test_naive_matches_a_plain_loop() -> None:
     for i, d in enumerate(data):
         r = naive.step(d)
         for m, mode in enumerate(lib.modes):
-            e = brute_force(data[: i + 1], mode.samples)
+            # the matchers use the kernels' float32 values (the compiled step streams float32)
+            e = brute_force(data[: i + 1], mode.samples.astype(np.float32).astype(np.float64))
             assert r.sse[m] == pytest.approx(e.min(), rel=1e-12)
             j = int(e.argmin())
             assert r.phases[m] == pytest.approx(((j + 1) % mode.length) / mode.length)
@@ -202,7 +203,8 @@ def test_window_fraction_compares_only_the_newest_samples() -> None:
         r = naive.step(d)
     for m, mode in enumerate(lib.modes):
         w = int(naive.windows[m])
-        e = [sum(float(np.sum((data[-1 - t] - mode.samples[(j - t) % mode.length]) ** 2)) for t in range(w))
+        k = mode.samples.astype(np.float32).astype(np.float64)  # the matchers' kernel values
+        e = [sum(float(np.sum((data[-1 - t] - k[(j - t) % mode.length]) ** 2)) for t in range(w))
              for j in range(mode.length)]
         assert r.sse[m] == pytest.approx(min(e))
     assert r.ready and not NaiveMatcher(lib, window_fraction=0.5).step(data[0]).ready
@@ -380,7 +382,7 @@ def test_mean_offset_and_sensor_offset(able_bodied, fraction) -> None:
     m = IncrementalMatcher(able_bodied, window_fraction=fraction)
     r = m.run(x + offsets)
     assert r.modes[-1] == "Med"
-    np.testing.assert_allclose(m.mean_offset(1, int(m.step(x[0] + offsets).column[1])), offsets, atol=1e-9)
+    np.testing.assert_allclose(m.mean_offset(1, int(m.step(x[0] + offsets).column[1])), offsets, atol=1e-6)  # float32 kernels
     clean = IncrementalMatcher(able_bodied, window_fraction=fraction).run(x)
     shifted = IncrementalMatcher(able_bodied, window_fraction=fraction)
     shifted.set_sensor_offset(offsets)
@@ -413,3 +415,20 @@ def test_without_numba_the_numpy_step_runs(tmp_path) -> None:
         fast = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
         assert fast[:3] == ["True", "numba", "Med"]
         assert float(fast[3]) == pytest.approx(float(plain[3]), abs=1e-12)
+
+
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba missing")
+def test_large_libraries_use_the_threaded_float32_step_with_the_same_results(able_bodied, multispeed_csv) -> None:
+    """From PARALLEL_MIN_ROWS rows on, the compiled step reads float32 kernels and spreads rows
+    over threads (given two CPUs): the same kernel values, so the numpy step's results."""
+    from gait_estimator.core.matcher import PARALLEL_MIN_ROWS
+
+    lib = able_bodied.replicated(40)
+    opts = {"time_scales": (0.94, 1.0, 1.06, 1.12), "offset_tolerance_deg": 2.0, "normalize": True}
+    fast = IncrementalMatcher(lib, backend="numba", **opts)
+    assert fast.n_rows >= PARALLEL_MIN_ROWS and fast._kernels.dtype == np.float32
+    x = read_recording(multispeed_csv).angles_deg[2000:2600]
+    a, b = fast.run(x), IncrementalMatcher(lib, backend="numpy", **opts).run(x)
+    np.testing.assert_array_equal(a.mode_index, b.mode_index)
+    np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10)
+    np.testing.assert_allclose(a.phase, b.phase, rtol=0, atol=1e-12)

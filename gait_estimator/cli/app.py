@@ -156,6 +156,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(f"reference command: {ref['us_per_sample_best']:.2f} us per sample (best of {ref['runs']} runs of "
               f"{ref['samples']} samples, process start-up included)")
     if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
         print(f"wrote {args.json}")
     return 0

@@ -13,17 +13,19 @@ first use compiles (about 2 s) and caches the machine code next to this file or 
 from __future__ import annotations
 
 import os
+import types
 
 import numpy as np
 
 try:  # pragma: no cover - depends on the environment
     if os.environ.get("GAIT_ESTIMATOR_NO_NUMBA"):
         raise ImportError("disabled by GAIT_ESTIMATOR_NO_NUMBA")
-    from numba import njit
+    from numba import njit, prange
 
     AVAILABLE = True
 except ImportError:  # pragma: no cover - depends on the environment
     AVAILABLE = False
+    prange = range
 
     def njit(*args, **kwargs):  # type: ignore[no-redef]
         def wrap(fn):
@@ -52,7 +54,6 @@ def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover
     return total * w
 
 
-@njit(cache=True, nogil=True)
 def step_rows(
     e, kern, ksq, lens, wins, ring, ring_sq, psum_ring, psum, count, d, dsq,
     offset, mu, mu_seg, tau, normalize, subsample, n_scales,
@@ -60,7 +61,7 @@ def step_rows(
 ):  # pragma: no cover - compiled
     """One matcher step over every row; returns the best mode. See the module docstring.
 
-    e (R, Nmax): running sums, updated in place; kern (R, 4, Nmax); ksq (R, Nmax) = ||k_j||^2;
+    e (R, Nmax): running sums, updated in place; kern (R, 4, Nmax) float64 or float32; ksq (R, Nmax) = ||k_j||^2;
     lens/wins (R,); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and their squared
     norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,) the prefix
     sum before this sample; count: samples before this one; d (4,), dsq = ||d||^2; offset: apply
@@ -74,7 +75,7 @@ def step_rows(
     i = count
     d0, d1, d2, d3 = d[0], d[1], d[2], d[3]
     p0, p1, p2, p3 = psum[0] + d0, psum[1] + d1, psum[2] + d2, psum[3] + d3
-    for r in range(n_rows):
+    for r in prange(n_rows):  # rows are independent (threads in step_rows_parallel)
         n = lens[r]
         w = wins[r]
         full = i >= w
@@ -190,6 +191,15 @@ def step_rows(
     psum_ring[slot, 0], psum_ring[slot, 1], psum_ring[slot, 2], psum_ring[slot, 3] = p0, p1, p2, p3
     psum[0], psum[1], psum[2], psum[3] = p0, p1, p2, p3
     return best_mode
+
+
+# Two compiled copies of step_rows: serial (prange runs as range) and with the rows spread over
+# numba's threads. The parallel copy is a function object of its own name so that the two
+# caches do not collide.
+_parallel = types.FunctionType(step_rows.__code__, step_rows.__globals__, "step_rows_parallel")
+_parallel.__qualname__ = "step_rows_parallel"
+step_rows_parallel = njit(cache=True, nogil=True, parallel=True)(_parallel)
+step_rows = njit(cache=True, nogil=True)(step_rows)
 
 
 @njit(cache=True, nogil=True, inline="always")

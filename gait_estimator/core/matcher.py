@@ -40,6 +40,7 @@ Options (the defaults are the paper, which reproduces the reference exactly):
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -50,6 +51,10 @@ from .channels import N_CHANNELS
 from .kernels import KernelLibrary, resample_stride
 
 BACKENDS = ("auto", "numba", "numpy")
+PARALLEL_MIN_ROWS = 256
+"""From this many rows (modes x time scales) on, the compiled step reads float32 copies of the
+kernels (same values: every path uses float32-representable kernel values) and spreads the rows
+over threads (numba's ``parallel``) when the process may use more than one CPU."""
 """Incremental step implementations: ``numba`` (compiled), ``numpy``; ``auto`` = numba if installed."""
 
 
@@ -206,7 +211,9 @@ class _MatcherBase:
         """(Re)build the rows of ``mode`` from its kernel ``samples`` (N_m, 4), degrees."""
         for r in range(mode * self.n_scales, (mode + 1) * self.n_scales):
             n = int(self.lengths[r])
-            k = resample_stride(samples, n) * self._scale  # (n, 4)
+            # float32-representable values: the compiled step streams a float32 copy (half the
+            # memory traffic); every path computes with exactly these values, in float64
+            k = (resample_stride(samples, n) * self._scale).astype(np.float32).astype(np.float64)  # (n, 4)
             self._kernels[r] = 0.0
             self._kernels[r, :, :n] = k.T
             self._mu[r] = k.mean(axis=0)
@@ -221,7 +228,7 @@ class _MatcherBase:
         """The kernel of ``row`` (n, 4), degrees (unweighted channels as given)."""
         n = int(self.lengths[row])
         with np.errstate(divide="ignore", invalid="ignore"):
-            k = self._kernels[row, :, :n].T / np.where(self._scale > 0, self._scale, 1.0)
+            k = self._kernels[row, :, :n].T.astype(np.float64) / np.where(self._scale > 0, self._scale, 1.0)
         return k
 
     @property
@@ -446,7 +453,13 @@ class IncrementalMatcher(_MatcherBase):
             raise ValueError("backend 'numba' needs the numba package (pip install numba)")
         self.backend = "numba" if backend == "auto" and compiled.AVAILABLE else ("numpy" if backend == "auto" else backend)
         r, n = self.n_rows, self.max_length
-        self._lagged: np.ndarray | None = None
+        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        large = self.backend == "numba" and self.n_rows >= PARALLEL_MIN_ROWS
+        self.parallel = large and cpus > 1
+        if large:  # beyond the caches the step is memory-bound: stream float32 kernels, half the traffic
+            self._kernels = self._kernels.astype(np.float32)
+        if compiled.AVAILABLE:
+            self._compiled_step = compiled.step_rows_parallel if self.parallel else compiled.step_rows
         self._ring_sq = np.zeros(self.max_window)
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
         self._psum = np.zeros(N_CHANNELS)
@@ -477,10 +490,11 @@ class IncrementalMatcher(_MatcherBase):
         if rows is None:
             rows = self._rows
             self._ksq = np.empty((self.n_rows, self.max_length))
+
             if self._partial:
                 self._stacked = np.empty((self.n_rows, 2 * N_CHANNELS, self.max_length))
                 self._kconst = np.empty((self.n_rows, self.max_length))
-        k = self._kernels[rows]
+        k = self._kernels[rows].astype(np.float64)
         self._ksq[rows] = np.einsum("rcj,rcj->rj", k, k)  # ||k_j||^2, (R, Nmax)
         if self._partial:
             # k_{j-W} for every column j: the kernel column the stale sample was compared with.
@@ -513,7 +527,7 @@ class IncrementalMatcher(_MatcherBase):
         m = self.n_modes
         sse, phases = np.empty(m), np.empty(m)
         variant, column, window = np.empty((3, m), dtype=np.int64)  # fresh arrays: results outlive the step
-        b = compiled.step_rows(
+        b = self._compiled_step(
             self._e, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d, dsq, self._offset, self._mu, self._mu_seg, self._tau,
             self.normalize, self.subsample, self.n_scales,
@@ -600,7 +614,7 @@ class IncrementalMatcher(_MatcherBase):
         i = self._count - 1
         s = self._psum - (self._psum_ring[(i - w) % self.max_window] if i >= w else 0.0)
         if self._partial:  # the kernel part of a short window depends on the shift
-            mu = self._kernels[row][:, (column - np.arange(w)) % int(self.lengths[row])].mean(axis=1)
+            mu = self._kernels[row][:, (column - np.arange(w)) % int(self.lengths[row])].astype(np.float64).mean(axis=1)
         else:
             mu = self._mu[row]
         safe = np.where(self._scale > 0, self._scale, 1.0)
@@ -643,7 +657,7 @@ class IncrementalMatcher(_MatcherBase):
             x[:w] = data[:w]
             box = np.zeros(n)
             box[:w] = 1.0
-            k = self._kernels[r, :, :n]  # (4, n)
+            k = self._kernels[r, :, :n].astype(np.float64)  # (4, n)
             fx = np.fft.rfft(x.T, n=n)
             cross = np.fft.irfft((fx * np.fft.rfft(k, n=n)).sum(axis=0), n=n)
             ksq = np.fft.irfft(np.fft.rfft(box) * np.fft.rfft((k * k).sum(axis=0)), n=n)
