@@ -423,7 +423,7 @@ def test_large_libraries_use_the_threaded_float32_step_with_the_same_results(abl
     over threads (given two CPUs): the same kernel values, so the numpy step's results."""
     from gait_estimator.core.matcher import PARALLEL_MIN_ROWS
 
-    lib = able_bodied.replicated(40)
+    lib = able_bodied.replicated(70)
     opts = {"time_scales": (0.94, 1.0, 1.06, 1.12), "offset_tolerance_deg": 2.0, "normalize": True}
     fast = IncrementalMatcher(lib, backend="numba", **opts)
     assert fast.n_rows >= PARALLEL_MIN_ROWS and fast._kernels.dtype == np.float32
