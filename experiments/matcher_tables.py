@@ -87,8 +87,8 @@ def two_cores(report: dict[str, Any]) -> str:
                      f"from-scratch recomputation by at most {drift['max_relative_error']:.1e} (relative; required ≤ 1e-9)")
     loads = report.get("library_load", [])
     if loads:
-        notes.append("a " + " and ".join(f"{r['modes']}-mode library loads in {r['load_s']:.3f} s from {r['format']}"
-                                         for r in loads))
+        notes.append(f"a {loads[0]['modes']}-mode library loads in "
+                     + " and ".join(f"{r['load_s']:.3f} s from {r['format']}" for r in loads))
     return ("## Two cores\n\n"
             f"`gait-estimator bench --modes 7,70,700 --drift-steps 1000000 --json experiments/results/matcher/bench.json` "
             f"on the quiet development machine ({machine(report['machine'])}).\n\n"

@@ -286,6 +286,7 @@ def _bench_variant(
     profile: bool,
     throughput: bool,
     log: Any,
+    preset: str = "default",
 ) -> dict[str, Any]:
     from ..analysis.bench import synthetic_walk
     from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
@@ -293,7 +294,7 @@ def _bench_variant(
     from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient, publishing_costs_us
 
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
-    node = _start_node(domain_id, kernels, ["-p", f"executor:={executor}"], node_cmd)
+    node = _start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}"], node_cmd)
     client = EstimatorClient(
         domain_id,
         reliable=True,
@@ -434,8 +435,9 @@ def bench_node(
     executors: list[str] | tuple[str, ...] = EXECUTORS,
     outputs: list[str] | tuple[str, ...] = OUTPUT_SETS,
     profile: bool = False,
+    preset: str = "default",
 ) -> dict[str, Any]:
-    """Measure estimator_node in a child process over DDS on this machine, once per variant
+    """Measure estimator_node (with estimator preset ``preset``) in a child process over DDS on this machine, once per variant
     (``executors`` x ``outputs``, a fresh node process each).
 
     1. Latency: ``latency_samples`` inputs at ``rate_hz``; latency = arrival of the ``estimate``
@@ -471,13 +473,14 @@ def bench_node(
         "library": lib.name,
         "modes": len(lib),
         "domain_id": domain_id,
+        "preset": preset,
         "variants": [],
     }
     for executor in executors:
         for out in outputs:
             v = _bench_variant(
                 lib, lib.path or kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
-                node_cmd, profile, throughput=out == "estimate", log=log,
+                node_cmd, profile, throughput=out == "estimate", log=log, preset=preset,
             )
             report["variants"].append(v)
     first = report["variants"][0]
@@ -505,6 +508,7 @@ def cmd_bench_node(args: argparse.Namespace) -> int:
         executors=args.executor,
         outputs=args.outputs,
         profile=args.profile,
+        preset=args.preset,
     )
     m = report["machine"]
     print(f"machine: {m['processor']}, {m['cpus']} CPUs ({m['cpus_allowed']} allowed), Python {m['python']}; "
@@ -577,6 +581,8 @@ def add_commands(sub: Any) -> None:
     b.add_argument("--outputs", type=_choices(OUTPUT_SETS), default=list(OUTPUT_SETS), metavar="LIST",
                    help="what the bench subscribes to: estimate (like a controller) and/or all (mode, phase, sse, "
                    "estimate; latency only); default " + ",".join(OUTPUT_SETS))
+    b.add_argument("--preset", choices=("default", "paper"), default="default",
+                   help="the node's estimator preset (default: default)")
     b.add_argument("--profile", action="store_true",
                    help="split the latency run's time per sample: DDS in + executor, estimator, publish, DDS out, "
                    "bench callback (from the node's ~/profile topic)")
