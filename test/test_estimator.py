@@ -357,6 +357,23 @@ def test_personalisation_pulls_the_kernel_towards_the_wearer(able_bodied, tmp_pa
     np.testing.assert_allclose(back.mode("RA").samples, est.adapter.kernels[ra], atol=1e-6)
     assert back.provenance["adaptation"]["accepted_strides"]["RA"] == est.adapter.accepted[ra]
 
+    # New options (as a node parameter change): the personalised kernels carry over.
+    strides = int(est.adapter.accepted.sum())
+    again = Estimator(able_bodied, config.with_options(min_dwell_s=0.1))
+    assert again.adopt_adaptation(est) == strides
+    np.testing.assert_array_equal(again.adapter.kernels[ra], est.adapter.kernels[ra])
+    assert again.adapter.accepted[ra] == est.adapter.accepted[ra]
+    x = rec.angles_deg[-600:]
+    fresh = Estimator(est.adapted_library(), config.with_options(min_dwell_s=0.1, adapt_rate=0.0))
+    for i, d in enumerate(x):  # its matcher uses them: the same as an estimator built on them
+        a, b = again.update(i / 230.0, d), fresh.update(i / 230.0, d)
+        if again.adapter.accepted.sum() > strides:  # it went on adapting
+            break
+        assert a.mode == b.mode and a.sse == pytest.approx(b.sse, rel=1e-9, abs=1e-9)
+    assert i > 450, "compared at least one full window"
+    off = Estimator(able_bodied, config.with_options(adapt_rate=0.0))
+    assert off.adopt_adaptation(est) == strides and off.adapter is None
+
 
 def test_personalisation_never_uses_held_or_unconfident_strides(able_bodied) -> None:
     """Strides alternating between two modes: every estimate is held (dwell) or low-confidence

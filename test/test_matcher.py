@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -257,7 +258,15 @@ def test_invalid_options(able_bodied, kwargs, message) -> None:
 # ---------------------------------------------------------------------------------------------
 # Time-scaled variants, offset tolerance, per-sample error; the numba and numpy steps
 
-BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(not compiled.AVAILABLE, reason="numba missing"))]
+# numba is a dependency: its step is tested unless GAIT_ESTIMATOR_NO_NUMBA turns it off (then
+# test_numba_is_there_unless_turned_off says so instead of every numba test skipping quietly).
+NUMBA_OFF = bool(os.environ.get("GAIT_ESTIMATOR_NO_NUMBA"))
+BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA"))]
+BACKEND_NAMES = ["numpy"] + ([] if NUMBA_OFF else ["numba"])
+
+
+def test_numba_is_there_unless_turned_off() -> None:
+    assert compiled.AVAILABLE != NUMBA_OFF, "numba is a dependency (setup.py); is it installed?"
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -287,7 +296,7 @@ def test_new_options_match_the_naive_specification(
             assert a.variant[a.mode_index] == b.variant[b.mode_index]
 
 
-@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba missing")
+@pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")
 def test_numba_and_numpy_steps_agree_on_the_recording(multispeed_csv, able_bodied) -> None:
     x = read_recording(multispeed_csv).angles_deg[2000:4000]
     for opts in ({}, {"time_scales": (0.88, 0.94, 1.0, 1.06, 1.12), "offset_tolerance_deg": 4.0, "normalize": True},
@@ -324,6 +333,20 @@ def test_shape_only_matching_ignores_constant_offsets(able_bodied, multispeed_cs
     np.testing.assert_allclose(a.sse[r], b.sse[r], rtol=1e-7, atol=1e-6)
     paper = IncrementalMatcher(able_bodied, backend=backend).run(x + offsets)
     assert (paper.sse[r] > a.sse[r]).all()  # the paper pays for the offsets
+
+
+def test_shape_only_matching_with_a_dropped_channel(able_bodied, multispeed_csv) -> None:
+    """Infinite tolerance and a channel weighted 0: finite scores, the same on every backend
+    and for the naive matcher (the dropped channel's tolerance is 0, not inf * 0)."""
+    x = read_recording(multispeed_csv).angles_deg[3000:3700] + np.array([7.5, -6.0, 4.0, -8.0])
+    opts = {"offset_tolerance_deg": math.inf, "channel_weights": [1.0, 0.0, 1.0, 0.0]}
+    runs = [IncrementalMatcher(able_bodied, backend=b, **opts).run(x) for b in BACKEND_NAMES]
+    runs.append(NaiveMatcher(able_bodied, **opts).run(x))
+    r = runs[0].ready
+    for run in runs:
+        assert np.isfinite(run.sse[r]).all()
+        np.testing.assert_array_equal(run.mode_index[r], runs[0].mode_index[r])
+        np.testing.assert_allclose(run.sse[r], runs[0].sse[r], rtol=1e-7, atol=1e-6)
 
 
 def test_offset_penalty_is_the_excess_over_the_tolerance() -> None:
@@ -383,6 +406,14 @@ def test_mean_offset_and_sensor_offset(able_bodied, fraction) -> None:
     r = m.run(x + offsets)
     assert r.modes[-1] == "Med"
     np.testing.assert_allclose(m.mean_offset(1, int(m.step(x[0] + offsets).column[1])), offsets, atol=1e-6)  # float32 kernels
+    # Every mode walked as itself, the longest window (its prefix sum shares a ring slot) included.
+    for mode in range(len(able_bodied)):
+        walk = np.tile(able_bodied.modes[mode].samples, (2, 1)) + offsets
+        mm = IncrementalMatcher(able_bodied, window_fraction=fraction)
+        mm.run(walk)
+        got = mm.mean_offset(mode, int(mm.lengths[mode]) - 1)  # the aligned column: the walk ends a stride
+        np.testing.assert_allclose(got, offsets, atol=1e-6, err_msg=able_bodied.modes[mode].name)
+    assert int(np.argmax(mm.windows)) in range(len(able_bodied))
     clean = IncrementalMatcher(able_bodied, window_fraction=fraction).run(x)
     shifted = IncrementalMatcher(able_bodied, window_fraction=fraction)
     shifted.set_sensor_offset(offsets)
@@ -417,7 +448,7 @@ def test_without_numba_the_numpy_step_runs(tmp_path) -> None:
         assert float(fast[3]) == pytest.approx(float(plain[3]), abs=1e-12)
 
 
-@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba missing")
+@pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")
 def test_large_libraries_use_the_threaded_float32_step_with_the_same_results(able_bodied, multispeed_csv) -> None:
     """From PARALLEL_MIN_ROWS rows on, the compiled step reads float32 kernels and spreads rows
     over threads (given two CPUs): the same kernel values, so the numpy step's results."""

@@ -1,6 +1,6 @@
 """estimator_node in-process: real rclpy publishers/subscribers over DDS on loopback (no mocks).
 
-Domain IDs 11..20, one per test; LOCALHOST discovery; a namespace unique to the run.
+Domain IDs 11..20 and 26, one per test; LOCALHOST discovery; a namespace unique to the run.
 """
 
 from __future__ import annotations
@@ -287,6 +287,21 @@ def test_invalid_values_at_startup_raise_one_line_errors(ros, tmp_path: Path) ->
         with pytest.raises(StartupError) as info:
             h.estimator(**params)
         assert text in str(info.value) and "\n" not in str(info.value)
+
+    # `-p resample:=on` goes through rcl's YAML parser, which makes on/off booleans.
+    for text, want in (("on", "on"), ("off", "off"), ("auto", "auto"), ("true", "on")):
+        node = EstimatorNode(node_name=h.node_name, namespace=h.namespace, context=h.context,
+                             cli_args=["--ros-args", "-p", f"resample:={text}"])
+        assert node.config.resample == want, text
+        (result,) = node.set_parameters([Parameter("resample", value=False)])
+        assert result.successful and node.config.resample == "off"
+        (result,) = node.set_parameters([Parameter("resample", value="sometimes")])
+        assert not result.successful and "resample" in result.reason
+        node.destroy_node()
+    with pytest.raises(StartupError) as info:
+        EstimatorNode(node_name=h.node_name, namespace=h.namespace, context=h.context,
+                      cli_args=["--ros-args", "-p", "adapted_library_path:=/tmp/kernels.txt"])
+    assert "adapted_library_path" in str(info.value) and ".npz" in str(info.value)
 
 
 def test_max_gap_restarts_the_window(ros, multispeed_csv: Path, able_bodied) -> None:

@@ -138,6 +138,8 @@ def bench(
     default-preset ``Estimator.update`` (and the paper preset's, for the ratio), all in one run."""
     backends = backends or ["numba", "numpy"]
     backends = [b for b in backends if b != "numba" or compiled.AVAILABLE]
+    if not backends:
+        raise ValueError("no backend to time: numba is not installed (or GAIT_ESTIMATOR_NO_NUMBA is set); add numpy")
     results = []
     for m in modes:
         lib = library.replicated(m)

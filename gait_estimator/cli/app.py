@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import subprocess
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -16,7 +17,7 @@ from pathlib import Path
 from ..core.errors import GaitEstimatorError
 from ..io.library_io import load_library, save_library
 from ..io.resources import DEFAULT_LIBRARY
-from .args import int_list, positive_int
+from .args import choice_list, int_list, positive_int
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.node_commands",
@@ -34,8 +35,6 @@ def _kernels_arg(p: argparse.ArgumentParser) -> None:
         help="kernel library: .yaml/.npz file, reference CSV/YAML file or directory, or a bundled "
         "name (able_bodied, prosthesis); default %(default)s",
     )
-
-
 
 
 # ---------------------------------------------------------------------------------------------
@@ -91,13 +90,20 @@ def cmd_process(args: argparse.Namespace) -> int:
     rec = rec.slice(args.start, args.stop)
     if len(rec) == 0:
         raise GaitEstimatorError(f"{args.recording}: no samples in the selected range")
-    if args.save_adapted and config.adapt_rate <= 0:
-        raise GaitEstimatorError("--save-adapted needs personalisation on: --adapt-rate > 0")
+    if args.save_adapted:
+        if config.adapt_rate <= 0:
+            raise GaitEstimatorError("--save-adapted needs personalisation on: --adapt-rate > 0")
+        if Path(args.save_adapted).suffix.lower() not in (".yaml", ".yml", ".npz"):
+            raise GaitEstimatorError(f"--save-adapted {args.save_adapted}: the file name must end in .yaml or .npz")
     pred = predict(rec, lib, config)  # restarts the window at gaps > max_gap_s, like the node
     if args.out:
         write_predictions_csv(pred, args.out)
     if args.save_adapted and pred.adapted is not None:
-        save_library(pred.adapted, args.save_adapted)
+        try:
+            Path(args.save_adapted).parent.mkdir(parents=True, exist_ok=True)
+            save_library(pred.adapted, args.save_adapted)
+        except OSError as exc:
+            raise GaitEstimatorError(f"--save-adapted {args.save_adapted}: {exc.strerror or exc}") from None
     bag_lines = finish_process(args, rec, pred)  # --out-bag; notes on bag stamps and gaps
     if not args.quiet:
         print(format_summary(pred, lib, str(args.recording)))
@@ -126,15 +132,18 @@ def cmd_bench(args: argparse.Namespace) -> int:
     lib = load_library(args.kernels)
     if args.compare_reference and not args.reference_samples:
         raise GaitEstimatorError("--compare-reference needs --reference-samples (samples the command processes)")
-    report = bench(lib, args.modes, steps=args.steps, naive_max_modes=args.naive_max_modes, backends=args.backends,
-                   preset_max_modes=args.preset_max_modes)
+    try:
+        report = bench(lib, args.modes, steps=args.steps, naive_max_modes=args.naive_max_modes, backends=args.backends,
+                       preset_max_modes=args.preset_max_modes)
+    except ValueError as exc:
+        raise GaitEstimatorError(f"--backends: {exc}") from None
     report["library_load"] = load_times(lib, max(args.modes))
     if args.drift_steps:
         report["drift"] = drift(lib, args.drift_steps)
     if args.compare_reference:
         try:
             report["reference"] = time_reference(args.compare_reference, args.reference_samples)
-        except (OSError, RuntimeError, ValueError) as exc:
+        except (OSError, RuntimeError, ValueError, subprocess.SubprocessError) as exc:
             raise GaitEstimatorError(f"--compare-reference: {exc}") from None
     mach = report["machine"]
     print(f"{mach['processor']}, {mach['cpus_allowed']} of {mach['cpus']} CPUs, Python {mach['python']}, "
@@ -207,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--steps", type=positive_int, default=5000, help="timed steps per mode count (default 5000)")
     b.add_argument("--naive-max-modes", type=int, default=7, help="also time the naive matcher up to this M (default 7)")
     b.add_argument("--drift-steps", type=int, default=0, help="also run this many steps and report drift vs recomputation")
-    b.add_argument("--backends", type=lambda v: [x.strip() for x in v.split(",") if x.strip()], default=["numba", "numpy"],
+    b.add_argument("--backends", type=choice_list(("numba", "numpy")), default=["numba", "numpy"],
                    help="matcher step implementations to time, e.g. numba,numpy (default; numba only if installed)")
     b.add_argument("--preset-max-modes", type=int, default=70,
                    help="also time the default preset's matcher and Estimator.update up to this M (default 70)")

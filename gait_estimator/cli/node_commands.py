@@ -22,7 +22,7 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import positive_float
+from .args import choice_list, positive_float, positive_int
 
 DEMO_DOMAIN_ID = 77
 BENCH_DOMAIN_ID = 78
@@ -37,17 +37,6 @@ def _domain_id(text: str) -> int:
         raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
     return v
 
-
-
-def _choices(allowed: tuple[str, ...]) -> Any:
-    def parse(text: str) -> list[str]:
-        values = [v.strip() for v in text.split(",") if v.strip()]
-        bad = [v for v in values if v not in allowed]
-        if not values or bad:
-            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {', '.join(allowed)}, got {text!r}")
-        return values
-
-    return parse
 
 
 def _rates(text: str) -> list[float]:
@@ -94,8 +83,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from ..io.readers import read_recording
     from ..io.recording import Recording
     from ..io.resources import DEMO_RECORDING, data_path
-    from ..ros.node_client import use_local_ros
-
     try:
         path = Path(args.recording) if args.recording else data_path(DEMO_RECORDING)
     except FileNotFoundError as exc:
@@ -108,9 +95,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise GaitEstimatorError(f"{path}: no samples in the selected range")
     rate = (rec.median_rate_hz if len(rec) > 1 else lib.sample_rate_hz) * args.speed
     due_s = (rec.time_s - rec.time_s[0]) / args.speed  # the recording's own timing
-    use_local_ros(args.domain_id)
     require_ros()
-    from ..ros.node_client import EstimatorClient
+    from ..ros.node_client import EstimatorClient, use_local_ros
+
+    use_local_ros(args.domain_id)
 
     kernels = lib.path or args.kernels
     print(
@@ -119,7 +107,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
         flush=True,
     )
     node = _start_node(args.domain_id, kernels, [], args.node_cmd)
-    client = EstimatorClient(args.domain_id, reliable=args.reliable)
+    try:
+        client = EstimatorClient(args.domain_id, reliable=args.reliable)
+    except BaseException:
+        node.close()
+        raise
     code = 0
     try:
         _wait_node(client, node, args.timeout)
@@ -295,13 +287,17 @@ def _bench_variant(
 
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
     node = _start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}"], node_cmd)
-    client = EstimatorClient(
-        domain_id,
-        reliable=True,
-        record=False,
-        outputs=(*topics, DIAGNOSTICS_TOPIC),
-        profile_topic=f"/{NODE_NAME}/profile" if profile else None,
-    )
+    try:
+        client = EstimatorClient(
+            domain_id,
+            reliable=True,
+            record=False,
+            outputs=(*topics, DIAGNOSTICS_TOPIC),
+            profile_topic=f"/{NODE_NAME}/profile" if profile else None,
+        )
+    except BaseException:
+        node.close()
+        raise
     out: dict[str, Any] = {"executor": executor, "outputs": outputs, "node_cmd": node.cmd}
     next_stamp = [time.time_ns()]
 
@@ -465,10 +461,8 @@ def bench_node(
 
     lib = load_library(kernels)
     use_local_ros(domain_id)
-    machine = machine_info()
-    machine["cpus_allowed"] = len(os.sched_getaffinity(0))
     report: dict[str, Any] = {
-        "machine": machine,
+        "machine": machine_info(),
         "load_average_before": list(os.getloadavg()),
         "library": lib.name,
         "modes": len(lib),
@@ -495,8 +489,18 @@ def bench_node(
     return report
 
 
+def _writable(path: str, option: str) -> None:
+    """Create the parent folder of an output file now, or fail with one line."""
+    try:
+        Path(path).expanduser().parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise GaitEstimatorError(f"{option} {path}: {exc.strerror or exc}") from None
+
+
 def cmd_bench_node(args: argparse.Namespace) -> int:
     require_ros()
+    if args.json:  # before minutes of measuring, not after
+        _writable(args.json, "--json")
     report = bench_node(
         kernels=args.kernels,
         latency_samples=args.samples,
@@ -569,16 +573,16 @@ def add_commands(sub: Any) -> None:
     )
     b.add_argument("--kernels", "-k", default=DEFAULT_LIBRARY, metavar="LIB", help="kernel library (default %(default)s)")
     b.add_argument("--rate", type=positive_float, default=230.0, help="rate of the latency run, Hz (default 230)")
-    b.add_argument("--samples", type=int, default=2300, help="samples in the latency run (default 2300 = 10 s)")
+    b.add_argument("--samples", type=positive_int, default=2300, help="samples in the latency run (default 2300 = 10 s)")
     b.add_argument("--rates", type=_rates, default=list(DEFAULT_RATES),
                    help="input rates to try, Hz (default " + ",".join(str(r) for r in DEFAULT_RATES) + ")")
     b.add_argument("--seconds", type=positive_float, default=2.0, help="duration of each rate step (default 2 s)")
     b.add_argument("--domain-id", type=_domain_id, default=BENCH_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
     b.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
-    b.add_argument("--executor", type=_choices(EXECUTORS), default=list(EXECUTORS), metavar="LIST",
+    b.add_argument("--executor", type=choice_list(EXECUTORS), default=list(EXECUTORS), metavar="LIST",
                    help="node executors to measure, side by side (default " + ",".join(EXECUTORS) + "; the first "
                    "one's numbers are the report's top-level latency/throughput)")
-    b.add_argument("--outputs", type=_choices(OUTPUT_SETS), default=list(OUTPUT_SETS), metavar="LIST",
+    b.add_argument("--outputs", type=choice_list(OUTPUT_SETS), default=list(OUTPUT_SETS), metavar="LIST",
                    help="what the bench subscribes to: estimate (like a controller) and/or all (mode, phase, sse, "
                    "estimate; latency only); default " + ",".join(OUTPUT_SETS))
     b.add_argument("--preset", choices=("default", "paper"), default="default",

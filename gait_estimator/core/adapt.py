@@ -40,7 +40,7 @@ MAD_TO_SIGMA = 1.4826
 HISTORY = 16
 WARMUP = 3
 MAX_SHIFT = 0.05
-REASONS = ("held", "confidence", "duration", "shape")
+SKIP_REASONS = ("held", "confidence", "duration", "warmup", "shape")  # keys of KernelAdapter.skipped
 
 
 @dataclass(frozen=True)
@@ -91,6 +91,13 @@ class KernelAdapter:
         self.skipped: Counter = Counter()
         self._dist: list[deque] = [deque(maxlen=HISTORY) for _ in library.modes]
         self.reset()
+
+    def adopt(self, other: KernelAdapter) -> None:
+        """Continue from ``other``'s kernels, stride counts and outlier history (same library)."""
+        self.kernels = [k.copy() for k in other.kernels]
+        self.accepted = other.accepted.copy()
+        self.skipped = other.skipped.copy()
+        self._dist = [deque(d, maxlen=d.maxlen) for d in other._dist]
 
     def reset(self) -> None:
         """Forget the stride in progress (after a window restart); kernels stay adapted."""
@@ -155,6 +162,7 @@ class KernelAdapter:
         self._min_conf = min(self._min_conf, confidence)
 
     def _skip(self, reason: str) -> None:
+        assert reason in SKIP_REASONS, reason
         self.skipped[reason] += 1
         return None
 

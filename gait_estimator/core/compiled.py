@@ -55,10 +55,13 @@ def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover
 
 
 def step_rows(
-    e, kern, ksq, lens, wins, ring, ring_sq, psum_ring, psum, count, d, dsq,
-    offset, mu, mu_seg, tau, normalize, subsample, n_scales,
-    out_col, out_score, out_sse, out_phase, out_variant, out_column, out_window,
-):  # pragma: no cover - compiled
+    e: np.ndarray, kern: np.ndarray, ksq: np.ndarray, lens: np.ndarray, wins: np.ndarray,
+    ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
+    d: np.ndarray, dsq: float, offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray,
+    normalize: bool, subsample: bool, n_scales: int,
+    out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
+    out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
+) -> int:  # pragma: no cover - compiled
     """One matcher step over every row; returns the best mode. See the module docstring.
 
     e (R, Nmax): running sums, updated in place; kern (R, 4, Nmax) float64 or float32; ksq (R, Nmax) = ||k_j||^2;
@@ -161,7 +164,7 @@ def step_rows(
         pos = float(j + 1)
         if subsample:
             w = wins[rb]
-            shifted = per_shift_row(offset, i, w, n)
+            shifted = _per_shift_row(offset, i, w, n)
             a = _row_score(e, rb, j - 1 if j > 0 else n - 1, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
             b = _row_score(e, rb, j + 1 if j < n - 1 else 0, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
             center = _row_score(e, rb, j, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
@@ -203,7 +206,7 @@ step_rows = njit(cache=True, nogil=True)(step_rows)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def per_shift_row(offset, i, w, n):  # pragma: no cover - compiled
+def _per_shift_row(offset, i, w, n):  # pragma: no cover - compiled
     """True when row scores carry a per-shift offset penalty (offset on, window full, W < N)."""
     return offset and i + 1 >= w and w < n
 

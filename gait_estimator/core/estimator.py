@@ -139,12 +139,14 @@ class EstimatorConfig:
         unknown = [c for c in self.channels if c not in CHANNELS]
         if unknown or not self.channels:
             raise ValueError(f"channels must be a non-empty subset of {', '.join(CHANNELS)}, got {list(self.channels)}")
+        check_channel_weights(self.channel_weights)
         check_channel_weights(self.effective_weights())
         for name in ("min_confidence", "min_dwell_s", "max_gap_s", "adapt_min_confidence"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and v >= 0 and not math.isnan(v)):
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and v >= 0 and not math.isnan(v)):
                 raise ValueError(f"{name} must be a number >= 0, got {v!r}")
-        if not (isinstance(self.min_dwell_samples, int) and self.min_dwell_samples >= 0):
+        dwell = self.min_dwell_samples
+        if isinstance(dwell, bool) or not (isinstance(dwell, int) and dwell >= 0):
             raise ValueError(f"min_dwell_samples must be an integer >= 0, got {self.min_dwell_samples!r}")
         if not (self.phase_rate_tau_s > 0 and math.isfinite(self.phase_rate_tau_s)):
             raise ValueError(f"phase_rate_tau_s must be > 0, got {self.phase_rate_tau_s!r}")
@@ -311,6 +313,23 @@ class Estimator:
             self.sensor_offset_deg = other.sensor_offset_deg.copy()
             self.matcher.set_sensor_offset(self.sensor_offset_deg)
 
+    def adopt_adaptation(self, other: Estimator) -> int:
+        """Start from the kernels ``other`` has personalised (same library, new options).
+
+        Returns:
+            The number of strides ``other`` had adopted; they are kept if this estimator
+            personalises too (``adapt_rate`` > 0), dropped otherwise.
+        """
+        theirs = other.adapter
+        strides = int(theirs.accepted.sum()) if theirs is not None else 0
+        mine = self.adapter
+        if not strides or mine is None or other.library.mode_names != self.library.mode_names:
+            return strides
+        mine.adopt(theirs)
+        for m in np.flatnonzero(mine.accepted):  # once per option change, not per sample
+            self.matcher.set_kernel(int(m), mine.kernels[m])
+        return strides
+
     def _calibrate(self, est: Estimate, result: Any) -> None:
         """At every heel strike of a confident, unheld mode: move the sensor offset estimate
         towards that stride's window-vs-kernel mean difference."""
@@ -372,7 +391,7 @@ class EstimateTrace:
     mode_index: np.ndarray  # (T,)
     phase: np.ndarray  # (T,)
     ready: np.ndarray  # (T,) bool
-    sse: np.ndarray  # (T, M) deg^2
+    sse: np.ndarray  # (T, M) deg^2 (per window sample with normalize_error)
     phases: np.ndarray  # (T, M)
     raw_mode_index: np.ndarray  # (T,)
     confidence: np.ndarray  # (T,)

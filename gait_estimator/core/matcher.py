@@ -51,11 +51,11 @@ from .channels import N_CHANNELS
 from .kernels import KernelLibrary, resample_stride
 
 BACKENDS = ("auto", "numba", "numpy")
-PARALLEL_MIN_ROWS = 256
-"""From this many rows (modes x time scales) on, the compiled step reads float32 copies of the
-kernels (same values: every path uses float32-representable kernel values) and spreads the rows
-over threads (numba's ``parallel``) when the process may use more than one CPU."""
 """Incremental step implementations: ``numba`` (compiled), ``numpy``; ``auto`` = numba if installed."""
+PARALLEL_MIN_ROWS = 256
+"""From this many rows (modes x time scales) on, the compiled step reads the kernels as float32
+(the same values: every path uses float32-representable kernel values) and spreads the rows over
+threads (numba's ``parallel``) when the process may use more than one CPU."""
 
 
 @dataclass(frozen=True)
@@ -94,7 +94,7 @@ class MatchTrace:
     mode_names: list[str]
     mode_index: np.ndarray  # (T,) int64
     phase: np.ndarray  # (T,) float64
-    sse: np.ndarray  # (T, M) float64, deg^2
+    sse: np.ndarray  # (T, M) float64, deg^2 (per window sample with normalize)
     phases: np.ndarray  # (T, M) float64
     ready: np.ndarray  # (T,) bool
 
@@ -180,7 +180,8 @@ class _MatcherBase:
         self._scale = np.sqrt(self.channel_weights)
         self._weighted = bool(np.any(self.channel_weights != 1.0))
         # row 0: tolerance, row 1: sensor offset (set_sensor_offset), in the weighted units of d and k
-        self._tau = np.stack([self.offset_tolerance_deg * self._scale, np.zeros(N_CHANNELS)])
+        tolerance = np.where(self._scale > 0, self.offset_tolerance_deg * np.where(self._scale > 0, self._scale, 1.0), 0.0)
+        self._tau = np.stack([tolerance, np.zeros(N_CHANNELS)])  # (a dropped channel: 0, not inf * 0)
         self._offset = self.offset_tolerance_deg > 0
         base = library.lengths
         # Rows are mode-major: row m * S + s is mode m at time scale s.
@@ -611,8 +612,9 @@ class IncrementalMatcher(_MatcherBase):
         with at ``column`` (4,), degrees: the sensor offset under the hypothesis that the wearer
         walks that row's mode and time scale. Valid once the row's window is full."""
         w = int(self.windows[row])
-        i = self._count - 1
-        s = self._psum - (self._psum_ring[(i - w) % self.max_window] if i >= w else 0.0)
+        # From the ring, not the prefix sums: for the longest window the prefix sum before it
+        # shares its ring slot with the newest one and has been overwritten.
+        s = self._window_data()[: min(w, self._count)].sum(axis=0)
         if self._partial:  # the kernel part of a short window depends on the shift
             mu = self._kernels[row][:, (column - np.arange(w)) % int(self.lengths[row])].astype(np.float64).mean(axis=1)
         else:

@@ -165,6 +165,7 @@ DESCRIPTIONS: dict[str, str] = {
     },
 }
 READ_ONLY = frozenset({"input_type", "executor", "preset"})
+DYNAMIC_TYPING = frozenset({"resample"})  # auto | on | off, or a boolean
 
 
 class StartupError(GaitEstimatorError):
@@ -178,7 +179,7 @@ def _double_array(values: np.ndarray) -> array.array:
     return out
 
 
-def _config_value(name: str, value: Any) -> Any:
+def _config_value(value: Any) -> Any:
     """A parameter value as EstimatorConfig wants it (lists become tuples)."""
     return tuple(value) if isinstance(value, (list, tuple, array.array)) else value
 
@@ -214,7 +215,14 @@ class EstimatorNode(Node):
                 if name in OPTION_NAMES:  # the preset's value unless overridden
                     default = PRESETS[self._config_preset][name]
                 self.declare_parameter(
-                    name, default, ParameterDescriptor(description=DESCRIPTIONS[name], read_only=name in READ_ONLY)
+                    name,
+                    default,
+                    ParameterDescriptor(
+                        description=DESCRIPTIONS[name],
+                        read_only=name in READ_ONLY,
+                        # `-p resample:=on` and params files parse on/off as booleans (YAML 1.1)
+                        dynamic_typing=name in DYNAMIC_TYPING,
+                    ),
                 )
                 # Declaring validated the value (kernels: loaded it); keep it for the next ones.
                 if self._pending is not None:
@@ -310,7 +318,7 @@ class EstimatorNode(Node):
                 reason, loaded = self._check_kernels(p.value)
                 lib = loaded or lib
             elif p.name in OPTION_NAMES:
-                values[p.name] = _config_value(p.name, p.value)
+                values[p.name] = _config_value(p.value)
             else:
                 reason = self._check_input_parameter(p)
             if reason:
@@ -362,6 +370,8 @@ class EstimatorNode(Node):
             return f"must be one of {', '.join(EXECUTORS)}, got {v!r}"
         elif p.name == "preset" and v not in PRESETS:
             return f"must be one of {', '.join(PRESETS)}, got {v!r}"
+        elif p.name == "adapted_library_path" and v and Path(v).suffix.lower() not in (".yaml", ".yml", ".npz"):
+            return f"must end in .yaml or .npz (or be empty for the default), got {v!r}"
         return ""
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
@@ -385,13 +395,18 @@ class EstimatorNode(Node):
         restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - {"max_gap_s"})
         if restart and estimator is not None:
             self._resets_before += self._estimator.resets
-            if "kernels" not in names:  # same kernels, same sensors: keep what calibration learnt
+            kept = ""
+            if "kernels" not in names:  # same kernels, same sensors: keep what was learnt
                 estimator.adopt_calibration(self._estimator)
+                strides = estimator.adopt_adaptation(self._estimator)
+                if strides:
+                    kept = (f"; personalised kernels ({strides} strides) kept" if estimator.adapter is not None
+                            else f"; personalised kernels ({strides} strides) dropped: adapt_rate is 0")
             self._set_estimator(estimator)
             lib = self._library
             self.get_logger().info(
                 f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: {self._options_summary()}: "
-                "window restarted"
+                "window restarted" + kept
             )
         elif "max_gap_s" in names:
             self._estimator.config = config  # only the gap threshold changed: keep the window
@@ -788,6 +803,7 @@ def main(args: Sequence[str] | None = None) -> int:
     """
     rclpy.init(args=args)
     node: EstimatorNode | None = None
+    executor: Executor | None = None
     code = 0
     try:
         node = EstimatorNode()
@@ -804,6 +820,8 @@ def main(args: Sequence[str] | None = None) -> int:
         print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
         code = 2
     finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
