@@ -64,7 +64,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("time_scales", list(DEFAULT_TIME_SCALES), "stride-duration factors of the kernel variants matched per "
            "mode (cadence robustness; the chosen one gives cadence_ratio = 1/scale); [1.0] = the paper",
            [1.0]),
-    Option("offset_tolerance_deg", 0.0, "per-channel difference (deg) between window and kernel means, beyond the "
+    Option("offset_tolerance_deg", 2.0, "per-channel difference (deg) between window and kernel means, beyond the "
            "learnt sensor offset, that costs nothing (sensor mounting); .inf = shapes only; 0 = none, as the paper",
            0.0),
     Option("offset_calibration_rate", 0.2, "walking self-calibration of the sensor offsets: weight of one confident "
@@ -113,7 +113,7 @@ class EstimatorConfig:
 
     resample: str = "auto"
     time_scales: tuple[float, ...] = DEFAULT_TIME_SCALES
-    offset_tolerance_deg: float = 0.0
+    offset_tolerance_deg: float = 2.0
     offset_calibration_rate: float = 0.2
     normalize_error: bool = True
     window_fraction: float = 1.0
