@@ -38,7 +38,6 @@ def _domain_id(text: str) -> int:
     return v
 
 
-
 def _rates(text: str) -> list[float]:
     try:
         values = [float(v) for v in text.split(",") if v.strip()]
