@@ -17,7 +17,7 @@ from pathlib import Path
 from ..core.errors import GaitEstimatorError
 from ..io.library_io import load_library, save_library
 from ..io.resources import DEFAULT_LIBRARY
-from .args import choice_list, int_list, positive_int
+from .args import choice_list, int_list, positive_int, prepare_output
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.node_commands",
@@ -95,12 +95,12 @@ def cmd_process(args: argparse.Namespace) -> int:
             raise GaitEstimatorError("--save-adapted needs personalisation on: --adapt-rate > 0")
         if Path(args.save_adapted).suffix.lower() not in (".yaml", ".yml", ".npz"):
             raise GaitEstimatorError(f"--save-adapted {args.save_adapted}: the file name must end in .yaml or .npz")
+        prepare_output(args.save_adapted, "--save-adapted")
     pred = predict(rec, lib, config)  # restarts the window at gaps > max_gap_s, like the node
     if args.out:
         write_predictions_csv(pred, args.out)
     if args.save_adapted and pred.adapted is not None:
         try:
-            Path(args.save_adapted).parent.mkdir(parents=True, exist_ok=True)
             save_library(pred.adapted, args.save_adapted)
         except OSError as exc:
             raise GaitEstimatorError(f"--save-adapted {args.save_adapted}: {exc.strerror or exc}") from None
@@ -132,6 +132,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     lib = load_library(args.kernels)
     if args.compare_reference and not args.reference_samples:
         raise GaitEstimatorError("--compare-reference needs --reference-samples (samples the command processes)")
+    if args.json:
+        prepare_output(args.json, "--json")
     try:
         report = bench(lib, args.modes, steps=args.steps, naive_max_modes=args.naive_max_modes, backends=args.backends,
                        preset_max_modes=args.preset_max_modes)
@@ -165,7 +167,6 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(f"reference command: {ref['us_per_sample_best']:.2f} us per sample (best of {ref['runs']} runs of "
               f"{ref['samples']} samples, process start-up included)")
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
         print(f"wrote {args.json}")
     return 0

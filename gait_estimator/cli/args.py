@@ -1,10 +1,13 @@
-"""argparse value types shared by the CLI modules (each rejects bad values with a usage error)."""
+"""argparse value types and the output-path check shared by the CLI modules (bad values: one-line usage errors)."""
 
 from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 from typing import Any
+
+from ..core.errors import GaitEstimatorError
 
 
 def positive_int(text: str) -> int:
@@ -29,6 +32,15 @@ def choice_list(allowed: tuple[str, ...]) -> Any:
         return values
 
     return parse
+
+
+def prepare_output(path: str, option: str) -> None:
+    """Create the parent folder of the output file ``path`` (given with ``option``) before any
+    work is done, or raise a one-line GaitEstimatorError."""
+    try:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise GaitEstimatorError(f"{option} {path}: {exc.strerror or exc}") from None
 
 
 def positive_float(text: str) -> float:

@@ -22,7 +22,7 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import choice_list, positive_float, positive_int
+from .args import choice_list, positive_float, positive_int, prepare_output
 
 DEMO_DOMAIN_ID = 77
 BENCH_DOMAIN_ID = 78
@@ -488,18 +488,10 @@ def bench_node(
     return report
 
 
-def _writable(path: str, option: str) -> None:
-    """Create the parent folder of an output file now, or fail with one line."""
-    try:
-        Path(path).expanduser().parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise GaitEstimatorError(f"{option} {path}: {exc.strerror or exc}") from None
-
-
 def cmd_bench_node(args: argparse.Namespace) -> int:
     require_ros()
     if args.json:  # before minutes of measuring, not after
-        _writable(args.json, "--json")
+        prepare_output(args.json, "--json")
     report = bench_node(
         kernels=args.kernels,
         latency_samples=args.samples,

@@ -180,8 +180,8 @@ class _MatcherBase:
         self._scale = np.sqrt(self.channel_weights)
         self._weighted = bool(np.any(self.channel_weights != 1.0))
         # row 0: tolerance, row 1: sensor offset (set_sensor_offset), in the weighted units of d and k
-        tolerance = np.where(self._scale > 0, self.offset_tolerance_deg * np.where(self._scale > 0, self._scale, 1.0), 0.0)
-        self._tau = np.stack([tolerance, np.zeros(N_CHANNELS)])  # (a dropped channel: 0, not inf * 0)
+        tolerance = np.where(self._scale > 0, self.offset_tolerance_deg, 0.0) * self._scale  # dropped channel: 0, not inf * 0
+        self._tau = np.stack([tolerance, np.zeros(N_CHANNELS)])
         self._offset = self.offset_tolerance_deg > 0
         base = library.lengths
         # Rows are mode-major: row m * S + s is mode m at time scale s.
@@ -491,7 +491,6 @@ class IncrementalMatcher(_MatcherBase):
         if rows is None:
             rows = self._rows
             self._ksq = np.empty((self.n_rows, self.max_length))
-
             if self._partial:
                 self._stacked = np.empty((self.n_rows, 2 * N_CHANNELS, self.max_length))
                 self._kconst = np.empty((self.n_rows, self.max_length))
@@ -612,9 +611,7 @@ class IncrementalMatcher(_MatcherBase):
         with at ``column`` (4,), degrees: the sensor offset under the hypothesis that the wearer
         walks that row's mode and time scale. Valid once the row's window is full."""
         w = int(self.windows[row])
-        # From the ring, not the prefix sums: for the longest window the prefix sum before it
-        # shares its ring slot with the newest one and has been overwritten.
-        s = self._window_data()[: min(w, self._count)].sum(axis=0)
+        s = self.window_sums()[row]  # not from the prefix-sum ring: the longest window's start slot is overwritten
         if self._partial:  # the kernel part of a short window depends on the shift
             mu = self._kernels[row][:, (column - np.arange(w)) % int(self.lengths[row])].astype(np.float64).mean(axis=1)
         else:
