@@ -12,10 +12,15 @@ Reads, in experiments/results/node/ (a missing report leaves its column or secti
   --executor events --outputs estimate --rates 1000,2000,3000 --profile --json ...`` (the bench and
   the node it starts under SCHED_FIFO priority 10, as a controller would run);
 * ``bench_node_one_core.json``: ``taskset -c 0 gait-estimator bench-node --profile --json ...``
-  on a quiet machine (the node and the bench process share one core).
+  on a quiet machine (the node and the bench process share one core);
+* ``bench_node_700.json``: ``gait-estimator bench-node --modes 700 --preset paper --executor events
+  --outputs estimate --rates 250,500,1000 --profile --json ...`` (700 modes);
+* ``spaced_calls.json``: ``python experiments/spaced_calls.py --json ...`` (the node's callback
+  and ``Estimator.update`` back to back and spaced out).
 
 Writes ``tables.md`` with the sections ``Two cores`` (docs/performance.md, block
-``node#Two cores``) and ``One core`` (for the embedded-proxy section).
+``node#Two cores``), ``One core`` (for the embedded-proxy section), ``700 modes`` and ``Spaced
+calls``.
 """
 
 from __future__ import annotations
@@ -28,7 +33,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 NODE = ROOT / "experiments" / "results" / "node"
 REPORTS = {"quiet": "bench_node.json", "busy": "bench_node_busy.json", "busy_rt": "bench_node_busy_rt.json",
-           "one_core": "bench_node_one_core.json"}
+           "one_core": "bench_node_one_core.json", "modes_700": "bench_node_700.json"}
+SPACED = "spaced_calls.json"
 PERIODS_MS = {230: 1000 / 230, 1000: 1.0}
 STAGES = {
     "dds_in_and_executor": "input published → node starts handling it (DDS in, executor wake-up, take)",
@@ -147,7 +153,14 @@ def two_cores(reports: dict[str, dict[str, Any]]) -> str:
                 for k, label in STAGES.items() if k in stages]
         out += [table(["stage", "mean ms", "p50 ms", "p99 ms"], rows), ""]
         micro = prof.get("micro_us")
-        if micro:
+        if micro and "serialized_estimate_publish_us" in micro:
+            out += ["Per sample in the bench process, publishing `estimate` on a topic nobody subscribes to "
+                    "(conversion and serialisation, no delivery): the node's pre-serialised message, patched "
+                    f"and published as bytes, {micro['serialized_estimate_publish_us']:.1f} µs; a preallocated "
+                    f"JointState filled and published {micro['preallocated_estimate_publish_us']:.1f} µs; a "
+                    f"fresh one {micro['fresh_estimate_publish_us']:.1f} µs; a subscriber-count query "
+                    f"{micro['subscription_count_query_us']:.1f} µs.", ""]
+        elif micro:
             out += ["Per call in the bench process (no DDS): filling the node's preallocated `estimate` message "
                     f"{micro['fill_preallocated_estimate_us']:.1f} µs, building a fresh one "
                     f"{micro['build_fresh_estimate_us']:.1f} µs; a subscriber-count query "
@@ -193,6 +206,52 @@ def one_core(r: dict[str, Any]) -> str:
     return "\n".join(out).rstrip() + "\n"
 
 
+def modes_700(r: dict[str, Any]) -> str:
+    v = variant(r, r["executor"], r["outputs"])
+    assert v is not None
+    lt = v["latency"]
+    out = ["## 700 modes", "",
+           f"`gait-estimator bench-node --modes {r['modes']} --preset {r['preset']} --executor {r['executor']} --outputs "
+           f"{r['outputs']} --rates 250,500,1000 --profile --json experiments/results/node/bench_node_700.json` "
+           f"(the bundled library cycled to {r['modes']} modes, as `gait-estimator bench --modes`; {machine_line(r)}).",
+           "",
+           table(["measure", "value"], [
+               ["latency at 230 Hz to the bench's DDS reader, p50 / p99",
+                f"{ms(lt.get('dds_p50_ms'))} / {ms(lt.get('dds_p99_ms'))} ms"],
+               ["latency at 230 Hz to the bench's callback, p50 / p99",
+                f"{ms(lt.get('p50_ms'))} / {ms(lt.get('p99_ms'))} ms"],
+               ["highest input rate sustained without drops", rate(v)],
+               ["node processing at 230 Hz, mean (diagnostics)", f"{ms(lt.get('node_processing_mean_ms'), 3)} ms"],
+           ]), ""]
+    stages = lt.get("profile", {}).get("stages")
+    if stages:
+        out += [table(["stage at 230 Hz", "mean ms", "p50 ms", "p99 ms"],
+                      [[label, ms(stages[k]["mean_ms"], 3), ms(stages[k]["p50_ms"], 3), ms(stages[k]["p99_ms"], 3)]
+                       for k, label in STAGES.items() if k in stages]), ""]
+    micro = v.get("micro_us")
+    if micro and "serialized_estimate_publish_us" in micro:
+        out += [f"Publishing one `estimate` ({3 + 2 * r['modes'] + 6:,} names) in the bench process: pre-serialised "
+                f"{micro['serialized_estimate_publish_us']:.0f} µs, preallocated JointState "
+                f"{micro['preallocated_estimate_publish_us']:.0f} µs, fresh JointState "
+                f"{micro['fresh_estimate_publish_us']:.0f} µs.", ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def spaced_calls(r: dict[str, Any]) -> str:
+    conditions = list(r["results"][0]["conditions"])
+    rows = [[f"`{x['preset']}`", x["what"],
+             *(f"{x['conditions'][c]['median_us']:,.0f} / {x['conditions'][c]['p99_us']:,.0f}" for c in conditions)]
+            for x in r["results"]]
+    return "\n".join([
+        "## Spaced calls", "",
+        f"`python experiments/spaced_calls.py --json experiments/results/node/spaced_calls.json` ({machine_line(r)}): "
+        "the node's input callback (in-process, no executor; an in-process subscriber makes it publish `estimate`) "
+        "and `Estimator.update` alone, 1,000 calls per condition in blocks of 500, conditions interleaved; "
+        "median / p99 µs per call.", "",
+        table(["preset", "what", *conditions], rows), "",
+    ])
+
+
 def main() -> int:
     reports = {k: json.loads((NODE / f).read_text(encoding="utf-8")) for k, f in REPORTS.items() if (NODE / f).is_file()}
     if "quiet" not in reports:
@@ -200,6 +259,10 @@ def main() -> int:
     parts = [two_cores(reports)]
     if "one_core" in reports:
         parts.append(one_core(reports["one_core"]))
+    if "modes_700" in reports:
+        parts.append(modes_700(reports["modes_700"]))
+    if (NODE / SPACED).is_file():
+        parts.append(spaced_calls(json.loads((NODE / SPACED).read_text(encoding="utf-8"))))
     (NODE / "tables.md").write_text("\n".join(parts), encoding="utf-8")
     print(f"wrote {(NODE / 'tables.md').relative_to(ROOT)}")
     return 0

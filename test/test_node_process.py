@@ -226,4 +226,4 @@ def test_bench_node_command(tmp_path: Path) -> None:
         stages = prof["stages"]
         assert set(stages) >= {"dds_in_and_executor", "estimator", "publish", "dds_out", "bench_callback"}
         assert 0 < stages["estimator"]["p50_ms"] < stages["total_to_callback"]["p99_ms"]
-        assert v["micro_us"]["fill_preallocated_estimate_us"] > 0
+        assert v["micro_us"]["serialized_estimate_publish_us"] > 0

@@ -13,6 +13,7 @@ import math
 import os
 import signal
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -368,7 +369,7 @@ def _bench_variant(
             f"mean {lt.get('node_processing_mean_ms', math.nan):.3f} ms, max {lt.get('node_processing_max_ms', math.nan):.3f} ms"
         )
         if profile:
-            out["micro_us"] = publishing_costs_us(lib, client.publisher)
+            out["micro_us"] = publishing_costs_us(lib, client.node)
             stages = lt["profile"].get("stages", {})
             for name, text in PROFILE_LABELS.items():
                 st = stages.get(name)
@@ -431,9 +432,12 @@ def bench_node(
     outputs: list[str] | tuple[str, ...] = OUTPUT_SETS,
     profile: bool = False,
     preset: str = "default",
+    modes: int | None = None,
 ) -> dict[str, Any]:
     """Measure estimator_node (with estimator preset ``preset``) in a child process over DDS on this machine, once per variant
-    (``executors`` x ``outputs``, a fresh node process each).
+    (``executors`` x ``outputs``, a fresh node process each). With ``modes``, the node runs a
+    library of that many modes cycled from ``kernels`` (``KernelLibrary.replicated``, as
+    ``gait-estimator bench --modes``), written to a temporary NPZ.
 
     1. Latency: ``latency_samples`` inputs at ``rate_hz``; latency = arrival of the ``estimate``
        message carrying an input's stamp in the bench's callback - publication of that input
@@ -454,11 +458,25 @@ def bench_node(
     ``latency``/``throughput`` are the first variant's (by default the node's default executor,
     ``estimate`` only).
     """
-    from ..analysis.bench import machine_info
-    from ..io.library_io import load_library
-    from ..ros.node_client import use_local_ros
+    from ..io.library_io import load_library, save_library
 
     lib = load_library(kernels)
+    kernels = str(lib.path or kernels)
+    with tempfile.TemporaryDirectory(prefix="gait_estimator_bench_") as tmp:
+        if modes is not None:
+            lib = lib.replicated(modes)
+            kernels = str(save_library(lib, Path(tmp) / f"{lib.name}_{modes}.npz"))
+        return _bench_node(lib, kernels, latency_samples, rate_hz, rates, rate_seconds, domain_id, node_cmd, log,
+                           executors, outputs, profile, preset)
+
+
+def _bench_node(
+    lib: Any, kernels: str, latency_samples: int, rate_hz: float, rates: Any, rate_seconds: float, domain_id: int,
+    node_cmd: str | None, log: Any, executors: Any, outputs: Any, profile: bool, preset: str,
+) -> dict[str, Any]:
+    from ..analysis.bench import machine_info
+    from ..ros.node_client import use_local_ros
+
     use_local_ros(domain_id)
     report: dict[str, Any] = {
         "machine": machine_info(),
@@ -472,7 +490,7 @@ def bench_node(
     for executor in executors:
         for out in outputs:
             v = _bench_variant(
-                lib, lib.path or kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
+                lib, kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
                 node_cmd, profile, throughput=out == "estimate", log=log, preset=preset,
             )
             report["variants"].append(v)
@@ -504,6 +522,7 @@ def cmd_bench_node(args: argparse.Namespace) -> int:
         outputs=args.outputs,
         profile=args.profile,
         preset=args.preset,
+        modes=args.modes,
     )
     m = report["machine"]
     print(f"machine: {m['processor']}, {m['cpus']} CPUs ({m['cpus_allowed']} allowed), Python {m['python']}; "
@@ -578,6 +597,9 @@ def add_commands(sub: Any) -> None:
                    "estimate; latency only); default " + ",".join(OUTPUT_SETS))
     b.add_argument("--preset", choices=("default", "paper"), default="default",
                    help="the node's estimator preset (default: default)")
+    b.add_argument("--modes", type=positive_int, metavar="M",
+                   help="run the node with a library of M modes cycled from --kernels (as 'bench --modes'; "
+                   "default: the library as it is)")
     b.add_argument("--profile", action="store_true",
                    help="split the latency run's time per sample: DDS in + executor, estimator, publish, DDS out, "
                    "bench callback (from the node's ~/profile topic)")

@@ -178,6 +178,7 @@ class _MatcherBase:
         self.n_scales = int(self.time_scales.size)
         self.active_channels = int(np.count_nonzero(self.channel_weights))
         self._scale = np.sqrt(self.channel_weights)
+        self._unscale = np.where(self._scale > 0, 1.0 / np.where(self._scale > 0, self._scale, 1.0), 0.0)  # dropped: 0
         self._weighted = bool(np.any(self.channel_weights != 1.0))
         # row 0: tolerance, row 1: sensor offset (set_sensor_offset), in the weighted units of d and k
         tolerance = np.where(self._scale > 0, self.offset_tolerance_deg, 0.0) * self._scale  # dropped channel: 0, not inf * 0
@@ -228,15 +229,12 @@ class _MatcherBase:
     def row_kernel(self, row: int) -> np.ndarray:
         """The kernel of ``row`` (n, 4), degrees (unweighted channels as given)."""
         n = int(self.lengths[row])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            k = self._kernels[row, :, :n].T.astype(np.float64) / np.where(self._scale > 0, self._scale, 1.0)
-        return k
+        return self._kernels[row, :, :n].T.astype(np.float64) * self._unscale
 
     @property
     def sensor_offset_deg(self) -> np.ndarray:
         """The sensor offset assumed by the offset penalty (4,), degrees; zeros by default."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(self._scale > 0, self._tau[1] / np.where(self._scale > 0, self._scale, 1.0), 0.0)
+        return self._tau[1] * self._unscale
 
     def set_sensor_offset(self, offset_deg: Sequence[float] | np.ndarray) -> None:
         """Assume the sensors read ``offset_deg`` (4,) degrees more than the kernels' (CHANNELS
@@ -616,8 +614,7 @@ class IncrementalMatcher(_MatcherBase):
             mu = self._kernels[row][:, (column - np.arange(w)) % int(self.lengths[row])].astype(np.float64).mean(axis=1)
         else:
             mu = self._mu[row]
-        safe = np.where(self._scale > 0, self._scale, 1.0)
-        return np.where(self._scale > 0, (s / w - mu) / safe, 0.0)
+        return (s / w - mu) * self._unscale
 
     def resync_all(self) -> None:
         """Recompute every column from the window now (O(N^2 M); not needed in normal use)."""

@@ -87,6 +87,7 @@ from ..io.stream import (
     StreamGuard,
     restart_threshold,
 )
+from .serialized import SerializedJointState
 
 NODE_NAME = "estimator_node"
 SAVE_LIBRARY_SERVICE = "~/save_library"
@@ -456,11 +457,8 @@ class EstimatorNode(Node):
         names = estimator.mode_names
         self._sse_msg = Float64MultiArray()
         self._sse_msg.layout.dim = [MultiArrayDimension(label=sse_label(names), size=len(names), stride=len(names))]
-        self._estimate_msg = JointState()
-        self._estimate_msg.name = estimate_names(names)
-        # buffer of the message's position, filled for every estimate (estimate_into)
-        self._estimate_values = array.array("d", bytes(8 * len(self._estimate_msg.name)))
-        self._estimate_view = np.frombuffer(self._estimate_values, dtype=np.float64)
+        # serialised once per library; every estimate patches its stamp and values (estimate_into)
+        self._estimate_msg = SerializedJointState(estimate_names(names))
         self._last_estimate: Estimate | None = None
 
     def _options_summary(self) -> str:
@@ -604,10 +602,9 @@ class EstimatorNode(Node):
                 self._sse_pub.publish(self._sse_msg)
         if self._estimate_pub.get_subscription_count():
             msg = self._estimate_msg
-            msg.header.stamp = stamp
-            estimate_into(self._estimate_view, e)
-            msg.position = self._estimate_values  # (the setter copies it unless field checks are on)
-            self._estimate_pub.publish(msg)
+            msg.set_stamp(stamp)
+            estimate_into(msg.values, e)
+            self._estimate_pub.publish(msg.data())
 
     def _reject(self, exc: SampleRejected) -> None:
         """Count a dropped sample; warn at most every WARN_THROTTLE_S per reason."""
