@@ -1,5 +1,5 @@
 """estimator_node as a separate process through its installed entry point, and the demo and
-bench-node commands: real DDS on loopback (domain IDs 21..28, LOCALHOST discovery)."""
+bench-node commands: real DDS on loopback (domain IDs 21..28 and 37, LOCALHOST discovery)."""
 
 from __future__ import annotations
 
@@ -227,3 +227,18 @@ def test_bench_node_command(tmp_path: Path) -> None:
         assert set(stages) >= {"dds_in_and_executor", "estimator", "publish", "dds_out", "bench_callback"}
         assert 0 < stages["estimator"]["p50_ms"] < stages["total_to_callback"]["p99_ms"]
         assert v["micro_us"]["serialized_estimate_publish_us"] > 0
+
+
+def test_bench_node_with_more_modes(tmp_path: Path) -> None:
+    """--modes: the node runs the library cycled to M modes; every estimate (2M + 9 values) reaches the bench."""
+    report = tmp_path / "bench.json"
+    proc = _gait_estimator("bench-node", "--modes", "14", "--preset", "paper", "--samples", "150", "--rates", "300",
+                           "--seconds", "0.5", "--executor", "events", "--outputs", "estimate",
+                           "--domain-id", "37", "--json", str(report))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    data = json.loads(report.read_text(encoding="utf-8"))
+    assert data["modes"] == 14 and data["preset"] == "paper" and data["node_exit_code"] == 0
+    assert data["latency"]["answered"] >= 140
+    assert "(14 modes)" in proc.stdout
+    bad = _gait_estimator("bench-node", "--modes", "0")
+    assert bad.returncode == 2 and "--modes" in bad.stderr
