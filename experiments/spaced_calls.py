@@ -7,7 +7,7 @@
 ``gait-estimator bench`` measures for the same work in a tight loop. This script separates the
 machine from ROS 2: it builds ``estimator_node`` in-process (no executor, no input over DDS; a
 serialised subscriber in the same process makes it publish ``estimate``), and calls its input
-callback with prepared JointState messages
+callback with prepared serialised JointState messages (as its subscription delivers them)
 
 * back to back;
 * spaced by 1 ms and by 1/230 s, sleeping in between (as the node does between samples);
@@ -82,6 +82,7 @@ def measure(call: Callable[[int], None], warmup: int) -> dict[str, dict[str, flo
 
 def node_calls(lib: Any, preset: str, deg: np.ndarray, warmup: int) -> dict[str, dict[str, float]]:
     import rclpy
+    from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
 
     from gait_estimator.ros.node import EstimatorNode
@@ -93,7 +94,7 @@ def node_calls(lib: Any, preset: str, deg: np.ndarray, warmup: int) -> dict[str,
         m.name = list(CHANNELS)
         m.position = row.tolist()
         m.header.stamp.sec, m.header.stamp.nanosec = divmod(1_700_000_000_000_000_000 + i * period_ns, 1_000_000_000)
-        msgs.append(m)
+        msgs.append(serialize_message(m))  # as the node's input subscription delivers them
     rclpy.init(args=["--ros-args", "-p", f"preset:={preset}", "-p", "executor:=events"])
     try:
         node = EstimatorNode()

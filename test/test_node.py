@@ -139,7 +139,7 @@ def test_bad_input_is_dropped_counted_warned_and_state_stays_valid(ros, multispe
     good = list(range(len(rec)))
     sent = 0
 
-    def send(msg: JointState) -> None:
+    def send(msg: JointState | bytes) -> None:
         nonlocal sent
         client.publisher.publish(msg)
         sent += 1
@@ -160,6 +160,8 @@ def test_bad_input_is_dropped_counted_warned_and_state_stays_valid(ros, multispe
         # window as a restarted stream, see test_faults.py)
         ("non_increasing_stamp", _joint_state(names, x[0].tolist(), stamps[150])),
         ("out_of_range", _joint_state(names, [1e6, 0.1, 0.2, 0.3], bad_stamp + 5)),
+        # bytes no deserialiser reads, published as a serialised JointState
+        ("malformed", b"\x00\x01\x00\x00" + b"\xff" * 40),
     ]
     for i in range(200):
         send(good_sample(i))

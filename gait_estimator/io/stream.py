@@ -32,7 +32,8 @@ MISSING_JOINT = "missing_joint"
 WRONG_LENGTH = "wrong_length"
 NON_INCREASING_STAMP = "non_increasing_stamp"
 OUT_OF_RANGE = "out_of_range"
-REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP, OUT_OF_RANGE)
+MALFORMED = "malformed"  # bytes that do not decode as the input message type (live streams)
+REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP, OUT_OF_RANGE, MALFORMED)
 
 STREAM_RESTART_S = 1.0
 """Jump back (s) that restarts a live stream when ``max_gap_s`` is 0 (gap check off); see

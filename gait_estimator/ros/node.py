@@ -2,7 +2,8 @@
 
 Subscribes ``segment_angles`` (sensor-data QoS: best effort, keep last; receives from best-effort
 and reliable publishers) as ``sensor_msgs/JointState`` (angles by name) or
-``std_msgs/Float64MultiArray`` (``[right_thigh, left_thigh, right_shank, left_shank]``), feeds
+``std_msgs/Float64MultiArray`` (``[right_thigh, left_thigh, right_shank, left_shank]``; a
+JointState is taken serialised and read by ``io/cdr.py``), feeds
 every message to the shared estimator pipeline (``estimator.Estimator``: gap check, optional
 resampling, incremental matcher, supervisor; the same code as ``gait-estimator process``) and
 publishes (reliable, keep last 10):
@@ -57,6 +58,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 from std_srvs.srv import Trigger
@@ -66,6 +68,7 @@ from ..core.errors import GaitEstimatorError
 from ..core.estimator import OPTIONS, PRESETS, Estimator, EstimatorConfig
 from ..core.kernels import KernelLibrary
 from ..core.supervisor import Estimate
+from ..io.cdr import CdrError, Stamp, read_joint_state
 from ..io.library_io import load_library, save_library
 from ..io.outputs import (
     ESTIMATE_TOPIC,
@@ -80,6 +83,7 @@ from ..io.outputs import (
 from ..io.resources import DEFAULT_LIBRARY
 from ..io.stream import (
     INPUT_TYPES,
+    MALFORMED,
     REASONS,
     UNITS,
     AngleExtractor,
@@ -288,6 +292,7 @@ class EstimatorNode(Node):
             self._on_input,
             INPUT_QOS,
             qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+            raw=msg_type is JointState,  # read from the CDR bytes (io/cdr.py): no message objects
         )
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._save_srv = self.create_service(Trigger, SAVE_LIBRARY_SERVICE, self._save_library)
@@ -495,16 +500,27 @@ class EstimatorNode(Node):
             # SIGINT/SIGTERM shut the context down while we were publishing or taking (rclpy's
             # signal handling runs in another thread): nothing left to do.
 
-    def _handle_joint_state(self, msg: JointState) -> None:
-        """One JointState sample: angles by name, time from ``header.stamp``."""
+    def _handle_joint_state(self, msg: bytes | JointState) -> None:
+        """One JointState sample, serialised (as the subscription delivers it) or not: angles by
+        name, time from ``header.stamp``."""
         t0 = time.perf_counter()
         self._received += 1
         self._period_received += 1
-        stamp = msg.header.stamp
+        if isinstance(msg, bytes):
+            try:
+                stamp, names, positions = read_joint_state(msg)
+            except CdrError as exc:  # not plain CDR: the middleware's deserialiser reads any encoding
+                try:
+                    msg = deserialize_message(msg, JointState)
+                except Exception:  # whatever rclpy raises for undecodable bytes
+                    self._reject(SampleRejected(MALFORMED, f"cannot decode the JointState ({exc})"))
+                    return
+        if not isinstance(msg, bytes):
+            stamp, names, positions = msg.header.stamp, msg.name, msg.position
         if stamp.sec == 0 and stamp.nanosec == 0:
             stamp = self.get_clock().now().to_msg()
         try:
-            angles = self._extract.named(msg.name, msg.position)
+            angles = self._extract.named(names, positions)
         except SampleRejected as exc:
             self._reject(exc)
             return
@@ -523,7 +539,7 @@ class EstimatorNode(Node):
             return
         self._process(angles, stamp, t0)
 
-    def _process(self, angles_deg: np.ndarray, stamp: TimeMsg, t0: float) -> None:
+    def _process(self, angles_deg: np.ndarray, stamp: TimeMsg | Stamp, t0: float) -> None:
         """Stamp check, one estimator update, publish; ``t0`` = callback start (perf_counter)."""
         t = self._seconds(stamp)
         guard = self._guard
@@ -578,7 +594,7 @@ class EstimatorNode(Node):
             f"{why}: window restarted" + (f" ({more} more restarts since the last message)" if more else "")
         )
 
-    def _seconds(self, stamp: TimeMsg) -> float:
+    def _seconds(self, stamp: TimeMsg | Stamp) -> float:
         """A stamp in seconds since the whole second of the first stamp the node saw: float64
         keeps nanoseconds there, which seconds since 1970 (~1.7e9) do not (the resampler
         interpolates at these times)."""
@@ -586,7 +602,7 @@ class EstimatorNode(Node):
             self._epoch_sec = stamp.sec
         return (stamp.sec - self._epoch_sec) + stamp.nanosec * 1e-9
 
-    def _publish(self, e: Estimate, stamp: TimeMsg) -> None:
+    def _publish(self, e: Estimate, stamp: TimeMsg | Stamp) -> None:
         """Publish one estimate; topics nobody listens to are skipped (a count query is far
         cheaper than a publish). ``estimate`` goes last: once it is out, everything is."""
         self._last_estimate = e

@@ -19,6 +19,8 @@ from builtin_interfaces.msg import Time as TimeMsg
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
+from ..io.cdr import Stamp
+
 _STAMP = struct.Struct("=iI")  # builtin_interfaces/Time in CDR (host byte order, as serialize_message writes)
 _PROBE_SEC, _PROBE_NANOSEC = 0x5A17_C0DE, 0x3B9A_C9FF  # stamp values that cannot occur in the names
 
@@ -56,8 +58,8 @@ class SerializedJointState:
         self.set_stamp(TimeMsg())
         self._check(list(names), frame_id)
 
-    def set_stamp(self, stamp: TimeMsg) -> None:
-        """Write ``header.stamp``."""
+    def set_stamp(self, stamp: TimeMsg | Stamp) -> None:
+        """Write ``header.stamp`` (anything with ``sec`` and ``nanosec``)."""
         _STAMP.pack_into(self._buf, self._stamp_at, stamp.sec, stamp.nanosec)
 
     def data(self) -> bytes:

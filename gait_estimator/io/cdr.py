@@ -1,0 +1,79 @@
+"""A ``sensor_msgs/JointState`` read from its serialised CDR bytes, as a ROS 2 subscriber
+receives them: stamp, names and positions, without building message objects.
+
+The node subscribes to its input serialised: building a JointState object (header, stamp, a
+string per name, the arrays) costs more than the rest of taking a message. Plain CDR (XCDR1,
+either byte order), the encoding ROS 2 Jazzy's middlewares use for these messages: a 4-byte
+encapsulation header, then the fields, each aligned to its size relative to the end of that
+header. Anything else raises CdrError, and the caller hands the bytes to the middleware's own
+deserialiser.
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import NamedTuple
+
+
+class CdrError(ValueError):
+    """The bytes are not a plain-CDR JointState (other encoding, truncated, invalid)."""
+
+
+class Stamp(NamedTuple):
+    """``builtin_interfaces/Time``: seconds and nanoseconds (the fields the node reads)."""
+
+    sec: int
+    nanosec: int
+
+
+class JointStateFields(NamedTuple):
+    """The fields of a JointState the estimator uses."""
+
+    stamp: Stamp
+    names: list[str]
+    positions: tuple[float, ...]
+
+
+_BODY = 4  # alignment origin: the end of the encapsulation header
+_U32 = (struct.Struct(">I"), struct.Struct("<I"))  # by little-endian flag
+_TIME = (struct.Struct(">iI"), struct.Struct("<iI"))
+
+
+def read_joint_state(data: bytes) -> JointStateFields:
+    """Stamp (``header.stamp``), ``name`` and ``position`` of a CDR-serialised JointState.
+
+    Raises:
+        CdrError: not plain CDR (XCDR1), or truncated or invalid bytes.
+    """
+    if len(data) < 16 or data[0] != 0 or data[1] > 1:
+        raise CdrError(f"not plain CDR (encapsulation {bytes(data[:2]).hex() or 'missing'})")
+    little = data[1]
+    u32 = _U32[little].unpack_from
+    end = len(data)
+    try:
+        sec, nanosec = _TIME[little].unpack_from(data, _BODY)
+        p = _BODY + 8
+        p += 4 + u32(data, p)[0]  # frame_id
+        p += -(p - _BODY) % 4
+        count = u32(data, p)[0]
+        p += 4
+        names = []
+        for _ in range(count):  # the message's joints (four for the OSL), not modes
+            p += -(p - _BODY) % 4
+            n = u32(data, p)[0]
+            q = p + 4 + n
+            if n == 0 or q > end:  # a CDR string holds at least its terminating NUL
+                raise CdrError(f"invalid name at byte {p}")
+            names.append(data[p + 4 : q - 1].decode("utf-8"))
+            p = q
+        p += -(p - _BODY) % 4
+        count = u32(data, p)[0]
+        p += 4
+        if count:
+            p += -(p - _BODY) % 8
+        if p + 8 * count > end:
+            raise CdrError(f"{count} positions do not fit in {end} bytes")
+        positions = struct.unpack_from(("<%dd" if little else ">%dd") % count, data, p)
+    except (struct.error, UnicodeDecodeError) as exc:
+        raise CdrError(f"invalid JointState: {exc}") from None
+    return JointStateFields(Stamp(sec, nanosec), names, positions)
