@@ -16,11 +16,13 @@ Reads, in experiments/results/node/ (a missing report leaves its column or secti
 * ``bench_node_700.json``: ``gait-estimator bench-node --modes 700 --preset paper --executor events
   --outputs estimate --rates 250,500,1000 --profile --json ...`` (700 modes);
 * ``spaced_calls.json``: ``python experiments/spaced_calls.py --json ...`` (the node's callback
-  and ``Estimator.update`` back to back and spaced out).
+  and ``Estimator.update`` back to back and spaced out);
+* ``take_cost.json``: ``python experiments/take_cost.py --json ...`` (taking a JointState as a
+  message object or serialised).
 
 Writes ``tables.md`` with the sections ``Two cores`` (docs/performance.md, block
-``node#Two cores``), ``One core`` (for the embedded-proxy section), ``700 modes`` and ``Spaced
-calls``.
+``node#Two cores``), ``One core`` (for the embedded-proxy section), ``700 modes``, ``Spaced
+calls`` and ``Taking a message``.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ NODE = ROOT / "experiments" / "results" / "node"
 REPORTS = {"quiet": "bench_node.json", "busy": "bench_node_busy.json", "busy_rt": "bench_node_busy_rt.json",
            "one_core": "bench_node_one_core.json", "modes_700": "bench_node_700.json"}
 SPACED = "spaced_calls.json"
+TAKE = "take_cost.json"
 PERIODS_MS = {230: 1000 / 230, 1000: 1.0}
 STAGES = {
     "dds_in_and_executor": "input published → node starts handling it (DDS in, executor wake-up, take)",
@@ -252,6 +255,18 @@ def spaced_calls(r: dict[str, Any]) -> str:
     ])
 
 
+def take_cost(r: dict[str, Any]) -> str:
+    m = r["machine"]
+    rows = [[k, f"{v:.1f} µs", ", ".join(f"{x:.1f}" for x in r["rounds_us"][k])] for k, v in r["per_message_us"].items()]
+    return "\n".join([
+        "## Taking a message", "",
+        f"`python experiments/take_cost.py --json experiments/results/node/take_cost.json` ({m['processor']}, "
+        f"{m['cpus']} vCPUs, Python {m['python']}): {r['messages']:,} queued OSL JointState messages taken by rclpy's "
+        "EventsExecutor for a callback that only counts them; median of three rounds.", "",
+        table(["subscription delivers", "per message", "rounds, µs"], rows), "",
+    ])
+
+
 def main() -> int:
     reports = {k: json.loads((NODE / f).read_text(encoding="utf-8")) for k, f in REPORTS.items() if (NODE / f).is_file()}
     if "quiet" not in reports:
@@ -263,6 +278,8 @@ def main() -> int:
         parts.append(modes_700(reports["modes_700"]))
     if (NODE / SPACED).is_file():
         parts.append(spaced_calls(json.loads((NODE / SPACED).read_text(encoding="utf-8"))))
+    if (NODE / TAKE).is_file():
+        parts.append(take_cost(json.loads((NODE / TAKE).read_text(encoding="utf-8"))))
     (NODE / "tables.md").write_text("\n".join(parts), encoding="utf-8")
     print(f"wrote {(NODE / 'tables.md').relative_to(ROOT)}")
     return 0

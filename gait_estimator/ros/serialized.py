@@ -1,8 +1,8 @@
 """A ``sensor_msgs/JointState`` with fixed names, serialised once and patched for every message.
 
 rclpy converts and serialises every string of a message on every publish: for the node's
-``estimate`` (3 + 2M + 6 names for M modes) that is most of the publish cost: 33 against 13 µs
-per publish at M = 7 and 281 against 20 µs at M = 700 on the development VM (docs/performance.md).
+``estimate`` (3 + 2M + 6 names for M modes) that is most of the publish cost, more than ten times
+the rest at M = 700 (``gait-estimator bench-node --profile`` measures both; docs/performance.md).
 The names never change between two option changes, so neither does the layout of
 the serialised message: ``SerializedJointState`` keeps its CDR bytes, writes the stamp and the
 position values into them in place, and the node publishes the bytes
