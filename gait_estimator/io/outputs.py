@@ -66,7 +66,7 @@ def estimate_names(mode_names: Sequence[str]) -> list[str]:
 
 def estimate_into(out: np.ndarray, est: Estimate) -> np.ndarray:
     """``estimate_array(est)`` for one Estimate, written into ``out`` (float64, (K,)) without
-    allocating: the node fills the buffer behind its preallocated ``estimate`` message."""
+    allocating: the node writes into the position field of its pre-serialised ``estimate``."""
     m = len(est.sse)
     out[0] = est.mode_index
     out[1] = est.phase
