@@ -436,7 +436,7 @@ class EstimatorClient:
             due_s: (T,) publication times, seconds from the start, instead of a fixed rate.
 
         Returns:
-            perf_counter_ns() of every publication, (T,).
+            perf_counter_ns() of every publication (taken just before the publish call), (T,).
         """
         n = len(angles)
         sent = np.empty(n, dtype=np.int64)
@@ -452,8 +452,9 @@ class EstimatorClient:
                 if left <= 0:
                     break
                 spin(timeout_sec=min(left, 2_000_000) / 1e9 if left > 200_000 else 0.0)
-            self.publisher.publish(self.message(angles[i], int(stamps_ns[i])))
-            sent[i] = clock()
+            msg = self.message(angles[i], int(stamps_ns[i]))
+            sent[i] = clock()  # before the call: the message may be on its way before publish() returns
+            self.publisher.publish(msg)
             if on_sample is not None:
                 on_sample(i)
             if not period_ns:
