@@ -9,7 +9,7 @@ import pytest
 
 from gait_estimator.io.bag import typestore
 from gait_estimator.io.bag_write import JOINT_STATE
-from gait_estimator.io.cdr import CdrError, read_joint_state
+from gait_estimator.io.cdr import CdrError, read_joint_state, read_stamp
 
 
 def _cdr(frame_id: str, names: list[str], positions: list[float], velocity: list[float], little: bool,
@@ -35,7 +35,9 @@ OSL = ["right_thigh", "left_thigh", "right_shank", "left_shank"]
 def test_fields_equal_the_serialised_message(little: bool, frame_id: str, names: list[str]) -> None:
     rng = np.random.default_rng(len(frame_id) * 10 + len(names))
     for positions in ([], rng.normal(size=len(names)).tolist(), rng.normal(size=len(names) + 2).tolist()):
-        got = read_joint_state(_cdr(frame_id, names, positions, [1.0, 2.0], little, sec=-7, nanosec=999_999_999))
+        data = _cdr(frame_id, names, positions, [1.0, 2.0], little, sec=-7, nanosec=999_999_999)
+        got = read_joint_state(data)
+        assert read_stamp(data) == got.stamp
         assert got.names == names
         assert list(got.positions) == positions
         assert tuple(got.stamp) == (-7, 999_999_999) and got.stamp.sec == -7
@@ -58,3 +60,6 @@ def test_bad_bytes_raise_cdr_error() -> None:
     for data in bad:
         with pytest.raises(CdrError):
             read_joint_state(data)
+    for data in (b"", b"\x00\x01" + bytes(9), b"\x00\x07" + good[2:]):
+        with pytest.raises(CdrError):
+            read_stamp(data)

@@ -178,7 +178,7 @@ class _MatcherBase:
         self.n_scales = int(self.time_scales.size)
         self.active_channels = int(np.count_nonzero(self.channel_weights))
         self._scale = np.sqrt(self.channel_weights)
-        self._unscale = np.where(self._scale > 0, 1.0 / np.where(self._scale > 0, self._scale, 1.0), 0.0)  # dropped: 0
+        self._unscale = np.divide(1.0, self._scale, out=np.zeros(N_CHANNELS), where=self._scale > 0)  # dropped: 0
         self._weighted = bool(np.any(self.channel_weights != 1.0))
         # row 0: tolerance, row 1: sensor offset (set_sensor_offset), in the weighted units of d and k
         tolerance = np.where(self._scale > 0, self.offset_tolerance_deg, 0.0) * self._scale  # dropped channel: 0, not inf * 0

@@ -39,19 +39,37 @@ _U32 = (struct.Struct(">I"), struct.Struct("<I"))  # by little-endian flag
 _TIME = (struct.Struct(">iI"), struct.Struct("<iI"))
 
 
+def _byte_order(data: bytes) -> int:
+    """1 for little-endian, 0 for big-endian plain CDR; CdrError otherwise (or shorter than a
+    header with its stamp)."""
+    if len(data) < _BODY + 8 or data[0] != 0 or data[1] > 1:
+        raise CdrError(f"not plain CDR (encapsulation {bytes(data[:2]).hex() or 'missing'})")
+    return data[1]
+
+
+def read_stamp(data: bytes) -> Stamp:
+    """``header.stamp`` of any CDR-serialised message that starts with a std_msgs/Header (its
+    first field), without reading the rest.
+
+    Raises:
+        CdrError: not plain CDR (XCDR1), or too short.
+    """
+    return Stamp(*_TIME[_byte_order(data)].unpack_from(data, _BODY))
+
+
 def read_joint_state(data: bytes) -> JointStateFields:
     """Stamp (``header.stamp``), ``name`` and ``position`` of a CDR-serialised JointState.
 
     Raises:
         CdrError: not plain CDR (XCDR1), or truncated or invalid bytes.
     """
-    if len(data) < 16 or data[0] != 0 or data[1] > 1:
-        raise CdrError(f"not plain CDR (encapsulation {bytes(data[:2]).hex() or 'missing'})")
-    little = data[1]
+    little = _byte_order(data)
+    if len(data) < 16:
+        raise CdrError(f"a JointState needs at least 16 bytes, got {len(data)}")
+    stamp = read_stamp(data)
     u32 = _U32[little].unpack_from
     end = len(data)
     try:
-        sec, nanosec = _TIME[little].unpack_from(data, _BODY)
         p = _BODY + 8
         p += 4 + u32(data, p)[0]  # frame_id
         p += -(p - _BODY) % 4
@@ -76,4 +94,4 @@ def read_joint_state(data: bytes) -> JointStateFields:
         positions = struct.unpack_from(("<%dd" if little else ">%dd") % count, data, p)
     except (struct.error, UnicodeDecodeError) as exc:
         raise CdrError(f"invalid JointState: {exc}") from None
-    return JointStateFields(Stamp(sec, nanosec), names, positions)
+    return JointStateFields(stamp, names, positions)

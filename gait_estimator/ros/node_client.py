@@ -11,7 +11,6 @@ from __future__ import annotations
 import array
 import os
 import signal
-import struct
 import subprocess
 import sys
 import tempfile
@@ -35,6 +34,7 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from ..core.channels import CHANNELS
 from ..core.kernels import KernelLibrary
 from ..core.matcher import MatchTrace
+from ..io.cdr import read_stamp
 from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
 
 DIAGNOSTICS_TOPIC = "/diagnostics"
@@ -199,9 +199,6 @@ def _drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscrip
     return on_message
 
 
-_CDR_STAMP_LE, _CDR_STAMP_BE = struct.Struct("<iI"), struct.Struct(">iI")
-
-
 def stamp_to_ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
@@ -304,28 +301,25 @@ class EstimatorClient:
 
     # -- callbacks
 
-    def _on_estimate(self, msg: JointState, info: dict[str, Any]) -> None:
+    def _estimate_arrived(self, stamp: Any, info: dict[str, Any]) -> None:
         self.estimate_count += 1
         r = self.received
         r.estimate_recv_ns.append(time.perf_counter_ns())
         r.estimate_dds_ns.append(info["received_timestamp"])
         r.estimate_source_ns.append(info["source_timestamp"])
-        r.estimate_stamp_ns.append(stamp_to_ns(msg.header.stamp))
+        r.estimate_stamp_ns.append(stamp_to_ns(stamp))
+
+    def _on_estimate(self, msg: JointState, info: dict[str, Any]) -> None:
+        self._estimate_arrived(msg.header.stamp, info)
         if self.record:
+            r = self.received
             r.estimate_values.append(np.frombuffer(msg.position, dtype=np.float64).copy())
             if not r.estimate_names:
                 r.estimate_names = list(msg.name)
 
     def _on_estimate_serialized(self, data: bytes, info: dict[str, Any]) -> None:
-        """``estimate`` as CDR bytes: the stamp is the message's first field, after the 4-byte
-        encapsulation header (whose second byte says the byte order)."""
-        self.estimate_count += 1
-        r = self.received
-        r.estimate_recv_ns.append(time.perf_counter_ns())
-        r.estimate_dds_ns.append(info["received_timestamp"])
-        r.estimate_source_ns.append(info["source_timestamp"])
-        sec, nanosec = (_CDR_STAMP_LE if data[1] & 1 else _CDR_STAMP_BE).unpack_from(data, 4)
-        r.estimate_stamp_ns.append(sec * 1_000_000_000 + nanosec)
+        """``estimate`` as CDR bytes: only its stamp is read."""
+        self._estimate_arrived(read_stamp(data), info)
 
     def _on_mode(self, msg: String, _info: Any = None) -> None:
         self.mode_count += 1

@@ -54,9 +54,7 @@ class SerializedJointState:
         values_at = _find_once(buf, sentinel.tobytes(), "positions") if k else len(buf)
         self._buf = buf
         self.values = np.frombuffer(buf, dtype=np.float64, count=k, offset=values_at)
-        self.values[:] = 0.0
-        self.set_stamp(TimeMsg())
-        self._check(list(names), frame_id)
+        self._check(list(names), frame_id)  # leaves values and stamp at 0
 
     def set_stamp(self, stamp: TimeMsg | Stamp) -> None:
         """Write ``header.stamp`` (anything with ``sec`` and ``nanosec``)."""
