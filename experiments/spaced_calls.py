@@ -13,14 +13,17 @@ callback with prepared serialised JointState messages (as its subscription deliv
 * spaced by 1 ms and by 1/230 s, sleeping in between (as the node does between samples);
 * spaced by 1/230 s, busy-waiting in between (the thread never sleeps);
 
-and does the same for ``Estimator.update`` alone (no ROS). Blocks of 500 calls, the conditions
-interleaved in two rounds, median and p99 per condition. LOCALHOST discovery, ROS_DOMAIN_ID 84.
+and does the same for ``Estimator.update`` alone (no ROS), and for a few small numpy calls on a
+4-vector against the same arithmetic on four Python floats (why the live path hands a sample from
+stage to stage as Python floats). Blocks of 500 calls, the conditions interleaved in two rounds,
+median and p99 per condition. LOCALHOST discovery, ROS_DOMAIN_ID 84.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -104,6 +107,27 @@ def node_calls(lib: Any, preset: str, deg: np.ndarray, warmup: int) -> dict[str,
         rclpy.shutdown()
 
 
+SAMPLE = (10.0, -5.0, 30.0, 2.0)
+DEG_PER_RAD = 180.0 / math.pi
+
+
+def numpy_calls(_i: int) -> None:
+    """Six small numpy calls on one sample, as the live path made before it used Python floats."""
+    d = np.asarray(SAMPLE, dtype=np.float64).reshape(4)
+    np.isfinite(d).all()
+    float(d @ d)
+    np.empty(7), np.empty(7)
+    np.degrees(d)
+
+
+def float_calls(_i: int) -> None:
+    """The same arithmetic on four Python floats."""
+    a, b, c, d = SAMPLE
+    math.isfinite(a) and math.isfinite(b) and math.isfinite(c) and math.isfinite(d)
+    a * a + b * b + c * c + d * d
+    a * DEG_PER_RAD, b * DEG_PER_RAD, c * DEG_PER_RAD, d * DEG_PER_RAD
+
+
 def estimator_calls(lib: Any, preset: str, deg: np.ndarray, warmup: int) -> dict[str, dict[str, float]]:
     est = Estimator(lib, EstimatorConfig.preset(preset))
     dt = 1.0 / lib.sample_rate_hz
@@ -127,6 +151,12 @@ def main() -> int:
             report["results"].append({"preset": preset, "what": what, "conditions": res})
             print(f"{preset:<8} {what:<42} " + "  ".join(f"{c}: {r['median_us']:.0f} / {r['p99_us']:.0f} us"
                                                              for c, r in res.items()))
+    for what, call in (("six small numpy calls on a 4-vector (asarray, isfinite, dot, 2 x empty, degrees)", numpy_calls),
+                       ("the same arithmetic on four Python floats", float_calls)):
+        res = measure(call, warmup)
+        report["results"].append({"preset": None, "what": what, "conditions": res})
+        print(f"{'':<8} {what[:42]:<42} " + "  ".join(f"{c}: {r['median_us']:.1f} / {r['p99_us']:.1f} us"
+                                                       for c, r in res.items()))
     report["load_average_after"] = list(os.getloadavg())
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -11,6 +11,7 @@ import pytest
 
 from gait_estimator import IncrementalMatcher, KernelLibrary
 from gait_estimator.cli.app import main as cli_main
+from gait_estimator.core.channels import sample_values
 from gait_estimator.core.errors import GaitEstimatorError
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
 from gait_estimator.core.kernels import make_mode
@@ -154,6 +155,28 @@ def test_bad_samples_leave_the_state_untouched(able_bodied, multispeed) -> None:
                 est.update(t[i - 1], x[i])
         a, b = est.update(t[i], x[i]), ref.update(t[i], x[i])
         np.testing.assert_array_equal(a.sse, b.sse)
+
+
+def test_sample_values() -> None:
+    assert sample_values(np.array([1.0, 2.0, 3.0, 4.0])) == (1.0, 2.0, 3.0, 4.0)
+    assert sample_values(np.arange(4).reshape(1, 4)) == (0.0, 1.0, 2.0, 3.0)
+    got = sample_values([1, np.float32(0.5), 3.0, True])
+    assert got == (1.0, 0.5, 3.0, 1.0) and all(type(v) is float for v in got)
+    for bad in ([1.0, 2.0, 3.0], np.zeros(5), "abcd", [1.0, 2.0, 3.0, None], 4.0):
+        with pytest.raises(ValueError, match="a sample is 4 numbers"):
+            sample_values(bad)
+
+
+def test_tuples_and_arrays_give_the_same_estimates(able_bodied) -> None:
+    """The node hands the estimator tuples of floats, the offline tools array rows: same results."""
+    x = np.concatenate([m.samples for m in able_bodied.modes]) + 1.5
+    t = np.arange(len(x)) / 251.0  # off the library rate: the resampler interpolates
+    a, b = Estimator(able_bodied), Estimator(able_bodied)
+    for i in range(len(x)):
+        ea, eb = a.update(t[i], x[i]), b.update(float(t[i]), tuple(x[i].tolist()))
+        fields = ("mode_index", "phase", "confidence", "cadence_ratio", "phase_rate", "held")
+        assert [getattr(ea, f) for f in fields] == [getattr(eb, f) for f in fields]
+        np.testing.assert_array_equal(ea.sse, eb.sse)
 
 
 def test_resampler_interpolates_linearly() -> None:

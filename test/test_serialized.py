@@ -5,6 +5,8 @@ No DDS here (rclpy's serialisation only); test_node checks the published estimat
 
 from __future__ import annotations
 
+import struct
+
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
@@ -32,7 +34,10 @@ def test_patched_bytes_equal_a_serialised_message(names: list[str], frame_id: st
     for stamp in (Time(sec=1_763_900_000, nanosec=999_999_999), Time(sec=-5, nanosec=0), Time(sec=0, nanosec=1)):
         values = rng.normal(size=len(names)) * 1e3
         values[::5] = np.nan if len(names) > 5 else values[::5]
-        msg.values[:] = values
+        if stamp.nanosec % 2:  # both ways of writing the values: the numpy view and set_values (the node's)
+            msg.values[:] = values
+        else:
+            msg.set_values(values.tolist())
         msg.set_stamp(stamp)
         assert len(msg.data()) == len(serialize_message(_message(names, frame_id, stamp, values)))  # padding bytes differ
         got = deserialize_message(msg.data(), JointState)
@@ -54,3 +59,13 @@ def test_data_is_a_snapshot() -> None:
     msg.values[:] = [3.0, 4.0]
     assert list(deserialize_message(first, JointState).position) == [1.0, 2.0]
     assert list(deserialize_message(msg.data(), JointState).position) == [3.0, 4.0]
+
+
+def test_set_values_takes_exactly_one_value_per_name() -> None:
+    msg = SerializedJointState(["a", "b"])
+    msg.set_values([5, True])  # ints and flags are written as doubles, as in estimate_values
+    assert list(msg.values) == [5.0, 1.0]
+    for wrong in ([1.0], [1.0, 2.0, 3.0]):
+        with pytest.raises(struct.error):
+            msg.set_values(wrong)
+    assert list(msg.values) == [5.0, 1.0]

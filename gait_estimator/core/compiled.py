@@ -57,8 +57,8 @@ def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover
 def step_rows(
     e: np.ndarray, kern: np.ndarray, ksq: np.ndarray, lens: np.ndarray, wins: np.ndarray,
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
-    d: np.ndarray, dsq: float, offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray,
-    normalize: bool, subsample: bool, n_scales: int,
+    d0: float, d1: float, d2: float, d3: float, dsq: float,
+    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, normalize: bool, subsample: bool, n_scales: int,
     out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
@@ -67,16 +67,15 @@ def step_rows(
     e (R, Nmax): running sums, updated in place; kern (R, 4, Nmax) float64 or float32; ksq (R, Nmax) = ||k_j||^2;
     lens/wins (R,); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and their squared
     norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,) the prefix
-    sum before this sample; count: samples before this one; d (4,), dsq = ||d||^2; offset: apply
-    the offset penalty (mu (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift means of the
-    window's kernel part when W < N, tau (2, 4): tolerances and sensor offsets); normalize: divide
-    by the window length.
+    sum before this sample; count: samples before this one; d0..d3: the (weighted) sample, as
+    scalars (the caller builds no array), dsq = ||d||^2; offset: apply the offset penalty (mu
+    (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift means of the window's kernel part when
+    W < N, tau (2, 4): tolerances and sensor offsets); normalize: divide by the window length.
     Writes per row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
     n_rows = lens.shape[0]
     wmax = ring.shape[0]
     i = count
-    d0, d1, d2, d3 = d[0], d[1], d[2], d[3]
     p0, p1, p2, p3 = psum[0] + d0, psum[1] + d1, psum[2] + d2, psum[3] + d3
     for r in prange(n_rows):  # rows are independent (threads in step_rows_parallel)
         n = lens[r]

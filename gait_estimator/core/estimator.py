@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .adapt import AdaptOptions, KernelAdapter
-from .channels import CHANNELS, N_CHANNELS
+from .channels import CHANNELS, N_CHANNELS, Sample, sample_values
 from .kernels import KernelLibrary
 from .matcher import (
     IncrementalMatcher,
@@ -275,9 +275,10 @@ class Estimator:
 
         Raises ValueError for a non-finite sample or a non-increasing stamp; state is unchanged.
         """
-        x = np.asarray(sample_deg, dtype=np.float64).reshape(N_CHANNELS)
-        if not np.isfinite(x).all() or not math.isfinite(time_s):
-            raise ValueError(f"non-finite sample {x.tolist()} at {time_s}")
+        x = sample_values(sample_deg)  # four floats: no numpy call per sample before the matcher
+        if not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]) and math.isfinite(x[3])
+                and math.isfinite(time_s)):
+            raise ValueError(f"non-finite sample {list(x)} at {time_s}")
         if self.last_time is not None and time_s <= self.last_time:
             raise ValueError(f"stamp {time_s} is not after the previous {self.last_time}")
         if self.gap_exceeded(time_s):
@@ -293,7 +294,7 @@ class Estimator:
             est = self._restamped(self._last, time_s)
         return est
 
-    def _step(self, time_s: float, x: np.ndarray) -> Estimate:
+    def _step(self, time_s: float, x: Sample) -> Estimate:
         result = self.matcher.step(x)
         est = self.supervisor.update(time_s, result)
         if self.config.offset_calibration_rate > 0:
@@ -361,7 +362,7 @@ class Estimator:
     # -----------------------------------------------------------------------------------------
     # Personalisation
 
-    def _adapt(self, x: np.ndarray, est: Estimate, result: Any) -> None:
+    def _adapt(self, x: Sample, est: Estimate, result: Any) -> None:
         adapter = self.adapter
         assert adapter is not None
         step = self.matcher.steps - 1  # this sample's number since the window (re)started

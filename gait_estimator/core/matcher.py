@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import compiled
-from .channels import N_CHANNELS
+from .channels import N_CHANNELS, Sample, sample_values
 from .kernels import KernelLibrary, resample_stride
 
 BACKENDS = ("auto", "numba", "numpy")
@@ -178,6 +178,7 @@ class _MatcherBase:
         self.n_scales = int(self.time_scales.size)
         self.active_channels = int(np.count_nonzero(self.channel_weights))
         self._scale = np.sqrt(self.channel_weights)
+        self._scale_values: Sample = sample_values(self._scale)
         self._unscale = np.divide(1.0, self._scale, out=np.zeros(N_CHANNELS), where=self._scale > 0)  # dropped: 0
         self._weighted = bool(np.any(self.channel_weights != 1.0))
         # row 0: tolerance, row 1: sensor offset (set_sensor_offset), in the weighted units of d and k
@@ -265,15 +266,18 @@ class _MatcherBase:
         self._ring[:] = 0.0
         self._count = 0
 
-    def _weighted_sample(self, sample: np.ndarray) -> tuple[np.ndarray, float]:
-        d = np.asarray(sample, dtype=np.float64).reshape(N_CHANNELS)
-        dsq = float(d @ d)
+    def _weighted_values(self, sample: Sequence[float] | np.ndarray) -> tuple[float, float, float, float, float]:
+        """The sample (4 angles, degrees) times sqrt(channel weight), as floats, and its squared
+        norm; ValueError if it is not four finite numbers."""
+        d0, d1, d2, d3 = sample_values(sample)
+        dsq = d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3
         if not math.isfinite(dsq):  # also catches overflow of ||d||^2, i.e. |angle| > 1e154
-            raise ValueError(f"sample has non-finite values: {d.tolist()}")
+            raise ValueError(f"sample has non-finite values: {[d0, d1, d2, d3]}")
         if self._weighted:
-            d = d * self._scale
-            dsq = float(d @ d)
-        return d, dsq
+            s0, s1, s2, s3 = self._scale_values
+            d0, d1, d2, d3 = d0 * s0, d1 * s1, d2 * s2, d3 * s3
+            dsq = d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3
+        return d0, d1, d2, d3, dsq
 
     def _window_data(self) -> np.ndarray:
         """The buffered samples newest first: row t is d_{i-t}, (Wmax, 4) (weighted)."""
@@ -390,8 +394,8 @@ class NaiveMatcher(_MatcherBase):
 
     def step(self, sample: np.ndarray) -> StepResult:
         """Consume one sample (4,), degrees, CHANNELS order; return the estimate."""
-        d, _ = self._weighted_sample(sample)
-        self._ring[self._count % self.max_window] = d
+        d0, d1, d2, d3, _ = self._weighted_values(sample)
+        self._ring[self._count % self.max_window] = d0, d1, d2, d3
         self._count += 1
         e = self.full_sse()
         return self._result(self._scores(e, self.window_sums() if self._offset else None))
@@ -480,7 +484,7 @@ class IncrementalMatcher(_MatcherBase):
             self._resync_every = 0
         self.reset()
         if self.backend == "numba":  # compile (or load the cached code) now, not at the first sample
-            self._step_numba(np.zeros(N_CHANNELS), 0.0)
+            self._step_numba(0.0, 0.0, 0.0, 0.0, 0.0)
             self.reset()
 
     def _update_row_constants(self, rows: np.ndarray | None = None) -> None:
@@ -512,22 +516,22 @@ class IncrementalMatcher(_MatcherBase):
 
     def step(self, sample: np.ndarray) -> StepResult:
         """Consume one sample (4,), degrees, CHANNELS order; return the estimate."""
-        d, dsq = self._weighted_sample(sample)
+        d0, d1, d2, d3, dsq = self._weighted_values(sample)
         if self.backend == "numba":
-            result = self._step_numba(d, dsq)
+            result = self._step_numba(d0, d1, d2, d3, dsq)
         else:
-            result = self._step_numpy(d, dsq)
+            result = self._step_numpy(np.array((d0, d1, d2, d3)), dsq)
         if self._resync_every and self._count % self._resync_every == 0:
             self._resync()
         return result
 
-    def _step_numba(self, d: np.ndarray, dsq: float) -> StepResult:
+    def _step_numba(self, d0: float, d1: float, d2: float, d3: float, dsq: float) -> StepResult:
         m = self.n_modes
         sse, phases = np.empty(m), np.empty(m)
         variant, column, window = np.empty((3, m), dtype=np.int64)  # fresh arrays: results outlive the step
         b = self._compiled_step(
             self._e, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
-            self._psum_ring, self._psum, self._count, d, dsq, self._offset, self._mu, self._mu_seg, self._tau,
+            self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq, self._offset, self._mu, self._mu_seg, self._tau,
             self.normalize, self.subsample, self.n_scales,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import math
-
-import numpy as np
+from collections.abc import Sequence
 
 SNAP = 0.01
 """Fraction of the grid interval within which a grid point takes the sample as it is."""
@@ -33,11 +32,13 @@ class UniformResampler:
         self._t0: float | None = None
         self._k = 0
         self._prev_t = 0.0
-        self._prev_x = np.zeros(0)
+        self._prev_x: tuple[float, ...] = ()
 
-    def push(self, time_s: float, sample: np.ndarray) -> list[tuple[float, np.ndarray]]:
-        """Add one sample (stamps strictly increasing); returns the grid samples it completes."""
-        x = np.asarray(sample, dtype=np.float64)
+    def push(self, time_s: float, sample: Sequence[float]) -> list[tuple[float, tuple[float, ...]]]:
+        """Add one sample (any number of channels; stamps strictly increasing); returns the grid
+        samples it completes, each channel interpolated in Python floats (no numpy call: this
+        runs for every live sample)."""
+        x = tuple(map(float, sample))
         if self._t0 is None:
             self._t0, self._k = time_s, 1
             self._prev_t, self._prev_x = time_s, x
@@ -54,7 +55,7 @@ class UniformResampler:
                 out.append((time_s, x))
             else:
                 a = (t - self._prev_t) / (time_s - self._prev_t)
-                out.append((t, self._prev_x + a * (x - self._prev_x)))
+                out.append((t, tuple(p + a * (v - p) for p, v in zip(self._prev_x, x, strict=True))))
             self._k += 1
         self._prev_t, self._prev_x = time_s, x
         return out

@@ -147,7 +147,7 @@ class Supervisor:
         self.allowed = allowed
         self.phase_rate_tau_s = float(phase_rate_tau_s)
         self.normalized = bool(normalized)
-        self._inverse_scales = 1.0 / np.asarray(time_scales, dtype=np.float64)
+        self._inverse_scales: list[float] = (1.0 / np.asarray(time_scales, dtype=np.float64)).tolist()
         self.reset()
 
     def reset(self) -> None:
@@ -161,19 +161,20 @@ class Supervisor:
     def update(self, time_s: float, result: StepResult) -> Estimate:
         """Supervise one matcher result at ``time_s`` (seconds)."""
         sse = result.sse
+        values = sse.tolist()  # Python floats from here on: per-sample numpy calls are costly when cold
         candidate = result.mode_index
         if self._current is not None and self.allowed is not None:
             masked = np.where(self.allowed[self._current], sse, np.inf)
             candidate = int(masked.argmin())
-        confidence = _margin(sse, candidate, result.mode_index)
+        confidence = _margin(values, sse, candidate, result.mode_index)
         held = False
         if not result.ready:
             reported = candidate
         else:
             reported, held = self._choose(time_s, candidate, confidence)
-        per_sample = max(float(sse[reported]), 0.0) / (1 if self.normalized else max(int(result.window[reported]), 1))
+        per_sample = max(values[reported], 0.0) / (1 if self.normalized else max(int(result.window[reported]), 1))
         fit_rms = math.sqrt(per_sample / self.active_channels)
-        phase = float(result.phases[reported])
+        phase = result.phase if reported == result.mode_index else float(result.phases[reported])
         rate = self._phase_rate(time_s, reported, phase) if result.ready else math.nan
         return Estimate(
             time_s=time_s,
@@ -188,7 +189,7 @@ class Supervisor:
             fit_rms_deg=fit_rms,
             held=held,
             phase_rate=rate,
-            cadence_ratio=math.nan if result.variant is None else float(self._inverse_scales[result.variant[reported]]),
+            cadence_ratio=math.nan if result.variant is None else self._inverse_scales[int(result.variant[reported])],
         )
 
     def _choose(self, time_s: float, candidate: int, confidence: float) -> tuple[int, bool]:
@@ -226,15 +227,16 @@ class Supervisor:
         return self._rate
 
 
-def _margin(sse: np.ndarray, candidate: int, argmin: int) -> float:
-    """(SSE of the best mode other than ``candidate`` - SSE of ``candidate``) / SSE of ``candidate``."""
-    if sse.size < 2:
+def _margin(values: list[float], sse: np.ndarray, candidate: int, argmin: int) -> float:
+    """(SSE of the best mode other than ``candidate`` - SSE of ``candidate``) / SSE of
+    ``candidate``; ``values`` = ``sse`` as a list."""
+    if len(values) < 2:
         return math.inf
     if candidate == argmin:  # the second smallest; a sort of a short list beats np.partition here
-        best_other = sorted(sse.tolist())[1] if sse.size <= 64 else float(np.partition(sse, 1)[1])
+        best_other = sorted(values)[1] if len(values) <= 64 else float(np.partition(sse, 1)[1])
     else:
-        best_other = float(sse[argmin])
-    own = float(sse[candidate])
+        best_other = values[argmin]
+    own = values[candidate]
     if own <= 0.0:
         return math.inf if best_other > 0 else 0.0
     return (best_other - own) / own

@@ -77,6 +77,14 @@ def estimate_into(out: np.ndarray, est: Estimate) -> np.ndarray:
     return out
 
 
+def estimate_values(est: Estimate) -> list[float]:
+    """``estimate_array(est)`` for one Estimate as a list of Python numbers (flags as bools,
+    indices as ints): two numpy calls for any number of modes. The node packs it straight into
+    its pre-serialised ``estimate`` (``SerializedJointState.set_values``)."""
+    return [est.mode_index, est.phase, est.ready, *est.sse.tolist(), *est.phases.tolist(),
+            *[getattr(est, k) for k in ESTIMATE_TAIL]]
+
+
 def estimate_array(est: Estimate | EstimateTrace) -> np.ndarray:
     """Values of the ``estimate`` message (JointState ``position``) in the order of
     ``estimate_names``: float64 (K,) for one Estimate, (T, K) for a whole EstimateTrace.

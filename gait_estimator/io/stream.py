@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.channels import CHANNELS, N_CHANNELS, Sample, sample_values
 
 UNITS = ("rad", "deg")
 INPUT_TYPES = ("joint_state", "float64_multi_array")
@@ -94,12 +94,16 @@ def angles_from_array(data: Sequence[float], units: str = "rad") -> np.ndarray:
     return _to_degrees(values, units)
 
 
+_DEG_PER_RAD = 180.0 / math.pi
+
+
 class AngleExtractor:
     """``angles_from_named`` / ``angles_from_array`` for a live stream, with the same results
     and the same rejections, in a few microseconds: the index of each joint in the message is
     kept while the message's names stay the same, and the common case (4 finite angles in range)
-    takes no Python loop and two small numpy calls. Anything unusual goes through the reference
-    functions, which raise the proper SampleRejected.
+    takes no loop and no numpy call. Anything unusual goes through the reference functions, which
+    raise the proper SampleRejected. Returns the angles as four floats, degrees, CHANNELS order
+    (equal to the reference functions' array).
 
     Args:
         joint_names: Names of right_thigh, left_thigh, right_shank, left_shank (CHANNELS order).
@@ -117,10 +121,10 @@ class AngleExtractor:
         self._names: list[str] | None = None
         self._index: tuple[int, int, int, int] = (0, 1, 2, 3)
 
-    def named(self, names: Sequence[str], positions: Sequence[float]) -> np.ndarray:
+    def named(self, names: Sequence[str], positions: Sequence[float]) -> Sample:
         """Same as ``angles_from_named(names, positions, joint_names, units)``."""
         if names != self._names:
-            values = angles_from_named(names, positions, self.joint_names, self.units)  # raises if bad
+            values = sample_values(angles_from_named(names, positions, self.joint_names, self.units))  # raises if bad
             index = {n: i for i, n in enumerate(names)}
             i0, i1, i2, i3 = (index[j] for j in self.joint_names)
             self._index = (i0, i1, i2, i3)
@@ -131,21 +135,22 @@ class AngleExtractor:
         if len(positions) == len(names):
             a, b, c, d = positions[i0], positions[i1], positions[i2], positions[i3]
             if -lim < a < lim and -lim < b < lim and -lim < c < lim and -lim < d < lim:  # False for nan/inf
-                return self._convert((a, b, c, d))
-        return angles_from_named(names, positions, self.joint_names, self.units)  # raises
+                return self._convert(a, b, c, d)
+        return sample_values(angles_from_named(names, positions, self.joint_names, self.units))  # raises if bad
 
-    def array(self, data: Sequence[float]) -> np.ndarray:
+    def array(self, data: Sequence[float]) -> Sample:
         """Same as ``angles_from_array(data, units)``."""
         lim = self._limit
         if len(data) == N_CHANNELS:
             a, b, c, d = data
             if -lim < a < lim and -lim < b < lim and -lim < c < lim and -lim < d < lim:
-                return self._convert((a, b, c, d))
-        return angles_from_array(data, self.units)  # raises
+                return self._convert(a, b, c, d)
+        return sample_values(angles_from_array(data, self.units))  # raises if bad
 
-    def _convert(self, values: tuple[float, float, float, float]) -> np.ndarray:
-        x = np.array(values, dtype=np.float64)
-        return np.degrees(x) if self.units == "rad" else x
+    def _convert(self, a: float, b: float, c: float, d: float) -> Sample:
+        if self.units == "rad":  # bit for bit what np.degrees gives (tested)
+            return a * _DEG_PER_RAD, b * _DEG_PER_RAD, c * _DEG_PER_RAD, d * _DEG_PER_RAD
+        return float(a), float(b), float(c), float(d)
 
 
 def restart_threshold(max_gap_s: float) -> float:

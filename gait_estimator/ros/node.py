@@ -63,7 +63,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 from std_srvs.srv import Trigger
 
-from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.channels import CHANNELS, N_CHANNELS, Sample
 from ..core.errors import GaitEstimatorError
 from ..core.estimator import OPTIONS, PRESETS, Estimator, EstimatorConfig
 from ..core.kernels import KernelLibrary
@@ -76,8 +76,8 @@ from ..io.outputs import (
     MODE_TOPIC,
     PHASE_TOPIC,
     SSE_TOPIC,
-    estimate_into,
     estimate_names,
+    estimate_values,
     sse_label,
 )
 from ..io.resources import DEFAULT_LIBRARY
@@ -462,7 +462,7 @@ class EstimatorNode(Node):
         names = estimator.mode_names
         self._sse_msg = Float64MultiArray()
         self._sse_msg.layout.dim = [MultiArrayDimension(label=sse_label(names), size=len(names), stride=len(names))]
-        # serialised once per library; every estimate patches its stamp and values (estimate_into)
+        # serialised once per library; every estimate patches its stamp and values (estimate_values)
         self._estimate_msg = SerializedJointState(estimate_names(names))
         self._last_estimate: Estimate | None = None
 
@@ -539,7 +539,7 @@ class EstimatorNode(Node):
             return
         self._process(angles, stamp, t0)
 
-    def _process(self, angles_deg: np.ndarray, stamp: TimeMsg | Stamp, t0: float) -> None:
+    def _process(self, angles_deg: Sample, stamp: TimeMsg | Stamp, t0: float) -> None:
         """Stamp check, one estimator update, publish; ``t0`` = callback start (perf_counter)."""
         t = self._seconds(stamp)
         guard = self._guard
@@ -619,7 +619,7 @@ class EstimatorNode(Node):
         if self._estimate_pub.get_subscription_count():
             msg = self._estimate_msg
             msg.set_stamp(stamp)
-            estimate_into(msg.values, e)
+            msg.set_values(estimate_values(e))
             self._estimate_pub.publish(msg.data())
 
     def _reject(self, exc: SampleRejected) -> None:

@@ -481,7 +481,7 @@ def publishing_costs_us(lib: KernelLibrary, node: Node) -> dict[str, float]:
 
     from ..analysis.bench import synthetic_walk
     from ..core.estimator import Estimator
-    from ..io.outputs import estimate_array, estimate_into
+    from ..io.outputs import estimate_array, estimate_into, estimate_values
     from .serialized import SerializedJointState
 
     est = Estimator(lib)
@@ -500,7 +500,7 @@ def publishing_costs_us(lib: KernelLibrary, node: Node) -> dict[str, float]:
 
     def patch_serialized() -> None:  # what the node does
         serialized.set_stamp(stamp)
-        estimate_into(serialized.values, e)
+        serialized.set_values(estimate_values(e))
         probe.publish(serialized.data())
 
     def fill_message() -> None:

@@ -35,7 +35,8 @@ def _find_once(buf: bytes, probe: bytes, what: str) -> int:
 class SerializedJointState:
     """Serialised JointState with ``names`` (and ``frame_id``), no velocity or effort.
 
-    ``values`` is a writable float64 view of the position field inside the bytes; ``set_stamp``
+    ``values`` is a writable float64 view of the position field inside the bytes (``set_values``
+    writes them all from a list); ``set_stamp``
     writes ``header.stamp``; ``data()`` returns the message ready for ``Publisher.publish``.
     The layout is checked on construction by deserialising a patched copy.
     """
@@ -53,12 +54,19 @@ class SerializedJointState:
         self._stamp_at = _find_once(buf, _STAMP.pack(_PROBE_SEC, _PROBE_NANOSEC), "stamp")
         values_at = _find_once(buf, sentinel.tobytes(), "positions") if k else len(buf)
         self._buf = buf
+        self._values_at = values_at
+        self._values = struct.Struct(f"={k}d")  # host byte order, as serialize_message writes
         self.values = np.frombuffer(buf, dtype=np.float64, count=k, offset=values_at)
         self._check(list(names), frame_id)  # leaves values and stamp at 0
 
     def set_stamp(self, stamp: TimeMsg | Stamp) -> None:
         """Write ``header.stamp`` (anything with ``sec`` and ``nanosec``)."""
         _STAMP.pack_into(self._buf, self._stamp_at, stamp.sec, stamp.nanosec)
+
+    def set_values(self, values: Sequence[float]) -> None:
+        """Write all position values (exactly as many as names) from Python numbers: what
+        ``values[:] = ...`` does, without numpy calls."""
+        self._values.pack_into(self._buf, self._values_at, *values)
 
     def data(self) -> bytes:
         """The serialised message (a copy: publish it, then patch the next one)."""
