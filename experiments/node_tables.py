@@ -22,7 +22,7 @@ Reads, in experiments/results/node/ (a missing report leaves its column or secti
 
 Writes ``tables.md`` with the sections ``Two cores`` (docs/performance.md, block
 ``node#Two cores``), ``One core`` (for the embedded-proxy section), ``700 modes``, ``Spaced
-calls`` and ``Taking a message``.
+calls``, ``Taking a message`` and ``Before and after``.
 """
 
 from __future__ import annotations
@@ -38,6 +38,11 @@ REPORTS = {"quiet": "bench_node.json", "busy": "bench_node_busy.json", "busy_rt"
            "one_core": "bench_node_one_core.json", "modes_700": "bench_node_700.json"}
 SPACED = "spaced_calls.json"
 TAKE = "take_cost.json"
+BEFORE_AFTER = NODE / "scalar_path"
+"""Runs of the same bench alternating between the code before the live path used Python floats
+(commit 8e5efd5, from a git worktree on PYTHONPATH) and after: ``bench_node_{old,new}_K.json``
+(``gait-estimator bench-node --executor events --outputs estimate --rates 3000,4000,5000``) and
+``spaced_calls_{old,new}_K.json`` (``experiments/spaced_calls.py``), K = run order."""
 PERIODS_MS = {230: 1000 / 230, 1000: 1.0}
 STAGES = {
     "dds_in_and_executor": "input published → node starts handling it (DDS in, executor wake-up, take)",
@@ -86,6 +91,8 @@ def rate(v: dict[str, Any]) -> str:
         return "—"
     best = tp["max_sustained_rate_hz"]
     tried = tp["rates_tried"]
+    if not best:
+        return f"none of {', '.join(f'{r:,.0f}' for r in tried)} Hz"
     higher = [r for r in tried if r > best]
     return f"{best:,.0f} Hz" + ("" if higher else " (the highest tried)")
 
@@ -242,8 +249,11 @@ def modes_700(r: dict[str, Any]) -> str:
 
 def spaced_calls(r: dict[str, Any]) -> str:
     conditions = list(r["results"][0]["conditions"])
+    def us(v: float) -> str:
+        return f"{v:,.0f}" if v >= 10 else f"{v:.1f}"
+
     rows = [[f"`{x['preset']}`" if x["preset"] else "—", x["what"],
-             *(f"{x['conditions'][c]['median_us']:,.0f} / {x['conditions'][c]['p99_us']:,.0f}" for c in conditions)]
+             *(f"{us(x['conditions'][c]['median_us'])} / {us(x['conditions'][c]['p99_us'])}" for c in conditions)]
             for x in r["results"]]
     return "\n".join([
         "## Spaced calls", "",
@@ -254,6 +264,42 @@ def spaced_calls(r: dict[str, Any]) -> str:
         "",
         table(["preset", "what", *conditions], rows), "",
     ])
+
+
+def before_after(folder: Path) -> str:
+    runs = sorted(folder.glob("bench_node_*_*.json"), key=lambda p: (p.stem.rsplit("_", 1)[1], p.stem.split("_")[2] != "old"))
+    rows = []
+    for path in runs:
+        r = json.loads(path.read_text(encoding="utf-8"))
+        code, k = path.stem.split("_")[2:]
+        v = r["variants"][0]
+        lt = v["latency"]
+        answered = [f"{s['answered']:,}" for s in v["throughput"]["steps"] if s["rate_hz"] == 4000]
+        rows.append([k, "before" if code == "old" else "after", lat2(lt), lat2(lt, "dds_"),
+                     f"{ms(lt.get('node_processing_mean_ms'), 3)} ms", rate(v), ", ".join(answered) or "—"])
+    out = ["## Before and after", "",
+           "`gait-estimator bench-node --executor events --outputs estimate --rates 3000,4000,5000`, alternating "
+           "between the code before this change (commit 8e5efd5, from a `git worktree` on `PYTHONPATH`) and after, "
+           "on the quiet development machine, in run order (`experiments/results/node/scalar_path/`).", "",
+           table(["run", "code", "230 Hz to the callback, p50 / p99", "to the DDS reader, p50 / p99",
+                  "node processing mean", "highest rate without drops", "answered of 8,000 at 4,000 Hz"], rows), ""]
+    spaced = sorted(folder.glob("spaced_calls_*_*.json"), key=lambda p: (p.stem.rsplit("_", 1)[1], p.stem.split("_")[2] != "old"))
+    if spaced:
+        srows = []
+        for path in spaced:
+            r = json.loads(path.read_text(encoding="utf-8"))
+            code, k = path.stem.split("_")[2:]
+            cells = []
+            for x in r["results"][:4]:
+                c = x["conditions"]
+                cells.append(f"{c['back to back']['median_us']:,.0f} / {c['every 1/230 s, sleeping']['median_us']:,.0f}")
+            srows.append([k, "before" if code == "old" else "after", *cells])
+        heads = [f"`{x['preset']}` {'callback' if 'callback' in x['what'] else 'update'}"
+                 for x in json.loads(spaced[0].read_text(encoding="utf-8"))["results"][:4]]
+        out += ["`python experiments/spaced_calls.py`, alternating the same way: median µs back to back / every "
+                "1/230 s (sleeping) of the node's input callback and of `Estimator.update`.", "",
+                table(["run", "code", *heads], srows), ""]
+    return "\n".join(out)
 
 
 def take_cost(r: dict[str, Any]) -> str:
@@ -281,6 +327,8 @@ def main() -> int:
         parts.append(spaced_calls(json.loads((NODE / SPACED).read_text(encoding="utf-8"))))
     if (NODE / TAKE).is_file():
         parts.append(take_cost(json.loads((NODE / TAKE).read_text(encoding="utf-8"))))
+    if BEFORE_AFTER.is_dir():
+        parts.append(before_after(BEFORE_AFTER))
     (NODE / "tables.md").write_text("\n".join(parts), encoding="utf-8")
     print(f"wrote {(NODE / 'tables.md').relative_to(ROOT)}")
     return 0

@@ -392,8 +392,9 @@ class NaiveMatcher(_MatcherBase):
     IncrementalMatcher for anything real. Takes the same options.
     """
 
-    def step(self, sample: np.ndarray) -> StepResult:
-        """Consume one sample (4,), degrees, CHANNELS order; return the estimate."""
+    def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:
+        """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
+        return the estimate."""
         d0, d1, d2, d3, _ = self._weighted_values(sample)
         self._ring[self._count % self.max_window] = d0, d1, d2, d3
         self._count += 1
@@ -514,8 +515,9 @@ class IncrementalMatcher(_MatcherBase):
         self._e[:] = np.where(self._valid, 0.0, np.inf)
         self._resync_cursor = 0
 
-    def step(self, sample: np.ndarray) -> StepResult:
-        """Consume one sample (4,), degrees, CHANNELS order; return the estimate."""
+    def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:
+        """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
+        return the estimate."""
         d0, d1, d2, d3, dsq = self._weighted_values(sample)
         if self.backend == "numba":
             result = self._step_numba(d0, d1, d2, d3, dsq)
