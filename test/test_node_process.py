@@ -1,10 +1,11 @@
 """estimator_node as a separate process through its installed entry point, and the demo and
-bench-node commands: real DDS on loopback (domain IDs 21..28 and 37, LOCALHOST discovery)."""
+bench-node commands: real DDS on loopback (domain IDs 21..28, 37 and 49, LOCALHOST discovery)."""
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import shutil
 import signal
@@ -15,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from ros_helpers import (
     REPO,
     as_node_sees,
@@ -159,6 +162,81 @@ def test_idle_node_shuts_down_cleanly(entry_point, local_ros, sig: int, domain_i
     _clean_exit(code, log)
 
 
+def _policies(pid: int) -> set[tuple[int, int]]:
+    """(policy, priority) of every thread of process ``pid``."""
+    out = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            out.add((os.sched_getscheduler(int(tid)), os.sched_getparam(int(tid)).sched_priority))
+        except ProcessLookupError:  # a thread that just ended
+            pass
+    return out
+
+
+def _rt_permitted() -> bool:
+    """Whether a process started from here may use SCHED_FIFO."""
+    probe = [sys.executable, "-c", "import os; os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(3))"]
+    return subprocess.run(probe, capture_output=True).returncode == 0
+
+
+def test_thread_priority_runs_every_thread_under_sched_fifo(entry_point, local_ros) -> None:
+    """``-p thread_priority:=3`` puts every thread of the node's process under SCHED_FIFO 3 (what
+    ``chrt -f 3`` does); setting it to 0 at run time returns them to the normal scheduler. Where
+    the system refuses real-time scheduling the node warns, reports ``normal`` and runs on."""
+    permitted = _rt_permitted()
+    run = Running(49, entry_point, ["-p", "thread_priority:=3"])
+    try:
+        diag = run.client.latest_diagnostics(3.0)
+        assert diag is not None
+        if not permitted:
+            assert diag["scheduling"] == "normal"
+            assert {p for p, _ in _policies(run.node.pid)} == {os.SCHED_OTHER}
+            code, log = run.stop(signal.SIGINT)
+            assert code == 0 and "thread_priority 3: not permitted" in log, log
+            return
+        assert diag["scheduling"] == "SCHED_FIFO 3"
+        threads = _policies(run.node.pid)
+        assert threads == {(os.SCHED_FIFO, 3)}, threads
+        remote = AsyncParameterClient(run.client.node, f"{run.namespace}/estimator")
+        assert remote.wait_for_services(10.0)
+        future = remote.set_parameters([Parameter("thread_priority", value=0)])
+        assert run.client.spin_until(future.done, 10.0)
+        assert future.result().results[0].successful
+        assert {p for p, _ in _policies(run.node.pid)} == {os.SCHED_OTHER}
+        future = remote.set_parameters([Parameter("thread_priority", value=100)])
+        assert run.client.spin_until(future.done, 10.0)
+        (result,) = future.result().results
+        assert not result.successful and "0..99" in result.reason
+        code, log = run.stop(signal.SIGINT)
+        assert "SCHED_FIFO 3 for" in log and "normal scheduling for" in log, log
+    finally:
+        run.close()
+    _clean_exit(code, log)
+
+
+def test_thread_priority_refused_is_a_warning(entry_point, local_ros) -> None:
+    """Without CAP_SYS_NICE (dropped with setpriv) the node warns once, reports ``normal`` and
+    runs on. As a non-root user the test above takes this path itself."""
+    setpriv = shutil.which("setpriv")
+    if os.geteuid() != 0 or setpriv is None:
+        pytest.skip("needs root and setpriv to drop CAP_SYS_NICE (the test above covers this case when not root)")
+    namespace = f"/gait_proc_{unique_suffix()}"
+    cmd = node_command(["-r", f"__ns:={namespace}", "-r", "__node:=estimator", "-p", "thread_priority:=3"], entry_point)
+    node = NodeProcess([setpriv, "--bounding-set=-sys_nice", "--inh-caps=-sys_nice", *cmd], local_ros_environment(49))
+    client = EstimatorClient(49, namespace=namespace, estimator_name=f"{namespace}/estimator")
+    try:
+        assert client.wait_for_node(timeout_s=30.0, settle_s=0.5), node.output()
+        diag = client.latest_diagnostics(3.0)
+        assert diag is not None and diag["scheduling"] == "normal"
+        assert {p for p, _ in _policies(node.pid)} == {os.SCHED_OTHER}
+        code = node.stop(signal.SIGINT)
+        log = node.output()
+    finally:
+        client.close()
+        node.close()
+    assert code == 0 and log.count("thread_priority 3: not permitted to set SCHED_FIFO 3") == 1, log
+
+
 def test_unusable_parameters_exit_nonzero_with_one_line(entry_point, tmp_path: Path) -> None:
     broken = tmp_path / "broken.yaml"
     broken.write_text("format: gait_estimator/kernel_library\nformat_version: 1\nname: [\n", encoding="utf-8")
@@ -230,15 +308,20 @@ def test_bench_node_command(tmp_path: Path) -> None:
 
 
 def test_bench_node_with_more_modes(tmp_path: Path) -> None:
-    """--modes: the node runs the library cycled to M modes; every estimate (2M + 9 values) reaches the bench."""
+    """--modes: the node runs the library cycled to M modes; every estimate (2M + 9 values) reaches the bench.
+    With --thread-priority (where permitted) the node and the bench run under SCHED_FIFO."""
     report = tmp_path / "bench.json"
+    priority = 2 if _rt_permitted() else 0
     proc = _gait_estimator("bench-node", "--modes", "14", "--preset", "paper", "--samples", "150", "--rates", "300",
                            "--seconds", "0.5", "--executor", "events", "--outputs", "estimate",
-                           "--domain-id", "37", "--json", str(report))
+                           "--thread-priority", str(priority), "--domain-id", "37", "--json", str(report))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     data = json.loads(report.read_text(encoding="utf-8"))
     assert data["modes"] == 14 and data["preset"] == "paper" and data["node_exit_code"] == 0
+    assert data["thread_priority"] == priority
     assert data["latency"]["answered"] >= 140
     assert "(14 modes)" in proc.stdout
     bad = _gait_estimator("bench-node", "--modes", "0")
     assert bad.returncode == 2 and "--modes" in bad.stderr
+    bad = _gait_estimator("bench-node", "--thread-priority", "100")
+    assert bad.returncode == 2 and "--thread-priority" in bad.stderr

@@ -39,6 +39,16 @@ def _domain_id(text: str) -> int:
     return v
 
 
+def _priority(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer 0..99, got {text!r}") from None
+    if not 0 <= v <= 99:
+        raise argparse.ArgumentTypeError(f"SCHED_FIFO priorities are 1..99 (0 = as started), got {text}")
+    return v
+
+
 def _rates(text: str) -> list[float]:
     try:
         values = [float(v) for v in text.split(",") if v.strip()]
@@ -279,6 +289,7 @@ def _bench_variant(
     throughput: bool,
     log: Any,
     preset: str = "default",
+    thread_priority: int = 0,
 ) -> dict[str, Any]:
     from ..analysis.bench import synthetic_walk
     from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
@@ -286,7 +297,8 @@ def _bench_variant(
     from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient, publishing_costs_us
 
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
-    node = _start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}"], node_cmd)
+    priority = ["-p", f"thread_priority:={thread_priority}"] if thread_priority else []
+    node = _start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}", *priority], node_cmd)
     try:
         client = EstimatorClient(
             domain_id,
@@ -433,11 +445,14 @@ def bench_node(
     profile: bool = False,
     preset: str = "default",
     modes: int | None = None,
+    thread_priority: int = 0,
 ) -> dict[str, Any]:
     """Measure estimator_node (with estimator preset ``preset``) in a child process over DDS on this machine, once per variant
     (``executors`` x ``outputs``, a fresh node process each). With ``modes``, the node runs a
     library of that many modes cycled from ``kernels`` (``KernelLibrary.replicated``, as
-    ``gait-estimator bench --modes``), written to a temporary NPZ.
+    ``gait-estimator bench --modes``), written to a temporary NPZ. With ``thread_priority`` P > 0
+    the node runs with ``thread_priority: P`` (``cmd_bench_node`` also puts this process under
+    SCHED_FIFO P, as a controller subscribing to the node would run).
 
     1. Latency: ``latency_samples`` inputs at ``rate_hz``; latency = arrival of the ``estimate``
        message carrying an input's stamp in the bench's callback - publication of that input
@@ -467,12 +482,12 @@ def bench_node(
             lib = lib.replicated(modes)
             kernels = str(save_library(lib, Path(tmp) / f"{lib.name}_{modes}.npz"))
         return _bench_node(lib, kernels, latency_samples, rate_hz, rates, rate_seconds, domain_id, node_cmd, log,
-                           executors, outputs, profile, preset)
+                           executors, outputs, profile, preset, thread_priority)
 
 
 def _bench_node(
     lib: Any, kernels: str, latency_samples: int, rate_hz: float, rates: Any, rate_seconds: float, domain_id: int,
-    node_cmd: str | None, log: Any, executors: Any, outputs: Any, profile: bool, preset: str,
+    node_cmd: str | None, log: Any, executors: Any, outputs: Any, profile: bool, preset: str, thread_priority: int = 0,
 ) -> dict[str, Any]:
     from ..analysis.bench import machine_info
     from ..ros.node_client import use_local_ros
@@ -485,13 +500,14 @@ def _bench_node(
         "modes": len(lib),
         "domain_id": domain_id,
         "preset": preset,
+        "thread_priority": thread_priority,
         "variants": [],
     }
     for executor in executors:
         for out in outputs:
             v = _bench_variant(
                 lib, kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
-                node_cmd, profile, throughput=out == "estimate", log=log, preset=preset,
+                node_cmd, profile, throughput=out == "estimate", log=log, preset=preset, thread_priority=thread_priority,
             )
             report["variants"].append(v)
     first = report["variants"][0]
@@ -510,6 +526,13 @@ def cmd_bench_node(args: argparse.Namespace) -> int:
     require_ros()
     if args.json:  # before minutes of measuring, not after
         prepare_output(args.json, "--json")
+    if args.thread_priority:  # this process too, as the controller subscribing to the node would run
+        from ..ros.priority import set_process_priority
+
+        try:
+            set_process_priority(args.thread_priority)
+        except OSError as exc:
+            raise GaitEstimatorError(f"--thread-priority {args.thread_priority}: {exc}") from None
     report = bench_node(
         kernels=args.kernels,
         latency_samples=args.samples,
@@ -523,6 +546,7 @@ def cmd_bench_node(args: argparse.Namespace) -> int:
         profile=args.profile,
         preset=args.preset,
         modes=args.modes,
+        thread_priority=args.thread_priority,
     )
     m = report["machine"]
     print(f"machine: {m['processor']}, {m['cpus']} CPUs ({m['cpus_allowed']} allowed), Python {m['python']}; "
@@ -600,6 +624,9 @@ def add_commands(sub: Any) -> None:
     b.add_argument("--modes", type=positive_int, metavar="M",
                    help="run the node with a library of M modes cycled from --kernels (as 'bench --modes'; "
                    "default: the library as it is)")
+    b.add_argument("--thread-priority", type=_priority, default=0, metavar="P",
+                   help="run the node with thread_priority P (SCHED_FIFO, 1-99) and the bench process at the same "
+                   "priority, like 'chrt -f P'; needs CAP_SYS_NICE (default 0: as started)")
     b.add_argument("--profile", action="store_true",
                    help="split the latency run's time per sample: DDS in + executor, estimator, publish, DDS out, "
                    "bench callback (from the node's ~/profile topic)")

@@ -91,6 +91,7 @@ from ..io.stream import (
     StreamGuard,
     restart_threshold,
 )
+from .priority import MAX_PRIORITY, process_priority, set_process_priority
 from .serialized import SerializedJointState
 
 NODE_NAME = "estimator_node"
@@ -142,6 +143,7 @@ DEFAULTS: dict[str, Any] = {
     "input_units": "rad",
     "input_type": "joint_state",
     "executor": "events",
+    "thread_priority": 0,
     "adapted_library_path": "",
     "preset": "default",
     **{o.name: o.default for o in OPTIONS},
@@ -158,6 +160,9 @@ DESCRIPTIONS: dict[str, str] = {
     "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]).",
     "executor": "Executor of the estimator_node process (read-only): events (rclpy's EventsExecutor, lower "
     "latency) or single_threaded (rclpy's SingleThreadedExecutor).",
+    "thread_priority": "Real-time priority of the node: 1-99 runs every thread of its process under SCHED_FIFO at "
+    "that priority (as ros2_control's controller_manager runs its loop; needs CAP_SYS_NICE or an rtprio limit, "
+    "otherwise the node warns and runs on); 0 leaves the scheduling the process started with (e.g. under chrt).",
     "adapted_library_path": "Where the save_library service writes the personalised kernels (.yaml or .npz); '' = "
     "~/.ros/gait_estimator/<library>_adapted.yaml.",
     "preset": "Values the estimator options start from (read-only): default (robust for a new wearer: resampling, "
@@ -310,6 +315,9 @@ class EstimatorNode(Node):
             + (f", joints {', '.join(self._joint_names)}" if self._input_type == "joint_state" else "")
             + f"; options: {self._options_summary()}"
         )
+        priority = self.get_parameter("thread_priority").value
+        if priority:
+            self._set_priority(priority)
 
     # -----------------------------------------------------------------------------------------
     # Parameters
@@ -372,6 +380,8 @@ class EstimatorNode(Node):
             return f"must be one of {', '.join(UNITS)}, got {v!r}"
         elif p.name == "input_type" and v not in INPUT_TYPES:
             return f"must be one of {', '.join(INPUT_TYPES)}, got {v!r}"
+        elif p.name == "thread_priority" and not 0 <= v <= MAX_PRIORITY:
+            return f"must be in 0..{MAX_PRIORITY} (0 = the scheduling the process started with), got {v}"
         elif p.name == "executor" and v not in EXECUTORS:
             return f"must be one of {', '.join(EXECUTORS)}, got {v!r}"
         elif p.name == "preset" and v not in PRESETS:
@@ -389,6 +399,8 @@ class EstimatorNode(Node):
                 self._joint_names = tuple(p.value)
             elif p.name == "input_units":
                 self._units = p.value
+            elif p.name == "thread_priority":
+                self._set_priority(p.value)
         if names & {"joint_names", "input_units"}:
             self._extract = AngleExtractor(self._joint_names, self._units)
         if pending is None:
@@ -416,6 +428,14 @@ class EstimatorNode(Node):
             )
         elif "max_gap_s" in names:
             self._estimator.config = config  # only the gap threshold changed: keep the window
+
+    def _set_priority(self, priority: int) -> None:
+        """Apply ``thread_priority`` to every thread of the process; a refusal is a warning (the
+        node runs on at the priority it has), as in ros2_control."""
+        try:
+            self.get_logger().info(f"thread_priority {priority}: {set_process_priority(priority)}")
+        except OSError as exc:
+            self.get_logger().warn(f"thread_priority {priority}: {exc}; running with {process_priority()} scheduling")
 
     def _new_estimator(self, library: KernelLibrary, config: EstimatorConfig) -> Estimator:
         """An estimator for this node's input: JointState carries stamps (``resample: auto``
@@ -718,6 +738,7 @@ class EstimatorNode(Node):
             "window_resets": str(self.window_resets),
             "stream_restarts": str(self._guard.restarts),
             "max_gap_s": f"{self._config.max_gap_s:g}",
+            "scheduling": process_priority(),
             "cadence_ratio": f"{e.cadence_ratio:.3f}" if shown and math.isfinite(e.cadence_ratio) else "",
             "sensor_offset_deg": ",".join(f"{v:.2f}" for v in self._estimator.sensor_offset_deg),
             "adapted_strides": str(int(self._estimator.adapter.accepted.sum())) if self._estimator.adapter else "",
