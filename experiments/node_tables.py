@@ -35,6 +35,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 NODE = ROOT / "experiments" / "results" / "node"
 REPORTS = {"quiet": "bench_node.json", "busy": "bench_node_busy.json", "busy_rt": "bench_node_busy_rt.json",
+           "busy_priority": "bench_node_busy_priority.json",
            "one_core": "bench_node_one_core.json", "modes_700": "bench_node_700.json"}
 SPACED = "spaced_calls.json"
 TAKE = "take_cost.json"
@@ -107,8 +108,11 @@ def two_cores(reports: dict[str, dict[str, Any]]) -> str:
     quiet = reports["quiet"]
     busy = reports.get("busy")
     busy_rt = reports.get("busy_rt")
+    busy_priority = reports.get("busy_priority")
     states = [("quiet machine", quiet)] + ([("both cores busy (two CPU burners)", busy)] if busy else [])
     states += [("both cores busy, bench and node under `chrt -f 10`", busy_rt)] if busy_rt else []
+    if busy_priority:
+        states += [(f"both cores busy, `--thread-priority {busy_priority['thread_priority']}`", busy_priority)]
     default = quiet["executor"], quiet["outputs"]
     out = [
         "## Two cores",
@@ -121,6 +125,10 @@ def two_cores(reports: dict[str, dict[str, Any]]) -> str:
         + (" With the same burners, `chrt -f 10 gait-estimator bench-node --executor events --outputs estimate "
            "--rates 1000,2000,3000 --profile --json experiments/results/node/bench_node_busy_rt.json` runs the bench "
            "and the node it starts with real-time (SCHED_FIFO) priority, as a controller would be run." if busy_rt else "")
+        + (f" The same with the node's own parameter instead of `chrt`: `gait-estimator bench-node --executor events "
+           f"--outputs estimate --rates 1000,2000,3000 --thread-priority {busy_priority['thread_priority']} --profile "
+           "--json experiments/results/node/bench_node_busy_priority.json` (the node runs with `thread_priority: "
+           f"{busy_priority['thread_priority']}`, the bench sets its own threads the same)." if busy_priority else "")
         + f" Library `{quiet['library']}` ({quiet['modes']} modes). Latency is measured from the publication of an input "
         "to the arrival of its `estimate` at the bench's DDS reader (the message info's `received_timestamp`), "
         "and, as in earlier versions of this table, to the bench's rclpy callback (which adds the bench's own "

@@ -40,12 +40,14 @@ def _domain_id(text: str) -> int:
 
 
 def _priority(text: str) -> int:
+    from ..ros.priority import MAX_PRIORITY
+
     try:
         v = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer 0..99, got {text!r}") from None
-    if not 0 <= v <= 99:
-        raise argparse.ArgumentTypeError(f"SCHED_FIFO priorities are 1..99 (0 = as started), got {text}")
+        raise argparse.ArgumentTypeError(f"expected an integer 0..{MAX_PRIORITY}, got {text!r}") from None
+    if not 0 <= v <= MAX_PRIORITY:
+        raise argparse.ArgumentTypeError(f"SCHED_FIFO priorities are 1..{MAX_PRIORITY} (0 = as started), got {text}")
     return v
 
 
