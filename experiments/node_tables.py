@@ -274,12 +274,18 @@ def spaced_calls(r: dict[str, Any]) -> str:
     ])
 
 
+def pairs(folder: Path, prefix: str) -> list[tuple[str, str, dict[str, Any]]]:
+    """(run, code, report) of ``{prefix}_{old,new}_{run}.json`` in run order, old before new."""
+    found = []
+    for path in folder.glob(f"{prefix}_*_*.json"):
+        code, k = path.stem.rsplit("_", 2)[1:]
+        found.append((k, code, json.loads(path.read_text(encoding="utf-8"))))
+    return sorted(found, key=lambda x: (int(x[0]), x[1] != "old"))
+
+
 def before_after(folder: Path) -> str:
-    runs = sorted(folder.glob("bench_node_*_*.json"), key=lambda p: (p.stem.rsplit("_", 1)[1], p.stem.split("_")[2] != "old"))
     rows = []
-    for path in runs:
-        r = json.loads(path.read_text(encoding="utf-8"))
-        code, k = path.stem.split("_")[2:]
+    for k, code, r in pairs(folder, "bench_node"):
         v = r["variants"][0]
         lt = v["latency"]
         answered = [f"{s['answered']:,}" for s in v["throughput"]["steps"] if s["rate_hz"] == 4000]
@@ -291,19 +297,17 @@ def before_after(folder: Path) -> str:
            "on the quiet development machine, in run order (`experiments/results/node/scalar_path/`).", "",
            table(["run", "code", "230 Hz to the callback, p50 / p99", "to the DDS reader, p50 / p99",
                   "node processing mean", "highest rate without drops", "answered of 8,000 at 4,000 Hz"], rows), ""]
-    spaced = sorted(folder.glob("spaced_calls_*_*.json"), key=lambda p: (p.stem.rsplit("_", 1)[1], p.stem.split("_")[2] != "old"))
+    spaced = pairs(folder, "spaced_calls")
     if spaced:
         srows = []
-        for path in spaced:
-            r = json.loads(path.read_text(encoding="utf-8"))
-            code, k = path.stem.split("_")[2:]
+        for k, code, r in spaced:
             cells = []
             for x in r["results"][:4]:
                 c = x["conditions"]
                 cells.append(f"{c['back to back']['median_us']:,.0f} / {c['every 1/230 s, sleeping']['median_us']:,.0f}")
             srows.append([k, "before" if code == "old" else "after", *cells])
         heads = [f"`{x['preset']}` {'callback' if 'callback' in x['what'] else 'update'}"
-                 for x in json.loads(spaced[0].read_text(encoding="utf-8"))["results"][:4]]
+                 for x in spaced[0][2]["results"][:4]]
         out += ["`python experiments/spaced_calls.py`, alternating the same way: median µs back to back / every "
                 "1/230 s (sleeping) of the node's input callback and of `Estimator.update`.", "",
                 table(["run", "code", *heads], srows), ""]

@@ -66,14 +66,9 @@ def estimate_names(mode_names: Sequence[str]) -> list[str]:
 
 def estimate_into(out: np.ndarray, est: Estimate) -> np.ndarray:
     """``estimate_array(est)`` for one Estimate, written into ``out`` (float64, (K,)) without
-    allocating: the node writes into the position field of its pre-serialised ``estimate``."""
-    m = len(est.sse)
-    out[0] = est.mode_index
-    out[1] = est.phase
-    out[2] = est.ready
-    out[3 : 3 + m] = est.sse
-    out[3 + m : 3 + 2 * m] = est.phases
-    out[3 + 2 * m :] = [getattr(est, k) for k in ESTIMATE_TAIL]
+    allocating a new array (the bench fills a preallocated JointState this way, for comparison
+    with the node's ``estimate_values``)."""
+    out[:] = estimate_values(est)
     return out
 
 
@@ -81,7 +76,7 @@ def estimate_values(est: Estimate) -> list[float]:
     """``estimate_array(est)`` for one Estimate as a list of Python numbers (flags as bools,
     indices as ints): two numpy calls for any number of modes. The node packs it straight into
     its pre-serialised ``estimate`` (``SerializedJointState.set_values``)."""
-    return [est.mode_index, est.phase, est.ready, *est.sse.tolist(), *est.phases.tolist(),
+    return [*[getattr(est, k) for k in ESTIMATE_HEAD], *est.sse.tolist(), *est.phases.tolist(),
             *[getattr(est, k) for k in ESTIMATE_TAIL]]
 
 

@@ -36,9 +36,9 @@ class SerializedJointState:
     """Serialised JointState with ``names`` (and ``frame_id``), no velocity or effort.
 
     ``values`` is a writable float64 view of the position field inside the bytes (``set_values``
-    writes them all from a list); ``set_stamp``
-    writes ``header.stamp``; ``data()`` returns the message ready for ``Publisher.publish``.
-    The layout is checked on construction by deserialising a patched copy.
+    writes them all from a list); ``set_stamp`` writes ``header.stamp``; ``data()`` returns the
+    message ready for ``Publisher.publish``. The layout is checked on construction by
+    deserialising a patched copy.
     """
 
     def __init__(self, names: Sequence[str], frame_id: str = "") -> None:
