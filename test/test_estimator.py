@@ -14,7 +14,7 @@ from gait_estimator.cli.app import main as cli_main
 from gait_estimator.core.channels import sample_values
 from gait_estimator.core.errors import GaitEstimatorError
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
-from gait_estimator.core.kernels import make_mode
+from gait_estimator.core.kernels import make_mode, resample_stride
 from gait_estimator.core.resample import UniformResampler
 from gait_estimator.core.supervisor import Supervisor, transitions_matrix
 from gait_estimator.io.readers import read_recording
@@ -435,3 +435,61 @@ def test_walking_calibration_finds_constant_sensor_offsets(able_bodied) -> None:
     assert Estimator(able_bodied, EstimatorConfig.preset("paper")).config.offset_calibration_rate == 0.0
     off = run_estimator(Estimator(able_bodied, EstimatorConfig(offset_calibration_rate=0.0, offset_tolerance_deg=0.0)), t, x)
     assert "Med" not in set(np.asarray(off.modes)[tail])
+
+
+def _wearer_walk(able_bodied, cadence: float, route: list[tuple[str, int]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Kernel strides of ``route`` ((mode, strides), ...) stretched to last 1/cadence as long:
+    (times, angles, truth mode per sample)."""
+    parts, labels = [], []
+    for mode, strides in route:
+        k = able_bodied.mode(mode).samples
+        stride = resample_stride(k, round(len(k) / cadence))
+        parts.append(np.tile(stride, (strides, 1)))
+        labels += [mode] * (len(stride) * strides)
+    x = np.concatenate(parts)
+    return np.arange(len(x)) / 230.0, x, np.array(labels)
+
+
+def test_cadence_calibration_tells_speed_classes_apart_at_the_wearer_cadence(able_bodied) -> None:
+    """Synthetic new wearer 1 (cadence 0.932: strides 7 % longer than the kernels'; offsets,
+    amplitudes, noise, 100-500 Hz) walks ramps and stairs, then Fast. The default estimator
+    learns the time scale from confident strides and reads the Fast strides as Fast; without the
+    calibration they are mostly read as Med (a slower wearer's Fast lasts as long as the kernels'
+    Med). reset_calibration forgets the scale and opens the band again."""
+    from synthetic import generate, new_wearer
+
+    wearer = new_wearer(1)
+    rec = generate(able_bodied, [("RA", 6), ("SA", 6), ("RD", 6), ("Fast", 12)], wearer, seed=1001).recording
+    est = Estimator(able_bodied)
+    trace = run_estimator(est, rec.time_s, rec.angles_deg)
+    assert est.cadence_scale == pytest.approx(1 / wearer.cadence, rel=0.03) and est.cadence_strides >= 3
+    band = est.matcher.scale_band
+    assert band[np.abs(est.matcher.time_scales - est.cadence_scale) < 0.02].all() and not band[0]
+    tail = rec.time_s > rec.time_s[-1] - 5.0
+    assert np.mean(np.asarray(trace.modes)[tail] == "Fast") > 0.95
+    assert np.nanmedian(trace.cadence_ratio[tail]) == pytest.approx(wearer.cadence, rel=0.04)
+    off = run_estimator(Estimator(able_bodied, EstimatorConfig(cadence_calibration_rate=0.0)), rec.time_s, rec.angles_deg)
+    assert np.mean(np.asarray(off.modes)[tail] == "Fast") < 0.5
+    est.reset_calibration()
+    assert math.isnan(est.cadence_scale) and est.matcher.scale_band.all()
+    assert EstimatorConfig.preset("paper").cadence_calibration_rate == 0.0
+
+
+def test_cadence_calibration_stays_open_when_the_scales_spread(able_bodied) -> None:
+    """Med strides alternating every 4 strides between 12 % slower and 12 % faster than the kernel
+    (a wearer changing speed): the strides' scales spread, and the band is wider than the 4 %
+    tolerance alone (3 scales at most) would make it."""
+    parts = [_wearer_walk(able_bodied, c, [("Med", 4)])[1] for c in (0.89, 1.12, 0.89, 1.12, 0.89, 1.12)]
+    x = np.concatenate(parts)
+    t = np.arange(len(x)) / 230.0
+    est = Estimator(able_bodied)
+    run_estimator(est, t, x)
+    assert est.cadence_strides >= 6 and est.cadence_spread > 0.04
+    assert est.matcher.scale_band.sum() >= 5
+
+
+@pytest.mark.parametrize("bad", [{"cadence_calibration_rate": 1.5}, {"cadence_calibration_rate": -0.1},
+                                 {"cadence_tolerance": -0.01}, {"cadence_tolerance": float("nan")}])
+def test_cadence_options_are_checked(bad) -> None:
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        EstimatorConfig(**bad)

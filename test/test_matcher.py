@@ -308,6 +308,51 @@ def test_numba_and_numpy_steps_agree_on_the_recording(multispeed_csv, able_bodie
         np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_scale_band_limits_the_time_scales_a_mode_is_read_at(able_bodied, backend) -> None:
+    """A Med stride stretched by 6 %: read at 1.06 with every scale allowed, at the nearest allowed
+    scale when the band excludes 1.06; best_scale_index still names 1.06; the running sums do not
+    depend on the band (switching it back gives the unbanded result)."""
+    med = able_bodied.mode("Med").samples
+    stride = resample_stride(med, round(1.06 * len(med)))
+    scales = (0.94, 1.0, 1.06)
+    free = IncrementalMatcher(able_bodied, time_scales=scales, normalize=True, backend=backend)
+    banded = IncrementalMatcher(able_bodied, time_scales=scales, normalize=True, backend=backend)
+    banded.set_scale_band([True, True, False])
+    med_index = able_bodied.mode_names.index("Med")
+    for d in np.tile(stride, (3, 1)):
+        a, b = free.step(d), banded.step(d)
+    assert scales[a.variant[med_index]] == 1.06 and scales[b.variant[med_index]] == 1.0
+    assert b.sse[med_index] > a.sse[med_index] + 1e-6
+    assert banded.best_scale_index(med_index) == 2 and banded.scale_band.tolist() == [True, True, False]
+    banded.set_scale_band(None)
+    a, b = free.step(stride[0]), banded.step(stride[0])
+    assert a.mode_index == b.mode_index and np.array_equal(a.variant, b.variant)
+    np.testing.assert_allclose(a.sse, b.sse, rtol=1e-12)
+    for bad in ([False, False, False], [True, True]):
+        with pytest.raises(ValueError, match="scale band"):
+            banded.set_scale_band(bad)
+
+
+@pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")
+def test_numba_and_numpy_agree_with_a_scale_band(multispeed_csv, able_bodied) -> None:
+    x = read_recording(multispeed_csv).angles_deg[2000:3500]
+    scales = (0.88, 0.94, 1.0, 1.06, 1.12)
+    out = []
+    for backend in ("numba", "numpy"):
+        m = IncrementalMatcher(able_bodied, backend=backend, time_scales=scales, offset_tolerance_deg=2.0, normalize=True)
+        rows = []
+        for i, d in enumerate(x):
+            if i == 600:
+                m.set_scale_band([False, True, True, False, False])
+            rows.append(m.step(d))
+        out.append(rows)
+    for a, b in zip(*out, strict=True):
+        assert a.mode_index == b.mode_index and np.array_equal(a.variant, b.variant)
+        np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10)
+    assert {int(v) for r in out[0][700:] for v in r.variant} <= {1, 2}
+
+
 def test_a_stretched_stride_is_matched_by_its_time_scale(able_bodied) -> None:
     med = able_bodied.mode("Med").samples
     n = round(1.06 * len(med))

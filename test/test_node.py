@@ -383,7 +383,7 @@ def test_config_yaml_holds_the_declared_defaults(ros, tmp_path: Path) -> None:
 def test_preset_services_and_new_wearer_outputs(ros, multispeed_csv: Path, able_bodied, tmp_path: Path) -> None:
     """preset: paper at start-up gives the paper's options (explicit ones still win); the
     estimate carries cadence_ratio; save_library writes the personalised kernels (or says why
-    not); reset_calibration zeroes the learnt sensor offsets."""
+    not); reset_calibration zeroes the learnt sensor offsets and forgets the learnt time scale."""
     from std_srvs.srv import Trigger
 
     from gait_estimator.core.estimator import EstimatorConfig
@@ -423,11 +423,16 @@ def test_preset_services_and_new_wearer_outputs(ros, multispeed_csv: Path, able_
     assert lib.mode_names == able_bodied.mode_names and sum(
         lib.provenance["adaptation"]["accepted_strides"].values()) > 0
     assert np.any(node._estimator.sensor_offset_deg != 0)
+    scale = node._estimator.cadence_scale
+    assert 0.88 <= scale <= 1.12
+    diag = client.latest_diagnostics(3.0)
+    assert diag is not None and diag["cadence_scale"] == f"{scale:.3f}"
     reset = call("reset_calibration")
-    assert reset.success and "reset to 0" in reset.message
-    assert not np.any(node._estimator.sensor_offset_deg)
+    assert reset.success and "reset to 0" in reset.message and f"time scale {scale:.3f} forgotten" in reset.message
+    assert not np.any(node._estimator.sensor_offset_deg) and math.isnan(node._estimator.cadence_scale)
     diag = client.latest_diagnostics(3.0)
     assert diag is not None and diag["sensor_offset_deg"] == "0.00,0.00,0.00,0.00" and int(diag["adapted_strides"]) > 0
+    assert diag["cadence_scale"] == ""
 
     (result,) = node.set_parameters([Parameter("adapt_rate", value=0.0)])
     assert result.successful

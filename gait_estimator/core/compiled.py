@@ -59,7 +59,7 @@ def step_rows(
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
     offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, normalize: bool, subsample: bool, n_scales: int,
-    out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
+    allowed: np.ndarray, out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
     """One matcher step over every row; returns the best mode. See the module docstring.
@@ -70,7 +70,8 @@ def step_rows(
     sum before this sample; count: samples before this one; d0..d3: the (weighted) sample, as
     scalars (the caller builds no array), dsq = ||d||^2; offset: apply the offset penalty (mu
     (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift means of the window's kernel part when
-    W < N, tau (2, 4): tolerances and sensor offsets); normalize: divide by the window length.
+    W < N, tau (2, 4): tolerances and sensor offsets); normalize: divide by the window length;
+    allowed (n_scales,) bool: the time scales a mode may be read at (at least one).
     Writes per row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
     n_rows = lens.shape[0]
@@ -154,9 +155,9 @@ def step_rows(
     best_mode = 0
     for m in range(n_modes):
         r0 = m * n_scales
-        rb = r0
-        for r in range(r0 + 1, r0 + n_scales):
-            if out_score[r] < out_score[rb]:
+        rb = -1
+        for r in range(r0, r0 + n_scales):
+            if allowed[r - r0] and (rb < 0 or out_score[r] < out_score[rb]):
                 rb = r
         n = lens[rb]
         j = out_col[rb]

@@ -41,6 +41,12 @@ DEFAULT_TIME_SCALES = (0.88, 0.92, 0.96, 1.0, 1.04, 1.08, 1.12)
 CALIBRATION_CONFIDENCE = 0.1
 CALIBRATION_STEP_DEG = 5.0
 CALIBRATION_MAX_DEG = 15.0
+CADENCE_MIN_STRIDES = 3
+"""Confident strides the cadence calibration reads before it narrows the time scales."""
+CADENCE_SPREAD_FACTOR = 2.0
+"""The band is at least this many running RMS deviations of the strides' log time scale wide on
+each side: a wearer whose strides do not keep one cadence across modes and speeds (e.g. one level
+kernel for every walking speed) is not narrowed."""
 
 
 @dataclass(frozen=True)
@@ -69,6 +75,12 @@ OPTIONS: tuple[Option, ...] = (
            0.0),
     Option("offset_calibration_rate", 0.2, "walking self-calibration of the sensor offsets: weight of one confident "
            "stride's window-vs-kernel mean difference in the running offset estimate, [0, 1]; 0 = off", 0.0),
+    Option("cadence_calibration_rate", 0.2, "walking self-calibration of the wearer's cadence: weight of one "
+           "confident stride's best time scale in the running (log) scale estimate, [0, 1]; after 3 strides every "
+           "mode is read only at time scales near it (speed classes at the wearer's own cadence); 0 = off", 0.0),
+    Option("cadence_tolerance", 0.04, "cadence calibration: relative band around the learnt time scale in which "
+           "a mode may be read (0.04: 4 percent either side; wider while the strides' scales spread more; "
+           "the nearest scale always counts)"),
     Option("normalize_error", True, "compare modes by mean squared error per window sample instead of SSE", False),
     Option("window_fraction", 1.0, "fraction of each stride compared, (0, 1]; 1.0 = the paper's full stride"),
     Option("channels", list(CHANNELS), "channels used for matching (subset of right_thigh, left_thigh, right_shank, "
@@ -115,6 +127,8 @@ class EstimatorConfig:
     time_scales: tuple[float, ...] = DEFAULT_TIME_SCALES
     offset_tolerance_deg: float = 2.0
     offset_calibration_rate: float = 0.2
+    cadence_calibration_rate: float = 0.2
+    cadence_tolerance: float = 0.04
     normalize_error: bool = True
     window_fraction: float = 1.0
     channels: tuple[str, ...] = CHANNELS
@@ -153,6 +167,10 @@ class EstimatorConfig:
             raise ValueError(f"phase_rate_tau_s must be > 0, got {self.phase_rate_tau_s!r}")
         if not (0.0 <= self.offset_calibration_rate <= 1.0):
             raise ValueError(f"offset_calibration_rate must be in [0, 1], got {self.offset_calibration_rate!r}")
+        if not (0.0 <= self.cadence_calibration_rate <= 1.0):
+            raise ValueError(f"cadence_calibration_rate must be in [0, 1], got {self.cadence_calibration_rate!r}")
+        if isinstance(self.cadence_tolerance, bool) or not (self.cadence_tolerance >= 0):
+            raise ValueError(f"cadence_tolerance must be a number >= 0, got {self.cadence_tolerance!r}")
         if not (0.0 <= self.adapt_rate <= 1.0):
             raise ValueError(f"adapt_rate must be in [0, 1], got {self.adapt_rate!r}")
         if not (self.adapt_max_step_deg > 0 and math.isfinite(self.adapt_max_step_deg)):
@@ -244,6 +262,12 @@ class Estimator:
             self.adapter = KernelAdapter(library, options)
             self._history = np.zeros((2 * self.matcher.max_length, N_CHANNELS))  # the last stride, however long
         self.sensor_offset_deg = np.zeros(N_CHANNELS)
+        self.cadence_scale = math.nan
+        """The wearer's learnt stride-duration scale (their strides last this times the kernels'); nan
+        until a confident stride was read. 1 / cadence_scale is their cadence ratio."""
+        self.cadence_strides = 0
+        self.cadence_spread = 0.0
+        """Running RMS deviation of the strides' log time scale from the learnt one."""
         self._calib_last: tuple[int, float] | None = None
         self.last_time: float | None = None
         self.resets = 0
@@ -297,23 +321,37 @@ class Estimator:
     def _step(self, time_s: float, x: Sample) -> Estimate:
         result = self.matcher.step(x)
         est = self.supervisor.update(time_s, result)
-        if self.config.offset_calibration_rate > 0:
-            self._calibrate(est, result)
+        c = self.config
+        if (c.offset_calibration_rate > 0 or c.cadence_calibration_rate > 0) and self._confident_stride_end(est):
+            if c.offset_calibration_rate > 0:
+                self._calibrate_offset(est, result)
+            if c.cadence_calibration_rate > 0 and self.matcher.n_scales > 1:
+                self._calibrate_cadence(est)
         if self.adapter is not None:
             self._adapt(x, est, result)
         return est
 
     def reset_calibration(self) -> None:
-        """Forget the learnt sensor offsets (e.g. after the sensors were re-donned)."""
+        """Forget the learnt sensor offsets and cadence (e.g. after the sensors were re-donned,
+        or for another wearer)."""
         self.sensor_offset_deg = np.zeros(N_CHANNELS)
         self.matcher.set_sensor_offset(self.sensor_offset_deg)
+        self.cadence_scale = math.nan
+        self.cadence_strides = 0
+        self.cadence_spread = 0.0
+        self.matcher.set_scale_band(None)
         self._calib_last = None
 
     def adopt_calibration(self, other: Estimator) -> None:
-        """Start from the sensor offsets ``other`` has learnt (same sensors, new options)."""
+        """Start from the sensor offsets and cadence ``other`` has learnt (same sensors and
+        wearer, new options)."""
         if self.config.offset_calibration_rate > 0 and np.any(other.sensor_offset_deg != 0):
             self.sensor_offset_deg = other.sensor_offset_deg.copy()
             self.matcher.set_sensor_offset(self.sensor_offset_deg)
+        if self.config.cadence_calibration_rate > 0 and self.matcher.n_scales > 1 and other.cadence_strides:
+            self.cadence_scale, self.cadence_strides = other.cadence_scale, other.cadence_strides
+            self.cadence_spread = other.cadence_spread
+            self._narrow_scales()
 
     def adopt_adaptation(self, other: Estimator) -> int:
         """Start from the kernels ``other`` has personalised (same library, new options).
@@ -332,20 +370,52 @@ class Estimator:
             self.matcher.set_kernel(int(m), mine.kernels[m])
         return strides
 
-    def _calibrate(self, est: Estimate, result: Any) -> None:
-        """At every heel strike of a confident, unheld mode: move the sensor offset estimate
-        towards that stride's window-vs-kernel mean difference."""
+    def _confident_stride_end(self, est: Estimate) -> bool:
+        """True at a heel strike (the phase wrapped) of a mode reported on both sides of it,
+        confident (margin >= CALIBRATION_CONFIDENCE) and not held: where the calibrations read."""
         m = est.mode_index
         last, self._calib_last = self._calib_last, (m, est.phase) if est.ready else None
-        if last is None or last[0] != m or est.phase >= last[1] - 0.5 or est.held or est.confidence < CALIBRATION_CONFIDENCE:
-            return
+        return not (last is None or last[0] != m or est.phase >= last[1] - 0.5 or est.held
+                    or est.confidence < CALIBRATION_CONFIDENCE)
 
+    def _calibrate_offset(self, est: Estimate, result: Any) -> None:
+        """Move the sensor offset estimate towards this stride's window-vs-kernel mean difference."""
+        m = est.mode_index
         variant = 0 if result.variant is None else int(result.variant[m])
         x = self.matcher.mean_offset(m * self.matcher.n_scales + variant, int(result.column[m]))
         step = np.clip(x - self.sensor_offset_deg, -CALIBRATION_STEP_DEG, CALIBRATION_STEP_DEG)
         self.sensor_offset_deg = np.clip(self.sensor_offset_deg + self.config.offset_calibration_rate * step,
                                          -CALIBRATION_MAX_DEG, CALIBRATION_MAX_DEG)
         self.matcher.set_sensor_offset(self.sensor_offset_deg)
+
+    def _calibrate_cadence(self, est: Estimate) -> None:
+        """Move the learnt time scale (in log) towards the reported mode's best time scale over
+        all scales (not only the band); from the CADENCE_MIN_STRIDES-th stride on, read every
+        mode only near it (``_narrow_scales``). One wearer's strides in every mode scale alike,
+        so the speed classes of a faster or slower wearer are told apart at their own cadence."""
+        scales = self.matcher.time_scales
+        x = math.log(scales[self.matcher.best_scale_index(est.mode_index)])
+        self.cadence_strides += 1
+        if self.cadence_strides == 1:
+            level, var = x, 0.0
+        else:  # a running mean over the first strides, then exponential forgetting
+            rate = max(self.config.cadence_calibration_rate, 1.0 / self.cadence_strides)
+            dev = x - math.log(self.cadence_scale)
+            level = math.log(self.cadence_scale) + rate * dev
+            var = self.cadence_spread ** 2 + rate * (dev * dev - self.cadence_spread ** 2)
+        self.cadence_scale = math.exp(level)
+        self.cadence_spread = math.sqrt(var)
+        if self.cadence_strides >= CADENCE_MIN_STRIDES:
+            self._narrow_scales()
+
+    def _narrow_scales(self) -> None:
+        """Let the matcher read modes only at the time scales within cadence_tolerance, or
+        CADENCE_SPREAD_FACTOR running deviations if wider, of the learnt one (always the nearest)."""
+        distance = np.abs(np.log(self.matcher.time_scales / self.cadence_scale))
+        half = max(math.log1p(self.config.cadence_tolerance), CADENCE_SPREAD_FACTOR * self.cadence_spread)
+        band = distance <= half + 1e-12
+        band[int(distance.argmin())] = True
+        self.matcher.set_scale_band(band)
 
     @staticmethod
     def _restamped(est: Estimate, time_s: float) -> Estimate:

@@ -34,7 +34,10 @@ Options (the defaults are the paper, which reproduces the reference exactly):
   and W x_c^2 per channel. tau = inf matches shapes only; 0 is the paper;
 * ``normalize``: compare modes and scales by mean squared error per window sample, score / W,
   instead of SSE (needed when rows of different lengths compete: the paper's SSE favours shorter
-  kernels).
+  kernels);
+* ``set_scale_band``: the time scales a mode may be read at (all by default). The estimator's
+  cadence calibration narrows them to the wearer's learnt cadence; every row keeps its running
+  sums, so the band may change at any sample.
 """
 
 from __future__ import annotations
@@ -198,6 +201,8 @@ class _MatcherBase:
         self._rows = np.arange(self.n_rows)
         self._all = np.arange(self.n_modes)
         self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
+        self._scale_allowed = np.ones(self.n_scales, dtype=np.bool_)
+        self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
         self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
         self._mu = np.zeros((self.n_rows, N_CHANNELS))
         # per-shift kernel means of short windows (the offset penalty may be switched on at any sample)
@@ -247,6 +252,26 @@ class _MatcherBase:
             raise ValueError(f"sensor offset must be finite, got {o.tolist()}")
         self._tau[1] = o * self._scale
         self._offset = self._offset or bool(np.any(o != 0.0))
+
+    @property
+    def scale_band(self) -> np.ndarray:
+        """Per time scale, whether a mode may be read at it (S,) bool; a copy."""
+        return self._scale_allowed.copy()
+
+    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
+        """Read every mode only at the time scales flagged in ``allowed`` (S,) (``time_scales``
+        order; None = all). The running sums of every row are kept, so this may change at any
+        sample."""
+        a = np.ones(self.n_scales, dtype=np.bool_) if allowed is None else np.asarray(allowed, dtype=np.bool_).reshape(-1)
+        if a.size != self.n_scales or not a.any():
+            raise ValueError(f"scale band needs {self.n_scales} flags, at least one true, got {a.tolist()}")
+        self._scale_allowed[:] = a
+
+    def best_scale_index(self, mode: int) -> int:
+        """Index in ``time_scales`` of the row of ``mode`` that scored best at the last step,
+        whatever the scale band."""
+        s = self.n_scales
+        return int(self._row_score[mode * s : (mode + 1) * s].argmin())
 
     # -----------------------------------------------------------------------------------------
     # State
@@ -318,9 +343,13 @@ class _MatcherBase:
     def _result(self, score: np.ndarray) -> StepResult:
         cols = score.argmin(axis=1)
         best = score[self._rows, cols]
+        self._row_score = best
         s = self.n_scales
         if s > 1:
-            variant = best.reshape(self.n_modes, s).argmin(axis=1)
+            per_mode = best.reshape(self.n_modes, s)
+            if not self._scale_allowed.all():
+                per_mode = np.where(self._scale_allowed, per_mode, np.inf)
+            variant = per_mode.argmin(axis=1)
             rows = self._all * s + variant
         else:
             variant, rows = None, self._all
@@ -476,6 +505,8 @@ class IncrementalMatcher(_MatcherBase):
         # numba outputs, reused every step
         self._out_col = np.zeros(r, dtype=np.int64)
         self._out_score = np.zeros(r)
+        if self.backend == "numba":
+            self._row_score = self._out_score  # the compiled step writes it in place
         total = int(self._valid.sum())
         self._resync_block = max(1, min(int(resync_block), total))
         if resync_period > 0:
@@ -534,7 +565,7 @@ class IncrementalMatcher(_MatcherBase):
         b = self._compiled_step(
             self._e, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq, self._offset, self._mu, self._mu_seg, self._tau,
-            self.normalize, self.subsample, self.n_scales,
+            self.normalize, self.subsample, self.n_scales, self._scale_allowed,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
         self._count += 1

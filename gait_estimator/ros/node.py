@@ -469,11 +469,14 @@ class EstimatorNode(Node):
         return response
 
     def _reset_calibration(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        """``~/reset_calibration``: forget the learnt sensor offsets (after re-donning)."""
-        before = self._estimator.sensor_offset_deg.copy()
-        self._estimator.reset_calibration()
+        """``~/reset_calibration``: forget the learnt sensor offsets and cadence (after
+        re-donning, or for another wearer)."""
+        est = self._estimator
+        before, scale = est.sensor_offset_deg.copy(), est.cadence_scale
+        est.reset_calibration()
         response.success = True
-        response.message = "sensor offsets reset to 0 (were " + ", ".join(f"{v:.2f}" for v in before) + " deg)"
+        response.message = ("sensor offsets reset to 0 (were " + ", ".join(f"{v:.2f}" for v in before) + " deg)"
+                            + (f", learnt time scale {scale:.3f} forgotten" if math.isfinite(scale) else ""))
         self.get_logger().info(response.message)
         return response
 
@@ -741,6 +744,7 @@ class EstimatorNode(Node):
             "scheduling": process_priority(),
             "cadence_ratio": f"{e.cadence_ratio:.3f}" if shown and math.isfinite(e.cadence_ratio) else "",
             "sensor_offset_deg": ",".join(f"{v:.2f}" for v in self._estimator.sensor_offset_deg),
+            "cadence_scale": f"{self._estimator.cadence_scale:.3f}" if math.isfinite(self._estimator.cadence_scale) else "",
             "adapted_strides": str(int(self._estimator.adapter.accepted.sum())) if self._estimator.adapter else "",
         }
         problems = []
