@@ -315,8 +315,14 @@ def _bench_variant(
     out: dict[str, Any] = {"executor": executor, "outputs": outputs, "node_cmd": node.cmd}
     next_stamp = [time.time_ns()]
 
-    def node_received() -> int:
+    def node_received(at_least: int = 0) -> int:
+        """The node's samples_received from a report newer than now; up to 3 s for one that
+        counts ``at_least`` (a report composed before the last answered sample can arrive after
+        its estimate: the topics travel separately)."""
+        deadline = time.monotonic() + 3.0
         d = client.latest_diagnostics(timeout_s=3.0)
+        while d is not None and int(d["samples_received"]) < at_least and time.monotonic() < deadline:
+            d = client.latest_diagnostics(timeout_s=max(deadline - time.monotonic(), 0.0)) or d
         if d is None:
             raise GaitEstimatorError("no diagnostics from estimator_node")
         return int(d["samples_received"])
@@ -339,7 +345,8 @@ def _bench_variant(
             client.spin_once(0.05)
             if client.estimate_count != last:
                 last, last_change = client.estimate_count, time.monotonic()
-        processed = node_received()
+        answered_now = client.estimate_count - first
+        processed = node_received(at_least=before + answered_now)
         if with_profile:  # the rows of the last samples come with the next diagnostics period
             client.latest_diagnostics(timeout_s=3.0)
             client.spin_for(0.2)
