@@ -437,17 +437,10 @@ def test_walking_calibration_finds_constant_sensor_offsets(able_bodied) -> None:
     assert "Med" not in set(np.asarray(off.modes)[tail])
 
 
-def _wearer_walk(able_bodied, cadence: float, route: list[tuple[str, int]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Kernel strides of ``route`` ((mode, strides), ...) stretched to last 1/cadence as long:
-    (times, angles, truth mode per sample)."""
-    parts, labels = [], []
-    for mode, strides in route:
-        k = able_bodied.mode(mode).samples
-        stride = resample_stride(k, round(len(k) / cadence))
-        parts.append(np.tile(stride, (strides, 1)))
-        labels += [mode] * (len(stride) * strides)
-    x = np.concatenate(parts)
-    return np.arange(len(x)) / 230.0, x, np.array(labels)
+def _stretched_strides(able_bodied, mode: str, strides: int, cadence: float) -> np.ndarray:
+    """``strides`` kernel strides of ``mode`` stretched to last 1/cadence as long, (T, 4) deg."""
+    k = able_bodied.mode(mode).samples
+    return np.tile(resample_stride(k, round(len(k) / cadence)), (strides, 1))
 
 
 def test_cadence_calibration_tells_speed_classes_apart_at_the_wearer_cadence(able_bodied) -> None:
@@ -479,8 +472,7 @@ def test_cadence_calibration_stays_open_when_the_scales_spread(able_bodied) -> N
     """Med strides alternating every 4 strides between 12 % slower and 12 % faster than the kernel
     (a wearer changing speed): the strides' scales spread, and the band is wider than the 4 %
     tolerance alone (3 scales at most) would make it."""
-    parts = [_wearer_walk(able_bodied, c, [("Med", 4)])[1] for c in (0.89, 1.12, 0.89, 1.12, 0.89, 1.12)]
-    x = np.concatenate(parts)
+    x = np.concatenate([_stretched_strides(able_bodied, "Med", 4, c) for c in (0.89, 1.12) * 3])
     t = np.arange(len(x)) / 230.0
     est = Estimator(able_bodied)
     run_estimator(est, t, x)
