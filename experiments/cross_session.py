@@ -144,6 +144,7 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "default: cadence tolerance 2 %": {"cadence_tolerance": 0.02},
     "default: SSE (not per sample)": {"normalize_error": False},
     "default + window 0.75": {"window_fraction": 0.75},
+    "default + window 0.75, no calibration": {"window_fraction": 0.75, "offset_calibration_rate": 0.0},
     "default + window 0.5": {"window_fraction": 0.5},
     "default + subsample phase": {"subsample_phase": True},
     "default + min_dwell_s 0.1": {"min_dwell_s": 0.1},
