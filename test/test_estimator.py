@@ -468,6 +468,26 @@ def test_cadence_calibration_tells_speed_classes_apart_at_the_wearer_cadence(abl
     assert EstimatorConfig.preset("paper").cadence_calibration_rate == 0.0
 
 
+def test_new_options_keep_the_learnt_calibration(able_bodied) -> None:
+    """adopt_calibration (the node calls it when options change, same kernels): the sensor
+    offsets, the learnt time scale and its band carry over to an estimator with other options;
+    one that does not calibrate keeps none of them."""
+    offsets = np.array([3.0, -2.0, 1.0, 0.5])
+    x = np.concatenate([_stretched_strides(able_bodied, m, 6, 0.93) for m in ("RA", "SA", "Med")]) + offsets
+    est = Estimator(able_bodied)
+    run_estimator(est, np.arange(len(x)) / 230.0, x)
+    assert est.cadence_strides >= 3 and not est.matcher.scale_band.all()
+    other = Estimator(able_bodied, EstimatorConfig(min_dwell_s=0.1))
+    other.adopt_calibration(est)
+    np.testing.assert_array_equal(other.sensor_offset_deg, est.sensor_offset_deg)
+    assert (other.cadence_scale, other.cadence_strides, other.cadence_spread) == (
+        est.cadence_scale, est.cadence_strides, est.cadence_spread)
+    np.testing.assert_array_equal(other.matcher.scale_band, est.matcher.scale_band)
+    plain = Estimator(able_bodied, EstimatorConfig(offset_calibration_rate=0.0, cadence_calibration_rate=0.0))
+    plain.adopt_calibration(est)
+    assert not plain.sensor_offset_deg.any() and math.isnan(plain.cadence_scale) and plain.matcher.scale_band.all()
+
+
 def test_cadence_calibration_stays_open_when_the_scales_spread(able_bodied) -> None:
     """Med strides alternating every 4 strides between 12 % slower and 12 % faster than the kernel
     (a wearer changing speed): the strides' scales spread, and the band is wider than the 4 %
