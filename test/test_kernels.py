@@ -68,6 +68,25 @@ def test_round_trip(tmp_path: Path, able_bodied: KernelLibrary, suffix: str) -> 
     assert back.provenance == able_bodied.provenance
 
 
+def test_yaml_text_is_pyyaml_s_own(tmp_path: Path, able_bodied: KernelLibrary) -> None:
+    """The kernel rows are formatted without PyYAML's representer (for speed): the file must be
+    the text PyYAML itself writes, for odd floats and names that need quoting too."""
+    from gait_estimator.io import library_io
+
+    odd = able_bodied.modes[0].samples.copy()
+    odd[0] = [1e-05, -2.5e-07, 123456789.123, -0.0]
+    odd[1] = [1e16, 3e-9, 0.1, -1e-10]
+    modes = (make_mode("a: b #1", odd, 230.0), make_mode("Ünïcode", np.ones((3, 4)), 230.0), *able_bodied.modes[1:])
+    for lib in (able_bodied, KernelLibrary("odd 'name'", modes)):
+        out = save_library(lib, tmp_path / "lib.yaml")
+        doc = library_io.library_to_doc(lib)
+        expected = yaml.dump(doc, Dumper=library_io._FlowRowsDumper, sort_keys=False, width=120, allow_unicode=True)
+        assert out.read_text(encoding="utf-8") == library_io._yaml_header(lib) + expected
+        back = load_library(out)
+        assert [m.name for m in back.modes] == [m.name for m in lib.modes]
+        np.testing.assert_array_equal(back.modes[0].samples, np.round(lib.modes[0].samples, 9))
+
+
 def test_large_library_npz_round_trip(tmp_path: Path, able_bodied: KernelLibrary) -> None:
     big = able_bodied.replicated(700)
     back = load_library(save_library(big, tmp_path / "big.npz"))
