@@ -41,6 +41,9 @@ DEFAULT_TIME_SCALES = (0.88, 0.92, 0.96, 1.0, 1.04, 1.08, 1.12)
 CALIBRATION_CONFIDENCE = 0.1
 CALIBRATION_STEP_DEG = 5.0
 CALIBRATION_MAX_DEG = 15.0
+MID_STRIDE = (0.25, 0.75)
+"""A heel strike ends a stride for the calibrations only if the phase was in this range since the
+previous one."""
 CADENCE_MIN_STRIDES = 3
 """Confident strides the cadence calibration reads before it narrows the time scales."""
 CADENCE_SPREAD_FACTOR = 2.0
@@ -268,7 +271,7 @@ class Estimator:
         self.cadence_strides = 0
         self.cadence_spread = 0.0
         """Running RMS deviation of the strides' log time scale from the learnt one."""
-        self._calib_last: tuple[int, float] | None = None
+        self._calib_last: tuple[int, float, bool] | None = None  # mode, phase, passed mid-stride
         self.last_time: float | None = None
         self.resets = 0
         self._last: Estimate | None = None
@@ -371,12 +374,18 @@ class Estimator:
         return strides
 
     def _confident_stride_end(self, est: Estimate) -> bool:
-        """True at a heel strike (the phase wrapped) of a mode reported on both sides of it,
-        confident (margin >= CALIBRATION_CONFIDENCE) and not held: where the calibrations read."""
-        m = est.mode_index
-        last, self._calib_last = self._calib_last, (m, est.phase) if est.ready else None
-        return not (last is None or last[0] != m or est.phase >= last[1] - 0.5 or est.held
-                    or est.confidence < CALIBRATION_CONFIDENCE)
+        """True at a heel strike (the phase wrapped) of a mode reported on both sides of it that
+        ends a stride whose phase passed mid-stride (MID_STRIDE) since the last wrap, confident
+        (margin >= CALIBRATION_CONFIDENCE) and not held: where the calibrations read. A phase
+        that flickers across the wrap (0.99, 0.01, 0.99, ...) ends one stride, not one per flicker."""
+        m, phase = est.mode_index, est.phase
+        last = self._calib_last
+        same = last is not None and last[0] == m
+        wrapped = same and phase < last[1] - 0.5
+        passed_mid = same and last[2]
+        midway = MID_STRIDE[0] <= phase < MID_STRIDE[1] or (passed_mid and not wrapped)
+        self._calib_last = (m, phase, midway) if est.ready else None
+        return wrapped and passed_mid and not est.held and est.confidence >= CALIBRATION_CONFIDENCE
 
     def _calibrate_offset(self, est: Estimate, result: Any) -> None:
         """Move the sensor offset estimate towards this stride's window-vs-kernel mean difference."""
