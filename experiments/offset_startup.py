@@ -3,7 +3,7 @@
 The kernels' own Slow, Med and Fast strides (25 each, 230 Hz) with sensor offsets added: each
 sensor 6 deg up and down, and two mixed sets; 30 cases per offset tolerance. A case fails when
 the learnt offset ends more than 1 deg from the true one; the mode is wrong when it is not the
-walked mode on more than 5 % of the last 5 s. Deterministic; about 20 s.
+walked mode on more than 5 % of the last 5 s. Deterministic; about 40 s.
 
     python experiments/offset_startup.py [--tolerances 0,1,2]
 """

@@ -68,7 +68,7 @@ def test_round_trip(tmp_path: Path, able_bodied: KernelLibrary, suffix: str) -> 
     assert back.provenance == able_bodied.provenance
 
 
-def test_yaml_text_is_pyyaml_s_own(tmp_path: Path, able_bodied: KernelLibrary) -> None:
+def test_yaml_text_equals_pyyaml_dump(tmp_path: Path, able_bodied: KernelLibrary) -> None:
     """The kernel rows are formatted without PyYAML's representer (for speed): the file must be
     the text PyYAML itself writes, for odd floats and names that need quoting too."""
     from gait_estimator.io import library_io
