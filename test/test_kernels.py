@@ -13,6 +13,7 @@ import yaml
 from gait_estimator import KernelLibrary, LibraryError, load_library, save_library
 from gait_estimator.cli.app import main as cli_main
 from gait_estimator.core.kernels import make_mode
+from gait_estimator.io import library_io
 from gait_estimator.io.library_io import DEFAULT_REFERENCE_RATE_HZ
 
 
@@ -68,11 +69,23 @@ def test_round_trip(tmp_path: Path, able_bodied: KernelLibrary, suffix: str) -> 
     assert back.provenance == able_bodied.provenance
 
 
+class _FlowRow(list):
+    """A kernel row, for PyYAML to write in flow style ``[a, b, c, d]``."""
+
+
+class _FlowRowsDumper(library_io._YamlDumper):
+    pass
+
+
+_FlowRowsDumper.add_representer(
+    _FlowRow, lambda dumper, row: dumper.represent_sequence("tag:yaml.org,2002:seq", list(row), flow_style=True)
+)
+
+
 def test_yaml_text_equals_pyyaml_dump(tmp_path: Path, able_bodied: KernelLibrary) -> None:
     """The kernel rows are formatted without PyYAML's representer (for speed): the file must be
-    the text PyYAML itself writes, for odd floats and names that need quoting too."""
-    from gait_estimator.io import library_io
-
+    the text PyYAML itself writes (rows in flow style), for odd floats and names that need
+    quoting too."""
     odd = able_bodied.modes[0].samples.copy()
     odd[0] = [1e-05, -2.5e-07, 123456789.123, -0.0]
     odd[1] = [1e16, 3e-9, 0.1, -1e-10]
@@ -80,7 +93,9 @@ def test_yaml_text_equals_pyyaml_dump(tmp_path: Path, able_bodied: KernelLibrary
     for lib in (able_bodied, KernelLibrary("odd 'name'", modes)):
         out = save_library(lib, tmp_path / "lib.yaml")
         doc = library_io.library_to_doc(lib)
-        expected = yaml.dump(doc, Dumper=library_io._FlowRowsDumper, sort_keys=False, width=120, allow_unicode=True)
+        for md in doc["modes"]:
+            md["samples"] = [_FlowRow(row) for row in md["samples"]]
+        expected = yaml.dump(doc, Dumper=_FlowRowsDumper, sort_keys=False, width=120, allow_unicode=True)
         assert out.read_text(encoding="utf-8") == library_io._yaml_header(lib) + expected
         back = load_library(out)
         assert [m.name for m in back.modes] == [m.name for m in lib.modes]
