@@ -271,6 +271,7 @@ class Estimator:
         self.cadence_strides = 0
         self.cadence_spread = 0.0
         """Running RMS deviation of the strides' log time scale from the learnt one."""
+        self._learns_cadence = c.cadence_calibration_rate > 0 and self.matcher.n_scales > 1
         self._calib_last: tuple[int, float, bool] | None = None  # mode, phase, passed mid-stride
         self.last_time: float | None = None
         self.resets = 0
@@ -325,10 +326,10 @@ class Estimator:
         result = self.matcher.step(x)
         est = self.supervisor.update(time_s, result)
         c = self.config
-        if (c.offset_calibration_rate > 0 or c.cadence_calibration_rate > 0) and self._confident_stride_end(est):
+        if (c.offset_calibration_rate > 0 or self._learns_cadence) and self._confident_stride_end(est):
             if c.offset_calibration_rate > 0:
                 self._calibrate_offset(est, result)
-            if c.cadence_calibration_rate > 0 and self.matcher.n_scales > 1:
+            if self._learns_cadence:
                 self._calibrate_cadence(est)
         if self.adapter is not None:
             self._adapt(x, est, result)
@@ -351,7 +352,7 @@ class Estimator:
         if self.config.offset_calibration_rate > 0 and np.any(other.sensor_offset_deg != 0):
             self.sensor_offset_deg = other.sensor_offset_deg.copy()
             self.matcher.set_sensor_offset(self.sensor_offset_deg)
-        if self.config.cadence_calibration_rate > 0 and self.matcher.n_scales > 1 and other.cadence_strides:
+        if self._learns_cadence and other.cadence_strides:
             self.cadence_scale, self.cadence_strides = other.cadence_scale, other.cadence_strides
             self.cadence_spread = other.cadence_spread
             self._narrow_scales()
@@ -409,8 +410,9 @@ class Estimator:
             level, var = x, 0.0
         else:  # a running mean over the first strides, then exponential forgetting
             rate = max(self.config.cadence_calibration_rate, 1.0 / self.cadence_strides)
-            dev = x - math.log(self.cadence_scale)
-            level = math.log(self.cadence_scale) + rate * dev
+            mean = math.log(self.cadence_scale)
+            dev = x - mean
+            level = mean + rate * dev
             var = self.cadence_spread ** 2 + rate * (dev * dev - self.cadence_spread ** 2)
         self.cadence_scale = math.exp(level)
         self.cadence_spread = math.sqrt(var)
