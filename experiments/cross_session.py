@@ -681,7 +681,7 @@ def write_tables(res: dict[str, Any], out: Path) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=str(REPO / "experiments/results/cross_session"), help="output directory")
-    ap.add_argument("--settings", help=f"comma-separated setting names (default: all: {', '.join(SETTINGS)})")
+    ap.add_argument("--settings", help=f"comma-separated setting names (default: all: {', '.join(SETTINGS)})".replace("%", "%%"))
     ap.add_argument("--add", action="append", metavar="NAME=JSON",
                     help="add a setting, e.g. 'mine={\"resample\": true}' (repeatable; select with --settings too)")
     ap.add_argument("--datasets", help=f"comma-separated data sets (default: all: {', '.join(DATASET_KEYS)})")

@@ -63,4 +63,8 @@ def main(path: Path) -> None:
 
 
 if __name__ == "__main__":
+    if sys.argv[1:2] in (["-h"], ["--help"]):
+        sys.exit(print(__doc__))
+    if len(sys.argv) > 2:
+        sys.exit(__doc__)
     main(Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT)

@@ -473,15 +473,41 @@ def test_calibrations_read_each_stride_once(able_bodied, window_fraction: float)
     """The calibrations read at most once per stride, however the reported phase flickers across
     the heel strike (0.99, 0.01, 0.99, ...; frequent with part-stride windows), and still read
     most strides. Reading at every flicker let a few strides of a wrong mode set the sensor
-    offsets (MS-LG2 with window_fraction 0.75: 58.8 % accuracy, 85.1 % with one read per stride)."""
+    offsets (MS-LG2 with window_fraction 0.75: 58.8 % accuracy, 85.1 % with one read per stride).
+    They do not read the stride in which the mode changed: it blends two modes (a read of one
+    such SA stride put a new wearer's cadence 13 % off and widened the band until Fast was
+    read as Med)."""
     from synthetic import generate, new_wearer
 
     route = [("RA", 6), ("SA", 6), ("RD", 6), ("Fast", 12)]
     syn = generate(able_bodied, route, new_wearer(1), seed=1001)
     est = Estimator(able_bodied, EstimatorConfig(window_fraction=window_fraction))
-    run_estimator(est, syn.recording.time_s, syn.recording.angles_deg)
+    reads = []
+    for t, x in zip(syn.recording.time_s, syn.recording.angles_deg, strict=True):
+        before = est.cadence_strides
+        est.update(float(t), x)
+        if est.cadence_strides > before:
+            reads.append(float(t))
     strides = len(syn.stride_modes)
-    assert strides - 2 * len(route) <= est.cadence_strides <= strides - 1
+    assert len(reads) == est.cadence_strides
+    assert strides - 3 * len(route) <= len(reads) <= strides - 1
+    first = np.cumsum([n for _, n in route])[:-1]  # index of each mode's first stride after a change
+    ends = syn.heel_strikes_s[first + 1]
+    gap = np.abs(np.subtract.outer(ends, reads)).min(axis=1)
+    assert np.all(gap > 0.1), f"read at the end of a transition stride: {ends[gap <= 0.1].round(2).tolist()}"
+
+
+@pytest.mark.parametrize("mode", ["Med", "SA"])
+@pytest.mark.parametrize("scale", [0.98, 1.02])
+def test_cadence_is_read_between_the_time_scales(able_bodied, mode: str, scale: float) -> None:
+    """Strides lasting 0.98 or 1.02 times the kernel's, halfway between two time scales (0.96,
+    1.0, 1.04): the calibration reads the scale between them (the vertex of the row scores), not
+    the nearest scale, which was 0.02 off at every stride."""
+    x = _stretched_strides(able_bodied, mode, 10, 1.0 / scale)
+    est = Estimator(able_bodied)
+    run_estimator(est, np.arange(len(x)) / 230.0, x)
+    assert est.cadence_strides >= 6
+    assert est.cadence_scale == pytest.approx(scale, abs=0.005)
 
 
 def test_new_options_keep_the_learnt_calibration(able_bodied) -> None:

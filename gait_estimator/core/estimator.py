@@ -272,7 +272,7 @@ class Estimator:
         self.cadence_spread = 0.0
         """Running RMS deviation of the strides' log time scale from the learnt one."""
         self._learns_cadence = c.cadence_calibration_rate > 0 and self.matcher.n_scales > 1
-        self._calib_last: tuple[int, float, bool] | None = None  # mode, phase, passed mid-stride
+        self._calib_last: tuple[int, float, bool, bool] | None = None  # mode, phase, passed mid-stride, stride began in mode
         self.last_time: float | None = None
         self.resets = 0
         self._last: Estimate | None = None
@@ -375,18 +375,20 @@ class Estimator:
         return strides
 
     def _confident_stride_end(self, est: Estimate) -> bool:
-        """True at a heel strike (the phase wrapped) of a mode reported on both sides of it that
-        ends a stride whose phase passed mid-stride (MID_STRIDE) since the last wrap, confident
-        (margin >= CALIBRATION_CONFIDENCE) and not held: where the calibrations read. A phase
-        that flickers across the wrap (0.99, 0.01, 0.99, ...) ends one stride, not one per flicker."""
+        """True at a heel strike (the phase wrapped) that ends a stride reported as one mode from
+        the previous heel strike on, whose phase passed mid-stride (MID_STRIDE), confident (margin
+        >= CALIBRATION_CONFIDENCE) and not held: where the calibrations read. A phase that
+        flickers across the wrap (0.99, 0.01, 0.99, ...) ends one stride, not one per flicker; the
+        stride in which the reported mode changed (a blend of two modes) is not read."""
         m, phase = est.mode_index, est.phase
         last = self._calib_last
         same = last is not None and last[0] == m
         wrapped = same and phase < last[1] - 0.5
         passed_mid = same and last[2]
+        whole = same and last[3]
         midway = MID_STRIDE[0] <= phase < MID_STRIDE[1] or (passed_mid and not wrapped)
-        self._calib_last = (m, phase, midway) if est.ready else None
-        return wrapped and passed_mid and not est.held and est.confidence >= CALIBRATION_CONFIDENCE
+        self._calib_last = (m, phase, midway, wrapped or whole) if est.ready else None
+        return wrapped and whole and passed_mid and not est.held and est.confidence >= CALIBRATION_CONFIDENCE
 
     def _calibrate_offset(self, est: Estimate, result: Any) -> None:
         """Move the sensor offset estimate towards this stride's window-vs-kernel mean difference."""
@@ -400,11 +402,11 @@ class Estimator:
 
     def _calibrate_cadence(self, est: Estimate) -> None:
         """Move the learnt time scale (in log) towards the reported mode's best time scale over
-        all scales (not only the band); from the CADENCE_MIN_STRIDES-th stride on, read every
-        mode only near it (``_narrow_scales``). One wearer's strides in every mode scale alike,
-        so the speed classes of a faster or slower wearer are told apart at their own cadence."""
-        scales = self.matcher.time_scales
-        x = math.log(scales[self.matcher.best_scale_index(est.mode_index)])
+        all scales (not only the band), read between them (``best_log_scale``); from the
+        CADENCE_MIN_STRIDES-th stride on, read every mode only near it (``_narrow_scales``). One
+        wearer's strides in every mode scale alike, so the speed classes of a faster or slower
+        wearer are told apart at their own cadence."""
+        x = self.matcher.best_log_scale(est.mode_index)
         self.cadence_strides += 1
         if self.cadence_strides == 1:
             level, var = x, 0.0
