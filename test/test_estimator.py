@@ -474,9 +474,9 @@ def test_calibrations_read_each_stride_once(able_bodied, window_fraction: float)
     the heel strike (0.99, 0.01, 0.99, ...; frequent with part-stride windows), and still read
     most strides. Reading at every flicker let a few strides of a wrong mode set the sensor
     offsets (MS-LG2 with window_fraction 0.75: 58.8 % accuracy, 85.1 % with one read per stride).
-    They do not read the stride in which the mode changed: it blends two modes (a read of one
-    such SA stride put a new wearer's cadence 13 % off and widened the band until Fast was
-    read as Med)."""
+    They do not read the stride in which the mode changed: it blends two modes (one such SA
+    stride of this wearer read a time scale of 0.94 against the wearer's 1.07 and widened the
+    band until Fast was read as Med)."""
     from synthetic import generate, new_wearer
 
     route = [("RA", 6), ("SA", 6), ("RD", 6), ("Fast", 12)]
