@@ -125,6 +125,8 @@ class Collector:
 
 
 def _player(args: list[str], env: dict[str, str]) -> subprocess.Popen:
+    # Unbuffered, with faulthandler: if it ever hangs, _stop's SIGABRT shows where (every thread).
+    env = {**env, "PYTHONUNBUFFERED": "1", "PYTHONFAULTHANDLER": "1"}
     return subprocess.Popen(
         [sys.executable, "-m", "gait_estimator.cli", "play", *args],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
@@ -132,13 +134,19 @@ def _player(args: list[str], env: dict[str, str]) -> subprocess.Popen:
 
 
 def _stop(proc: subprocess.Popen, sig: int = signal.SIGINT) -> int:
+    """Send ``sig`` and return the exit code; a process still running 15 s later gets SIGABRT
+    (a Python child started with PYTHONFAULTHANDLER=1 prints its threads' stacks), then SIGKILL."""
     if proc.poll() is None:
         proc.send_signal(sig)
         try:
             proc.wait(timeout=15)
         except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+            proc.send_signal(signal.SIGABRT)
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
     return int(proc.returncode)
 
 
