@@ -232,7 +232,8 @@ def test_play_csv_into_live_node_equals_offline(ramp, able_bodied, tmp_path, ros
 
 def test_play_bag_with_clock_and_loop(ramp, tmp_path, ros_domain):
     """Bag messages go out unchanged (then shifted by one period per loop), /clock follows the
-    log times, and Ctrl-C ends playback with exit code 130."""
+    log times, and Ctrl-C ends playback with exit code 130, also when the player inherits SIGINT
+    ignored (as a background job of a script does: the player kept playing until it was killed)."""
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
 
@@ -241,7 +242,11 @@ def test_play_bag_with_clock_and_loop(ramp, tmp_path, ros_domain):
     bag = write_input_bag(ramp.slice(0, n), tmp_path / "bag", start_ns=START_NS)
     pl = playlist_from_bag(bag)
     collector = Collector(PLAY_LOOP_DOMAIN, {"/segment_angles": JointState, "/clock": Clock})
-    player = _player([str(bag), "--clock", "--loop", "--rate", "4", "--wait-for-subscribers", "30"], env)
+    ignored = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the player
+    try:
+        player = _player([str(bag), "--clock", "--loop", "--rate", "4", "--wait-for-subscribers", "30"], env)
+    finally:
+        signal.signal(signal.SIGINT, ignored)
     try:
         assert collector.spin_until(lambda: len(collector.got["/segment_angles"]) >= 2 * n + 50, 60), player.poll()
     finally:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import statistics
 import tempfile
 import time
@@ -161,6 +162,9 @@ def cmd_play(args: argparse.Namespace) -> int:
         args.source, topics=args.topic, msg_type=args.type, units=args.units,
         joint_names=args.joint_names or CHANNELS, rate_hz=args.sample_rate,
     )
+    # Ctrl-C (SIGINT) ends playback, as for ros2 bag play, also when this process inherited SIGINT
+    # ignored (a background job of a script): rclpy installs no handler for the player's context.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         play(
             playlist, rate=args.rate, loop=args.loop, clock=args.clock,
