@@ -278,12 +278,11 @@ class _MatcherBase:
         grid's scales: the vertex of the parabola through the best row's score and its two
         neighbours' (in log scale), whatever the scale band; the grid scale itself at either end."""
         s = self.n_scales
-        scores = self._row_score[mode * s : (mode + 1) * s]
-        b = int(scores.argmin())
+        b = self.best_scale_index(mode)
         if b == 0 or b == s - 1:
             return math.log(self.time_scales[b])
         x0, x1, x2 = (math.log(v) for v in self.time_scales[b - 1 : b + 2])
-        y0, y1, y2 = (float(v) for v in scores[b - 1 : b + 2])
+        y0, y1, y2 = (float(v) for v in self._row_score[mode * s + b - 1 : mode * s + b + 2])
         a, c = x1 - x0, x1 - x2
         den = a * (y1 - y2) - c * (y1 - y0)
         if den == 0.0:  # flat: no side is better

@@ -138,8 +138,13 @@ def library_to_doc(lib: KernelLibrary, samples: bool = True) -> dict[str, Any]:
     }
     if samples:
         for md, m in zip(doc["modes"], lib.modes, strict=True):
-            md["samples"] = [[round(v, SAMPLE_DECIMALS) for v in row] for row in m.samples.tolist()]
+            md["samples"] = _rounded_rows(m)
     return doc
+
+
+def _rounded_rows(mode: KernelMode) -> list[list[float]]:
+    """The kernel's samples as written to YAML: rows of floats rounded to SAMPLE_DECIMALS."""
+    return [[round(v, SAMPLE_DECIMALS) for v in row] for row in mode.samples.tolist()]
 
 
 def _library_from_doc(doc: dict[str, Any], p: Path, samples: list[np.ndarray] | None = None) -> KernelLibrary:
@@ -307,8 +312,8 @@ def _yaml_body(doc: dict[str, Any], lib: KernelLibrary) -> str:
 
     def block(match: re.Match[str]) -> str:
         indent = match.group(1)
-        rows = lib.modes[int(match.group(2))].samples.tolist()
-        lines = (f"{indent}- [{', '.join(_yaml_float(round(v, SAMPLE_DECIMALS)) for v in row)}]" for row in rows)
+        rows = _rounded_rows(lib.modes[int(match.group(2))])
+        lines = (f"{indent}- [{', '.join(_yaml_float(v) for v in row)}]" for row in rows)
         return f"{indent}samples:\n" + "\n".join(lines)
 
     return _SAMPLES_SLOT.sub(block, text)
