@@ -62,6 +62,32 @@ def test_naive_matches_a_plain_loop() -> None:
         assert r.ready == (i + 1 >= 7)
 
 
+def test_recency_weighting_matches_a_plain_loop() -> None:
+    """recency_half_life h: the squared error of a sample t samples old counts lambda^t, with
+    lambda = 2^(-1 / (h N)), and normalize divides by the window's weight sum."""
+    rng = np.random.default_rng(4)
+    lib = random_library(rng, [6, 9])
+    inc = IncrementalMatcher(lib, recency_half_life=0.5, normalize=True, resync_period=0)
+    naive = NaiveMatcher(lib, recency_half_life=0.5, normalize=True)
+    data = rng.normal(0, 20, (25, 4))
+    for i, d in enumerate(data):
+        a, b = inc.step(d), naive.step(d)
+        for m, mode in enumerate(lib.modes):
+            n = mode.length
+            k = mode.samples.astype(np.float32).astype(np.float64)
+            lam = 2.0 ** (-1.0 / (0.5 * n))
+            w = data[: i + 1][-n:]
+            e = np.zeros(n)
+            for j in range(n):
+                for t in range(len(w)):
+                    diff = w[len(w) - 1 - t] - k[(j - t) % n]
+                    e[j] += lam**t * (diff @ diff)
+            weight = sum(lam**t for t in range(len(w)))
+            assert a.sse[m] == pytest.approx(e.min() / weight, rel=1e-9)
+            assert b.sse[m] == pytest.approx(e.min() / weight, rel=1e-12)
+            assert a.phases[m] == pytest.approx(((int(e.argmin()) + 1) % n) / n)
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     lengths=st.lists(st.integers(min_value=2, max_value=40), min_size=1, max_size=6),
@@ -278,15 +304,17 @@ def test_numba_is_there_unless_turned_off() -> None:
     tolerance=st.sampled_from([0.0, 3.0, math.inf]),
     normalize=st.booleans(),
     subsample=st.booleans(),
+    recency=st.sampled_from([0.0, 0.3, 2.0]),
     seed=st.integers(min_value=0, max_value=2**32 - 1),
 )
 def test_new_options_match_the_naive_specification(
-    backend, lengths, fraction, scales, tolerance, normalize, subsample, seed
+    backend, lengths, fraction, scales, tolerance, normalize, subsample, recency, seed
 ) -> None:
     rng = np.random.default_rng(seed)
     lib = random_library(rng, lengths)
     opts = {"window_fraction": fraction, "time_scales": scales, "offset_tolerance_deg": tolerance,
-            "normalize": normalize, "subsample": subsample, "channel_weights": [1.0, 0.5, 2.0, 1.0]}
+            "normalize": normalize, "subsample": subsample, "channel_weights": [1.0, 0.5, 2.0, 1.0],
+            "recency_half_life": recency if fraction == 1.0 else 0.0}  # recency weighting needs the whole window
     inc = IncrementalMatcher(lib, resync_period=41, resync_block=3, backend=backend, **opts)
     naive = NaiveMatcher(lib, **opts)
     for d in rng.normal(5, 20, (80, 4)):
@@ -338,7 +366,7 @@ def test_scale_band_limits_the_time_scales_a_mode_is_read_at(able_bodied, backen
 def test_numba_and_numpy_agree_with_a_scale_band(multispeed_csv, able_bodied) -> None:
     x = read_recording(multispeed_csv).angles_deg[2000:3500]
     scales = (0.88, 0.94, 1.0, 1.06, 1.12)
-    out = []
+    out, matchers = [], []
     for backend in ("numba", "numpy"):
         m = IncrementalMatcher(able_bodied, backend=backend, time_scales=scales, offset_tolerance_deg=2.0, normalize=True)
         rows = []
@@ -347,10 +375,15 @@ def test_numba_and_numpy_agree_with_a_scale_band(multispeed_csv, able_bodied) ->
                 m.set_scale_band([False, True, True, False, False])
             rows.append(m.step(d))
         out.append(rows)
+        matchers.append(m)
     for a, b in zip(*out, strict=True):
         assert a.mode_index == b.mode_index and np.array_equal(a.variant, b.variant)
         np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10)
     assert {int(v) for r in out[0][700:] for v in r.variant} <= {1, 2}
+    # The compiled step reads out only the band's rows; the calibrations' row scores cover all.
+    for mode in range(len(able_bodied)):
+        np.testing.assert_allclose(matchers[0].mode_row_scores(mode), matchers[1].mode_row_scores(mode), rtol=1e-10)
+        assert np.isfinite(matchers[0].mode_row_scores(mode)).all()
 
 
 def test_a_stretched_stride_is_matched_by_its_time_scale(able_bodied) -> None:
@@ -409,9 +442,10 @@ def test_offset_penalty_is_the_excess_over_the_tolerance() -> None:
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_set_kernel_continues_as_if_the_kernel_had_always_been_this_one(able_bodied, multispeed_csv, backend) -> None:
+@pytest.mark.parametrize("window", [{"window_fraction": 0.7}, {"recency_half_life": 0.3}])
+def test_set_kernel_continues_as_if_the_kernel_had_always_been_this_one(able_bodied, multispeed_csv, backend, window) -> None:
     x = read_recording(multispeed_csv).angles_deg[3000:4000]
-    opts = {"time_scales": (0.9, 1.0, 1.1), "offset_tolerance_deg": 3.0, "normalize": True, "window_fraction": 0.7}
+    opts = {"time_scales": (0.9, 1.0, 1.1), "offset_tolerance_deg": 3.0, "normalize": True, **window}
     new = able_bodied.mode("Fast").samples + np.random.default_rng(0).normal(0, 2.0, (280, 4))
     modes = list(able_bodied.modes)
     modes[2] = make_mode("Fast", new, 230.0)
@@ -429,11 +463,36 @@ def test_set_kernel_continues_as_if_the_kernel_had_always_been_this_one(able_bod
         a.set_kernel(2, new[:10])
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_recency_weights_can_change_at_any_sample(able_bodied, multispeed_csv, backend) -> None:
+    """set_recency_half_life recomputes the running sums from the window: the matcher continues as
+    if it had always had the new weights (0 = uniform: as a matcher made without them)."""
+    x = read_recording(multispeed_csv).angles_deg[3000:4200]
+    opts = {"time_scales": (0.9, 1.0, 1.1), "offset_tolerance_deg": 2.0, "normalize": True, "backend": backend}
+    switched = IncrementalMatcher(able_bodied, recency_half_life=0.3, **opts)
+    switched.set_recency_half_life(0.0)
+    uniform = IncrementalMatcher(able_bodied, **opts)
+    np.testing.assert_allclose(switched.run(x[:500]).sse, uniform.run(x[:500]).sse, rtol=1e-9)
+    switched.set_recency_half_life(0.3)
+    weighted = IncrementalMatcher(able_bodied, recency_half_life=0.3, **opts)
+    weighted.run(x[:500])
+    a, b = switched.run(x[500:]), weighted.run(x[500:])
+    np.testing.assert_array_equal(a.mode_index, b.mode_index)
+    np.testing.assert_allclose(a.sse, b.sse, rtol=1e-9)
+    assert not np.allclose(a.sse, uniform.run(x[500:]).sse)
+    with pytest.raises(ValueError, match="recency_half_life > 0"):
+        uniform.set_recency_half_life(0.3)
+
+
 @pytest.mark.parametrize(("kwargs", "message"), [
     ({"time_scales": []}, "time_scales"),
     ({"time_scales": [0.3]}, "time_scales"),
     ({"time_scales": [1.0, 1.0]}, "distinct"),
     ({"offset_tolerance_deg": -1.0}, "offset_tolerance_deg"),
+    ({"recency_half_life": -0.1}, "recency_half_life"),
+    ({"recency_half_life": math.inf}, "recency_half_life"),
+    ({"recency_half_life": math.nan}, "recency_half_life"),
+    ({"recency_half_life": 0.3, "window_fraction": 0.5}, "needs window_fraction 1.0"),
     ({"backend": "cuda"}, "backend"),
 ])
 def test_invalid_new_options(able_bodied, kwargs, message) -> None:
@@ -441,26 +500,27 @@ def test_invalid_new_options(able_bodied, kwargs, message) -> None:
         IncrementalMatcher(able_bodied, **kwargs)
 
 
-@pytest.mark.parametrize("fraction", [1.0, 0.5])
-def test_mean_offset_and_sensor_offset(able_bodied, fraction) -> None:
+@pytest.mark.parametrize(("fraction", "recency"), [(1.0, 0.0), (0.5, 0.0), (1.0, 0.3)])
+def test_mean_offset_and_sensor_offset(able_bodied, fraction, recency) -> None:
     """A kernel walked with constant sensor offsets: mean_offset reads them back, and assuming
     them (set_sensor_offset) makes the paper's score what it is without the offsets."""
     offsets = np.array([3.0, -2.0, 1.0, 5.0])
     x = np.tile(able_bodied.mode("Med").samples, (2, 1))
-    m = IncrementalMatcher(able_bodied, window_fraction=fraction)
+    opts = {"window_fraction": fraction, "recency_half_life": recency}
+    m = IncrementalMatcher(able_bodied, **opts)
     r = m.run(x + offsets)
     assert r.modes[-1] == "Med"
     np.testing.assert_allclose(m.mean_offset(1, int(m.step(x[0] + offsets).column[1])), offsets, atol=1e-6)  # float32 kernels
     # Every mode walked as itself, the longest window (its prefix sum shares a ring slot) included.
     for mode in range(len(able_bodied)):
         walk = np.tile(able_bodied.modes[mode].samples, (2, 1)) + offsets
-        mm = IncrementalMatcher(able_bodied, window_fraction=fraction)
+        mm = IncrementalMatcher(able_bodied, **opts)
         mm.run(walk)
         got = mm.mean_offset(mode, int(mm.lengths[mode]) - 1)  # the aligned column: the walk ends a stride
         np.testing.assert_allclose(got, offsets, atol=1e-6, err_msg=able_bodied.modes[mode].name)
     assert int(np.argmax(mm.windows)) in range(len(able_bodied))
-    clean = IncrementalMatcher(able_bodied, window_fraction=fraction).run(x)
-    shifted = IncrementalMatcher(able_bodied, window_fraction=fraction)
+    clean = IncrementalMatcher(able_bodied, **opts).run(x)
+    shifted = IncrementalMatcher(able_bodied, **opts)
     shifted.set_sensor_offset(offsets)
     np.testing.assert_allclose(shifted.sensor_offset_deg, offsets)
     s = shifted.run(x + offsets)

@@ -102,7 +102,8 @@ def matcher_options(preset: str) -> dict[str, Any]:
     """IncrementalMatcher keyword arguments of an estimator preset (its matching options)."""
     c = EstimatorConfig.preset(preset)
     return {"window_fraction": c.window_fraction, "channel_weights": c.effective_weights(), "subsample": c.subsample_phase,
-            "time_scales": c.time_scales, "offset_tolerance_deg": c.offset_tolerance_deg, "normalize": c.normalize_error}
+            "time_scales": c.time_scales, "offset_tolerance_deg": c.offset_tolerance_deg, "normalize": c.normalize_error,
+            "recency_half_life": c.effective_recency_half_life}
 
 
 def time_updates(estimator: Estimator, samples: np.ndarray, rate_hz: float, warmup: int) -> dict[str, float]:

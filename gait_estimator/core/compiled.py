@@ -58,7 +58,9 @@ def step_rows(
     e: np.ndarray, kern: np.ndarray, ksq: np.ndarray, lens: np.ndarray, wins: np.ndarray,
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
-    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, normalize: bool, subsample: bool, n_scales: int,
+    decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
+    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray,
+    normalize: bool, subsample: bool, n_scales: int,
     allowed: np.ndarray, out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
@@ -68,10 +70,16 @@ def step_rows(
     lens/wins (R,); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and their squared
     norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,) the prefix
     sum before this sample; count: samples before this one; d0..d3: the (weighted) sample, as
-    scalars (the caller builds no array), dsq = ||d||^2; offset: apply the offset penalty (mu
-    (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift means of the window's kernel part when
-    W < N, tau (2, 4): tolerances and sensor offsets); normalize: divide by the window length;
-    allowed (n_scales,) bool: the time scales a mode may be read at (at least one).
+    scalars (the caller builds no array), dsq = ||d||^2; decay: recency weighting, with per row
+    lam (R,) the weight factor per sample of age, lam_w = lam^W, wsum the weight sum of a full
+    window (W without decay) and wsums (R, 4) the age-weighted window sums, updated in place;
+    offset: apply the offset penalty (mu (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift
+    (age-weighted) means of the window's kernel part when W < N or with decay, tau (2, 4):
+    tolerances and sensor offsets; with decay the window's weight W_a and age-weighted sums stand
+    for W and the sums; scratch (R, Nmax): room for per-shift scores); normalize: divide by the
+    window's weight;
+    allowed (n_scales,) bool: the time scales a mode may be read at (at least one); rows at other
+    scales are updated but not read out (out_score inf).
     Writes per row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
     n_rows = lens.shape[0]
@@ -83,60 +91,92 @@ def step_rows(
         w = wins[r]
         full = i >= w
         o0 = o1 = o2 = o3 = osq = 0.0
+        lw = lam_w[r]  # weight of the sample leaving the window (1 without decay)
         if full:
             s = (i - w) % wmax
-            o0, o1, o2, o3 = ring[s, 0], ring[s, 1], ring[s, 2], ring[s, 3]
-            osq = ring_sq[s]
+            o0, o1, o2, o3 = ring[s, 0] * lw, ring[s, 1] * lw, ring[s, 2] * lw, ring[s, 3] * lw
+            osq = ring_sq[s] * lw
         base = dsq - osq
         er = e[r]
         k0, k1, k2, k3 = kern[r, 0], kern[r, 1], kern[r, 2], kern[r, 3]
         last = er[n - 1]
         # In place, from the last column down: e[j] takes the old e[j-1] before it is overwritten.
-        if w == n and full:
+        aged = decay and lam[r] < 1.0  # age weights in effect (lam = 1: uniform, the paper's update)
+        if w == n and full and not aged:
             # e[j] = e[j-1] + ||d||^2 - ||old||^2 - 2 k_j . (d - old)
             c0, c1, c2, c3 = -2.0 * (d0 - o0), -2.0 * (d1 - o1), -2.0 * (d2 - o2), -2.0 * (d3 - o3)
             for j in range(n - 1, 0, -1):
                 er[j] = er[j - 1] + base + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
             er[0] = last + base + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
+        elif w == n and full:
+            # e[j] = lam e[j-1] + ||d||^2 - lam^W ||old||^2 - 2 k_j . (d - lam^W old) + (1 - lam^W) ||k_j||^2
+            c0, c1, c2, c3 = -2.0 * (d0 - o0), -2.0 * (d1 - o1), -2.0 * (d2 - o2), -2.0 * (d3 - o3)
+            a = lam[r]
+            kc = 1.0 - lw
+            kq = ksq[r]
+            for j in range(n - 1, 0, -1):
+                er[j] = a * er[j - 1] + base + kc * kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
+            er[0] = a * last + base + kc * kq[0] + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
         else:
-            # e[j] = e[j-1] + ||d - k_j||^2 - [full] ||old - k_{j-W}||^2
+            # e[j] = lam e[j-1] + ||d - k_j||^2 - [full] lam^W ||old - k_{j-W}||^2   (lam = 1 without decay)
             c0, c1, c2, c3 = -2.0 * d0, -2.0 * d1, -2.0 * d2, -2.0 * d3
+            a = lam[r]
             kq = ksq[r]
             for j in range(n - 1, -1, -1):
                 prev = er[j - 1] if j > 0 else last
-                v = prev + base + kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
+                v = a * prev + base + kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
                 if full:
                     lag = j - w
                     if lag < 0:
                         lag += n
-                    v += 2.0 * (o0 * k0[lag] + o1 * k1[lag] + o2 * k2[lag] + o3 * k3[lag]) - kq[lag]
+                    v += 2.0 * (o0 * k0[lag] + o1 * k1[lag] + o2 * k2[lag] + o3 * k3[lag]) - lw * kq[lag]
                 er[j] = v
 
-        # Read-out of row r: score = (e - offset penalty) / window, its argmin over j.
+        if decay:  # the weighted window sums age too: S = lam S + d - lam^W old
+            a = lam[r]
+            wsums[r, 0] = a * wsums[r, 0] + d0 - o0
+            wsums[r, 1] = a * wsums[r, 1] + d1 - o1
+            wsums[r, 2] = a * wsums[r, 2] + d2 - o2
+            wsums[r, 3] = a * wsums[r, 3] + d3 - o3
+
+        # Read-out of row r: score = (e - offset penalty) / window weight, its argmin over j; only
+        # for rows in the scale band (out_score of the others: inf).
+        if not allowed[r % n_scales]:
+            out_col[r] = 0
+            out_score[r] = np.inf
+            continue
         filled = i + 1 >= w
-        weff = w if filled else i + 1
+        if decay and lam[r] < 1.0:
+            weff = wsum[r] if filled else (1.0 - lam[r] ** (i + 1)) / (1.0 - lam[r])
+        else:
+            weff = float(w if filled else i + 1)
         scale = 1.0 / weff if normalize else 1.0
         use_offset = offset and filled
         s0 = s1 = s2 = s3 = 0.0
         if use_offset:
-            s0, s1, s2, s3 = p0, p1, p2, p3
-            if i >= w:
-                q = (i - w) % wmax
-                s0 -= psum_ring[q, 0]
-                s1 -= psum_ring[q, 1]
-                s2 -= psum_ring[q, 2]
-                s3 -= psum_ring[q, 3]
-        per_shift = use_offset and w < n
+            s0, s1, s2, s3 = _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w)
+        per_shift = use_offset and (w < n or aged)
+        wp = wsum[r]
         const = 0.0
         if use_offset and not per_shift:
-            const = _offset_penalty(s0, s1, s2, s3, float(w), mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
+            const = _offset_penalty(s0, s1, s2, s3, wp, mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
         best = np.inf
         bj = 0
-        if per_shift:
+        if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
+            a0, a1, a2, a3 = s0 / wp, s1 / wp, s2 / wp, s3 / wp
+            t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
+            f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
+            m0, m1, m2, m3 = mu_seg[r, 0], mu_seg[r, 1], mu_seg[r, 2], mu_seg[r, 3]
+            sr = scratch[r]
+            for j in range(n):  # no loop-carried dependence: vectorised
+                x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+                g0 = max(abs(x0 - f0) - t0, 0.0)
+                g1 = max(abs(x1 - f1) - t1, 0.0)
+                g2 = max(abs(x2 - f2) - t2, 0.0)
+                g3 = max(abs(x3 - f3) - t3, 0.0)
+                sr[j] = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
             for j in range(n):
-                v = er[j] - _offset_penalty(
-                    s0, s1, s2, s3, float(w), mu_seg[r, 0, j], mu_seg[r, 1, j], mu_seg[r, 2, j], mu_seg[r, 3, j], tau
-                )
+                v = sr[j]
                 if v < best:
                     best = v
                     bj = j
@@ -164,10 +204,12 @@ def step_rows(
         pos = float(j + 1)
         if subsample:
             w = wins[rb]
-            shifted = _per_shift_row(offset, i, w, n)
-            a = _row_score(e, rb, j - 1 if j > 0 else n - 1, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
-            b = _row_score(e, rb, j + 1 if j < n - 1 else 0, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
-            center = _row_score(e, rb, j, shifted, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau)
+            shifted = offset and i + 1 >= w and (w < n or (decay and lam[rb] < 1.0))  # the penalty depends on the shift
+            s0, s1, s2, s3 = _row_sums(decay, wsums, rb, p0, p1, p2, p3, psum_ring, i, w)
+            wp = wsum[rb]
+            a = _row_score(e, rb, j - 1 if j > 0 else n - 1, shifted, mu_seg, s0, s1, s2, s3, wp, tau)
+            b = _row_score(e, rb, j + 1 if j < n - 1 else 0, shifted, mu_seg, s0, s1, s2, s3, wp, tau)
+            center = _row_score(e, rb, j, shifted, mu_seg, s0, s1, s2, s3, wp, tau)
             curv = a - 2.0 * center + b
             if curv > 0.0:
                 off = 0.5 * (a - b) / curv
@@ -206,23 +248,26 @@ step_rows = njit(cache=True, nogil=True)(step_rows)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _per_shift_row(offset, i, w, n):  # pragma: no cover - compiled
-    """True when row scores carry a per-shift offset penalty (offset on, window full, W < N)."""
-    return offset and i + 1 >= w and w < n
+def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no cover - compiled
+    """The window sums of row r after this sample (p: prefix sums including it): the age-weighted
+    sums with decay, else a difference of two prefix sums."""
+    if decay:
+        return wsums[r, 0], wsums[r, 1], wsums[r, 2], wsums[r, 3]
+    s0, s1, s2, s3 = p0, p1, p2, p3
+    if i >= w:
+        q = (i - w) % psum_ring.shape[0]
+        s0 -= psum_ring[q, 0]
+        s1 -= psum_ring[q, 1]
+        s2 -= psum_ring[q, 2]
+        s3 -= psum_ring[q, 3]
+    return s0, s1, s2, s3
 
 
 @njit(cache=True, nogil=True)
-def _row_score(e, r, j, per_shift, mu_seg, p0, p1, p2, p3, psum_ring, i, w, tau):  # pragma: no cover - compiled
+def _row_score(e, r, j, per_shift, mu_seg, s0, s1, s2, s3, wp, tau):  # pragma: no cover - compiled
     """e[r, j] minus the per-shift offset penalty if any (for the parabola of ``subsample``;
     constant penalties and the 1/W scale do not move its vertex)."""
     v = e[r, j]
     if per_shift:
-        s0, s1, s2, s3 = p0, p1, p2, p3
-        if i >= w:
-            q = (i - w) % psum_ring.shape[0]
-            s0 -= psum_ring[q, 0]
-            s1 -= psum_ring[q, 1]
-            s2 -= psum_ring[q, 2]
-            s3 -= psum_ring[q, 3]
-        v -= _offset_penalty(s0, s1, s2, s3, float(w), mu_seg[r, 0, j], mu_seg[r, 1, j], mu_seg[r, 2, j], mu_seg[r, 3, j], tau)
+        v -= _offset_penalty(s0, s1, s2, s3, wp, mu_seg[r, 0, j], mu_seg[r, 1, j], mu_seg[r, 2, j], mu_seg[r, 3, j], tau)
     return v

@@ -27,6 +27,7 @@ from .matcher import (
     IncrementalMatcher,
     check_channel_weights,
     check_offset_tolerance,
+    check_recency_half_life,
     check_time_scales,
     check_window_fraction,
 )
@@ -38,6 +39,8 @@ RESAMPLE_MODES = ("auto", "on", "off")
 time column), off for unstamped input (timed on arrival, or by sample index)."""
 
 DEFAULT_TIME_SCALES = (0.88, 0.92, 0.96, 1.0, 1.04, 1.08, 1.12)
+RECENCY_HALF_LIFE = 0.3
+"""Default ``recency_half_life`` (strides): chosen by experiments/cross_session.py (docs/new_wearer.md)."""
 CALIBRATION_CONFIDENCE = 0.1
 CALIBRATION_STEP_DEG = 5.0
 CALIBRATION_MAX_DEG = 15.0
@@ -45,7 +48,8 @@ MID_STRIDE = (0.25, 0.75)
 """A heel strike ends a stride for the calibrations only if the phase was in this range since the
 previous one."""
 CADENCE_MIN_STRIDES = 3
-"""Confident strides the cadence calibration reads before it narrows the time scales."""
+"""Confident strides the cadence calibration reads before it narrows the time scales, and the
+calibrations read before recency weighting starts."""
 CADENCE_SPREAD_FACTOR = 2.0
 """The band is at least this many running RMS deviations of the strides' log time scale wide on
 each side: a wearer whose strides do not keep one cadence across modes and speeds (e.g. one level
@@ -86,6 +90,10 @@ OPTIONS: tuple[Option, ...] = (
            "the nearest scale always counts)"),
     Option("normalize_error", True, "compare modes by mean squared error per window sample instead of SSE", False),
     Option("window_fraction", 1.0, "fraction of each stride compared, (0, 1]; 1.0 = the paper's full stride"),
+    Option("recency_half_life", RECENCY_HALF_LIFE, "weight the compared samples by age: a sample's weight halves every "
+           "this many strides (the newest part of the stride counts most, so a mode change shows sooner); with "
+           "the walking calibrations on, from their 3rd stride on; whole-stride window only (not used with "
+           "window_fraction < 1); 0 = uniform weights, as the paper", 0.0),
     Option("channels", list(CHANNELS), "channels used for matching (subset of right_thigh, left_thigh, right_shank, "
            "left_shank), e.g. [right_thigh, right_shank] for unilateral sensing"),
     Option("channel_weights", [1.0, 1.0, 1.0, 1.0], "weight of each channel in the SSE, CHANNELS order, >= 0"),
@@ -134,6 +142,7 @@ class EstimatorConfig:
     cadence_tolerance: float = 0.04
     normalize_error: bool = True
     window_fraction: float = 1.0
+    recency_half_life: float = RECENCY_HALF_LIFE
     channels: tuple[str, ...] = CHANNELS
     channel_weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
     subsample_phase: bool = False
@@ -150,6 +159,7 @@ class EstimatorConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "resample", _resample_mode(self.resample))
         check_window_fraction(self.window_fraction)
+        object.__setattr__(self, "recency_half_life", check_recency_half_life(self.recency_half_life))
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "channel_weights", tuple(float(w) for w in self.channel_weights))
         object.__setattr__(self, "time_scales", tuple(float(s) for s in check_time_scales(self.time_scales)))
@@ -186,6 +196,11 @@ class EstimatorConfig:
             raise ValueError(f"preset must be one of {', '.join(PRESETS)}, got {name!r}")
         values = {k: tuple(v) if isinstance(v, list) else v for k, v in PRESETS[name].items()}
         return cls().with_options(**{**values, **overrides})
+
+    @property
+    def effective_recency_half_life(self) -> float:
+        """recency_half_life, or 0 with a shorter window (window_fraction < 1), which it does not apply to."""
+        return self.recency_half_life if self.window_fraction == 1.0 else 0.0
 
     def effective_weights(self) -> np.ndarray:
         """channel_weights with channels outside ``channels`` set to 0."""
@@ -243,6 +258,7 @@ class Estimator:
             time_scales=c.time_scales,
             offset_tolerance_deg=c.offset_tolerance_deg,
             normalize=c.normalize_error,
+            recency_half_life=c.effective_recency_half_life,
             backend=backend,
         )
         allowed = load_transitions(c.transitions, library.mode_names) if c.transitions else None
@@ -272,6 +288,13 @@ class Estimator:
         self.cadence_spread = 0.0
         """Running RMS deviation of the strides' log time scale from the learnt one."""
         self._learns_cadence = c.cadence_calibration_rate > 0 and self.matcher.n_scales > 1
+        self.calibration_strides = 0
+        """Strides the walking calibrations have read since they (re)started."""
+        # Recency weighting waits for the calibrations: before the sensor offsets and cadence are
+        # learnt, its shorter memory cannot tell the speed classes apart well enough to be confident.
+        self._recency_waits = self.matcher.recency_half_life > 0 and (c.offset_calibration_rate > 0 or self._learns_cadence)
+        if self._recency_waits:
+            self.matcher.set_recency_half_life(0.0)
         self._calib_last: tuple[int, float, bool, bool] | None = None  # mode, phase, passed mid-stride, stride began in mode
         self.last_time: float | None = None
         self.resets = 0
@@ -331,6 +354,9 @@ class Estimator:
                 self._calibrate_offset(est, result)
             if self._learns_cadence:
                 self._calibrate_cadence(est)
+            self.calibration_strides += 1
+            if self._recency_waits and self.calibration_strides == CADENCE_MIN_STRIDES:
+                self.matcher.set_recency_half_life(c.effective_recency_half_life)
         if self.adapter is not None:
             self._adapt(x, est, result)
         return est
@@ -345,6 +371,9 @@ class Estimator:
         self.cadence_spread = 0.0
         self.matcher.set_scale_band(None)
         self._calib_last = None
+        self.calibration_strides = 0
+        if self._recency_waits:
+            self.matcher.set_recency_half_life(0.0)
 
     def adopt_calibration(self, other: Estimator) -> None:
         """Start from the sensor offsets and cadence ``other`` has learnt (same sensors and
@@ -356,6 +385,10 @@ class Estimator:
             self.cadence_scale, self.cadence_strides = other.cadence_scale, other.cadence_strides
             self.cadence_spread = other.cadence_spread
             self._narrow_scales()
+        if self.config.offset_calibration_rate > 0 or self._learns_cadence:
+            self.calibration_strides = other.calibration_strides
+        if self._recency_waits and self.calibration_strides >= CADENCE_MIN_STRIDES:
+            self.matcher.set_recency_half_life(self.config.effective_recency_half_life)
 
     def adopt_adaptation(self, other: Estimator) -> int:
         """Start from the kernels ``other`` has personalised (same library, new options).

@@ -35,6 +35,15 @@ Options (the defaults are the paper, which reproduces the reference exactly):
 * ``normalize``: compare modes and scales by mean squared error per window sample, score / W,
   instead of SSE (needed when rows of different lengths compete: the paper's SSE favours shorter
   kernels);
+* ``recency_half_life`` h >= 0 (strides; needs ``window_fraction`` 1): weight the window's samples
+  by their age, a sample t samples old by a_t = lambda_r^t with lambda_r = 2^(-1 / (h n_r)) (its
+  weight halves every h strides): e[r, j] = sum_t a_t || d_{i-t} - k^r_{(j-t) mod n} ||^2, updated
+  as e[r, j] <- lambda e[r, j-1] + ||d_i - k_j||^2 - lambda^n ||d_{i-n} - k_j||^2. The newest part
+  of the stride counts most, so a mode change shows sooner. The offset penalty and ``normalize``
+  use the weighted window: its weight W_a = sum_t a_t for W, the weighted window mean, and the
+  weighted mean of the kernel part at each shift (precomputed, (R, 4, N)); the penalty is then
+  the exact minimum of the weighted SSE over offsets within tau, as above. 0 = uniform weights
+  (the paper); ``set_recency_half_life`` changes it at any sample;
 * ``set_scale_band``: the time scales a mode may be read at (all by default). The estimator's
   cadence calibration narrows them to the wearer's learnt cadence; every row keeps its running
   sums, so the band may change at any sample.
@@ -138,6 +147,17 @@ def check_time_scales(value: Sequence[float] | None) -> np.ndarray:
     return np.sort(s)
 
 
+def check_recency_half_life(value: float, window_fraction: float = 1.0) -> float:
+    """Validate ``recency_half_life``: a finite number >= 0 (strides; 0 = uniform weights), > 0
+    only with the whole-stride window (``window_fraction`` 1)."""
+    h = float(value)
+    if not (math.isfinite(h) and h >= 0):
+        raise ValueError(f"recency_half_life must be a finite number >= 0 (strides; 0 = off), got {value!r}")
+    if h > 0 and window_fraction != 1.0:
+        raise ValueError(f"recency_half_life {h} needs window_fraction 1.0 (got {window_fraction}); set one of them off")
+    return h
+
+
 def check_offset_tolerance(value: float) -> float:
     """Validate ``offset_tolerance_deg``: a number >= 0 (inf allowed)."""
     t = float(value)
@@ -157,6 +177,8 @@ class _MatcherBase:
         time_scales: Stride-duration factors of the kernel variants; None = (1.0,), the paper.
         offset_tolerance_deg: Per-channel mean offset that costs nothing, degrees; 0 = the paper.
         normalize: Compare by mean squared error per window sample instead of SSE.
+        recency_half_life: Age (strides) at which a sample's weight in the window halves; 0 =
+            uniform weights, the paper.
     """
 
     def __init__(
@@ -168,6 +190,7 @@ class _MatcherBase:
         time_scales: Sequence[float] | None = None,
         offset_tolerance_deg: float = 0.0,
         normalize: bool = False,
+        recency_half_life: float = 0.0,
     ) -> None:
         self.library = library
         self.mode_names = library.mode_names
@@ -178,6 +201,7 @@ class _MatcherBase:
         self.offset_tolerance_deg = check_offset_tolerance(offset_tolerance_deg)
         self.subsample = bool(subsample)
         self.normalize = bool(normalize)
+        self.recency_half_life = check_recency_half_life(recency_half_life, self.window_fraction)
         self.n_scales = int(self.time_scales.size)
         self.active_channels = int(np.count_nonzero(self.channel_weights))
         self._scale = np.sqrt(self.channel_weights)
@@ -198,6 +222,9 @@ class _MatcherBase:
         self.max_length = int(self.lengths.max())
         self.max_window = int(self.windows.max())
         self._partial = bool(np.any(self.windows < self.lengths))
+        self._decay = self.recency_half_life > 0  # age weights possible (set_recency_half_life)
+        self._set_weights(self.recency_half_life)
+        self._per_shift = self._partial or self._decay  # the kernel part's (weighted) mean depends on the shift
         self._rows = np.arange(self.n_rows)
         self._all = np.arange(self.n_modes)
         self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
@@ -205,8 +232,8 @@ class _MatcherBase:
         self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
         self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
         self._mu = np.zeros((self.n_rows, N_CHANNELS))
-        # per-shift kernel means of short windows (the offset penalty may be switched on at any sample)
-        self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._partial else 1))
+        # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
+        self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._per_shift else 1))
         for m in range(self.n_modes):
             self._set_rows(m, library.modes[m].samples)
         self._ring = np.zeros((self.max_window, N_CHANNELS))
@@ -226,11 +253,53 @@ class _MatcherBase:
             self._kernels[r, :, :n] = k.T
             self._mu[r] = k.mean(axis=0)
             if self._mu_seg.shape[2] > 1:
-                w = int(self.windows[r])
-                # mean of k over columns j-W+1 .. j (circular), for every j
-                c = np.cumsum(np.concatenate([k, k]), axis=0)
-                j = np.arange(n) + n
-                self._mu_seg[r, :, :n] = ((c[j] - c[j - w]) / w).T
+                self._mu_seg[r, :, :n] = self._shift_means(k, r)
+
+    def _set_weights(self, half_life: float) -> None:
+        """Per row: the weight factor per sample of age lambda, lambda^W (the weight of the sample
+        leaving the window) and the weight sum of a full window W_a (lambda = 1: W)."""
+        self.recency_half_life = half_life
+        if half_life > 0:
+            self._lam = 2.0 ** (-1.0 / (half_life * self.lengths))
+            self._lam_w = self._lam ** self.windows
+            self._wsum = (1.0 - self._lam_w) / (1.0 - self._lam)
+        else:
+            self._lam = np.ones(self.lengths.size)
+            self._lam_w = np.ones(self.lengths.size)
+            self._wsum = self.windows.astype(np.float64)
+
+    def set_recency_half_life(self, half_life: float) -> None:
+        """Change ``recency_half_life`` (strides; 0 = uniform weights) at any sample, keeping the
+        window: the running sums are recomputed from the buffered samples, so the next step
+        continues as if the weights had always been these. Only for a matcher made with
+        ``recency_half_life`` > 0 (its state holds the per-shift means the weights need)."""
+        h = check_recency_half_life(half_life, self.window_fraction)
+        if not self._decay:
+            raise ValueError("set_recency_half_life needs a matcher made with recency_half_life > 0")
+        if h == self.recency_half_life:
+            return
+        self._set_weights(h)
+        for r in range(self.n_rows):
+            n = int(self.lengths[r])
+            self._mu_seg[r, :, :n] = self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r)
+        self._reweighted()
+
+    def _reweighted(self) -> None:
+        """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
+
+    def _shift_means(self, k: np.ndarray, r: int) -> np.ndarray:
+        """Per column j, the (weighted) mean of the kernel part row ``r``'s window is compared with
+        at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (4, n) (a_t = 1 without recency weighting); ``k``
+        (n, 4)."""
+        n, w = k.shape[0], int(self.windows[r])
+        if self._lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
+            c = np.cumsum(np.concatenate([k, k]), axis=0)
+            j = np.arange(n) + n
+            return ((c[j] - c[j - w]) / w).T
+        weights = np.zeros(n)
+        weights[:w] = self._lam[r] ** np.arange(w)
+        conv = np.fft.irfft(np.fft.rfft(k.T, n=n) * np.fft.rfft(weights), n=n)  # circular: sum_t w_t k_{j-t}
+        return conv / self._wsum[r]
 
     def row_kernel(self, row: int) -> np.ndarray:
         """The kernel of ``row`` (n, 4), degrees (unweighted channels as given)."""
@@ -267,22 +336,28 @@ class _MatcherBase:
             raise ValueError(f"scale band needs {self.n_scales} flags, at least one true, got {a.tolist()}")
         self._scale_allowed[:] = a
 
+    def mode_row_scores(self, mode: int) -> np.ndarray:
+        """The best score of every row (time scale) of ``mode`` at the last step, (S,), whatever
+        the scale band."""
+        s = self.n_scales
+        return self._row_score[mode * s : (mode + 1) * s]
+
     def best_scale_index(self, mode: int) -> int:
         """Index in ``time_scales`` of the row of ``mode`` that scored best at the last step,
         whatever the scale band."""
-        s = self.n_scales
-        return int(self._row_score[mode * s : (mode + 1) * s].argmin())
+        return int(self.mode_row_scores(mode).argmin())
 
     def best_log_scale(self, mode: int) -> float:
         """Natural log of the time scale at which ``mode`` fits best at the last step, between the
         grid's scales: the vertex of the parabola through the best row's score and its two
         neighbours' (in log scale), whatever the scale band; the grid scale itself at either end."""
         s = self.n_scales
-        b = self.best_scale_index(mode)
+        scores = self.mode_row_scores(mode)
+        b = int(scores.argmin())
         if b == 0 or b == s - 1:
             return math.log(self.time_scales[b])
         x0, x1, x2 = (math.log(v) for v in self.time_scales[b - 1 : b + 2])
-        y0, y1, y2 = (float(v) for v in self._row_score[mode * s + b - 1 : mode * s + b + 2])
+        y0, y1, y2 = (float(v) for v in scores[b - 1 : b + 2])
         a, c = x1 - x0, x1 - x2
         den = a * (y1 - y2) - c * (y1 - y0)
         if den == 0.0:  # flat: no side is better
@@ -326,34 +401,50 @@ class _MatcherBase:
         return self._ring[(self._count - 1 - np.arange(w)) % w]
 
     def window_sums(self) -> np.ndarray:
-        """Per row, the sum of the samples in its current window, (R, 4) (weighted)."""
+        """Per row, the sum of the samples in its current window, (R, 4) (channel-weighted)."""
         data = self._window_data()
         cum = np.concatenate([np.zeros((1, N_CHANNELS)), np.cumsum(data, axis=0)])
         return cum[np.minimum(self._count, self.windows)]
 
+    def age_weighted_sums(self) -> np.ndarray:
+        """Per row, sum_t a_t d_{i-t} over its current window, (R, 4) (a_t: ``recency_half_life``'s
+        age weights, 1 without it)."""
+        seen = np.arange(self.max_window)[None, :] < np.minimum(self._count, self.windows)[:, None]
+        age = np.where(seen, self._lam[:, None] ** np.arange(self.max_window)[None, :], 0.0)  # (R, Wmax)
+        return age @ self._window_data()
+
+    def window_weight(self) -> np.ndarray:
+        """Per row, the weight of its current window (R,): the number of samples in it, or with
+        ``recency_half_life`` the sum of their age weights."""
+        seen = np.minimum(self._count, self.windows)
+        if self.recency_half_life > 0:
+            return (1.0 - self._lam ** seen) / (1.0 - self._lam)
+        return seen.astype(np.float64)
+
     # -----------------------------------------------------------------------------------------
     # Read-out (numpy): shared by the naive matcher and the numpy incremental step
 
-    def _scores(self, e: np.ndarray, sums: np.ndarray | None) -> np.ndarray:
-        """score[r, j] from the running sums e (R, Nmax); see the module docstring."""
-        win = np.minimum(self._count, self.windows)
+    def _scores(self, e: np.ndarray, sums: np.ndarray | None, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """score[r, j] of ``rows`` (default: all) from their running sums e (r, Nmax) and window
+        sums (r, 4), age-weighted with recency weighting; see the module docstring."""
         score = e
         if self._offset:
-            filled = self._count >= self.windows
-            w = self.windows.astype(np.float64)
-            if self._partial:
-                x = sums[:, :, None] / w[:, None, None] - self._mu_seg  # (R, 4, Nmax)
+            filled = self._count >= self.windows[rows]
+            w = self._wsum[rows]
+            if self._per_shift:
+                x = sums[:, :, None] / w[:, None, None] - self._mu_seg[rows]  # (r, 4, Nmax)
                 w_ = w[:, None]
+                tol, off = self._tau[0, :, None], self._tau[1, :, None]
             else:
-                x = sums / w[:, None] - self._mu  # (R, 4)
+                x = sums / w[:, None] - self._mu[rows]  # (r, 4)
                 w_ = w
-            tol, off = (self._tau[0, :, None], self._tau[1, :, None]) if self._partial else self._tau
+                tol, off = self._tau
             excess = np.maximum(np.abs(x - off) - tol, 0.0)
             penalty = w_ * (x * x - excess * excess).sum(axis=1)
-            penalty = np.where(filled if not self._partial else filled[:, None], penalty, 0.0)
-            score = e - (penalty if self._partial else penalty[:, None])
+            penalty = np.where(filled[:, None] if self._per_shift else filled, penalty, 0.0)
+            score = e - (penalty if self._per_shift else penalty[:, None])
         if self.normalize:
-            score = score / win[:, None]
+            score = score / self.window_weight()[rows][:, None]
         return score
 
     def _result(self, score: np.ndarray) -> StepResult:
@@ -398,6 +489,8 @@ class _MatcherBase:
         diff = data[None, :, :] - self._kernels[rows[:, None], :, (cols[:, None] - t[None, :]) % lens]
         sq = np.einsum("btc,btc->bt", diff, diff)
         sq[t[None, :] >= np.minimum(self._count, self.windows[rows][:, None])] = 0.0
+        if self._decay:
+            sq *= self._lam[rows][:, None] ** t[None, :]
         return sq.sum(axis=1)
 
     def full_sse(self) -> np.ndarray:
@@ -444,7 +537,8 @@ class NaiveMatcher(_MatcherBase):
         self._ring[self._count % self.max_window] = d0, d1, d2, d3
         self._count += 1
         e = self.full_sse()
-        return self._result(self._scores(e, self.window_sums() if self._offset else None))
+        sums = (self.age_weighted_sums() if self._decay else self.window_sums()) if self._offset else None
+        return self._result(self._scores(e, sums))
 
     def state_bytes(self) -> int:
         return self._kernels.nbytes + self._ring.nbytes + self._valid.nbytes
@@ -476,7 +570,7 @@ class IncrementalMatcher(_MatcherBase):
     Args:
         library: The kernels to match against.
         window_fraction, channel_weights, subsample, time_scales, offset_tolerance_deg,
-            normalize: see the module docstring.
+            normalize, recency_half_life: see the module docstring.
         resync_period: Steps within which every column is recomputed from scratch (0 = never).
         resync_block: Columns recomputed at one resynchronisation.
         backend: ``auto`` (numba if installed), ``numba`` or ``numpy``.
@@ -491,11 +585,15 @@ class IncrementalMatcher(_MatcherBase):
         time_scales: Sequence[float] | None = None,
         offset_tolerance_deg: float = 0.0,
         normalize: bool = False,
+        recency_half_life: float = 0.0,
         resync_period: int = 1 << 20,
         resync_block: int = 64,
         backend: str = "auto",
     ) -> None:
-        super().__init__(library, window_fraction, channel_weights, subsample, time_scales, offset_tolerance_deg, normalize)
+        super().__init__(
+            library, window_fraction, channel_weights, subsample, time_scales, offset_tolerance_deg, normalize,
+            recency_half_life,
+        )
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
         if backend == "numba" and not compiled.AVAILABLE:
@@ -512,6 +610,7 @@ class IncrementalMatcher(_MatcherBase):
         self._ring_sq = np.zeros(self.max_window)
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
         self._psum = np.zeros(N_CHANNELS)
+        self._wsums = np.zeros((r, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
         self._e = np.empty((r, n))
         self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
         self._update_row_constants()
@@ -520,9 +619,8 @@ class IncrementalMatcher(_MatcherBase):
         self._last = self.lengths - 1
         # numba outputs, reused every step
         self._out_col = np.zeros(r, dtype=np.int64)
+        self._scratch = np.zeros((r, n) if self._per_shift else (r, 1))  # per-shift scores of the compiled step
         self._out_score = np.zeros(r)
-        if self.backend == "numba":
-            self._row_score = self._out_score  # the compiled step writes it in place
         total = int(self._valid.sum())
         self._resync_block = max(1, min(int(resync_block), total))
         if resync_period > 0:
@@ -535,30 +633,52 @@ class IncrementalMatcher(_MatcherBase):
             self._step_numba(0.0, 0.0, 0.0, 0.0, 0.0)
             self.reset()
 
+    def mode_row_scores(self, mode: int) -> np.ndarray:
+        if self.backend != "numba":
+            return super().mode_row_scores(mode)
+        # The compiled step reads out only the rows in the scale band: score this mode's rows now.
+        rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
+        sums = None
+        if self._offset:
+            sums = self._wsums[rows] if self._decay else self.window_sums()[rows]
+        score = self._scores(self._e[rows].astype(np.float64), sums, rows)
+        return np.where(self._valid[rows], score, np.inf).min(axis=1)
+
+    def _reweighted(self) -> None:
+        self._update_row_constants()
+        self._e[:] = self._rows_sse_fft(self._rows)
+        self._wsums[:] = self.age_weighted_sums()
+
     def _update_row_constants(self, rows: np.ndarray | None = None) -> None:
         """Per-row kernel constants of the step for ``rows`` (default: all) after their kernels
-        changed: ||k_j||^2 and, with a shorter window, the lagged kernel k_{j-W}."""
+        changed: ||k_j||^2, with a shorter window the lagged kernel k_{j-W}, and the constant
+        term of a full window's update, ||k_j||^2 - lambda^W ||k_{j-W}||^2."""
         if rows is None:
             rows = self._rows
             self._ksq = np.empty((self.n_rows, self.max_length))
             if self._partial:
                 self._stacked = np.empty((self.n_rows, 2 * N_CHANNELS, self.max_length))
+            if self._partial or self._decay:
                 self._kconst = np.empty((self.n_rows, self.max_length))
         k = self._kernels[rows].astype(np.float64)
         self._ksq[rows] = np.einsum("rcj,rcj->rj", k, k)  # ||k_j||^2, (R, Nmax)
+        lam_w = self._lam_w[rows, None]
         if self._partial:
             # k_{j-W} for every column j: the kernel column the stale sample was compared with.
             j = np.arange(self.max_length)[None, :]
             src = np.where(self._valid[rows], (j - self.windows[rows, None]) % self.lengths[rows, None], j)
             lagged = k[np.arange(rows.size)[:, None], :, src].transpose(0, 2, 1)  # (R, 4, Nmax)
             self._stacked[rows] = np.concatenate([k, lagged], axis=1)  # (R, 8, Nmax)
-            self._kconst[rows] = self._ksq[rows] - np.einsum("rcj,rcj->rj", lagged, lagged)
+            self._kconst[rows] = self._ksq[rows] - lam_w * np.einsum("rcj,rcj->rj", lagged, lagged)
+        elif self._decay:  # W = n: k_{j-W} = k_j
+            self._kconst[rows] = (1.0 - lam_w) * self._ksq[rows]
 
     def reset(self) -> None:
         super().reset()
         self._ring_sq[:] = 0.0
         self._psum_ring[:] = 0.0
         self._psum[:] = 0.0
+        self._wsums[:] = 0.0
         self._e[:] = np.where(self._valid, 0.0, np.inf)
         self._resync_cursor = 0
 
@@ -580,7 +700,9 @@ class IncrementalMatcher(_MatcherBase):
         variant, column, window = np.empty((3, m), dtype=np.int64)  # fresh arrays: results outlive the step
         b = self._compiled_step(
             self._e, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
-            self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq, self._offset, self._mu, self._mu_seg, self._tau,
+            self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
+            self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
+            self._offset, self._mu, self._mu_seg, self._tau, self._scratch,
             self.normalize, self.subsample, self.n_scales, self._scale_allowed,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
@@ -594,16 +716,21 @@ class IncrementalMatcher(_MatcherBase):
         i = self._count
         w = self.max_window
         stale = (i - self.windows) % w
-        if i >= w:  # every window is full: d_{i-W_r} leaves every row's window
-            old = self._ring[stale]
-            base = dsq - self._ring_sq[stale]
+        if i >= w:  # every window is full: d_{i-W_r} leaves every row's window (with weight lambda^W)
+            leave = self._lam_w if self._decay else None
             full = None
         else:  # windows still filling: nothing leaves them yet
             full = i >= self.windows
-            old = self._ring[stale] * full[:, None]
-            base = dsq - self._ring_sq[stale] * full
+            leave = full * self._lam_w
+        old = self._ring[stale] if leave is None else self._ring[stale] * leave[:, None]
+        base = dsq - (self._ring_sq[stale] if leave is None else self._ring_sq[stale] * leave)
         psum = self._psum + d  # kept always: the offset penalty may be switched on at any sample
-        sums = psum - np.where((i >= self.windows)[:, None], self._psum_ring[stale], 0.0) if self._offset else None
+        if self._decay:
+            self._wsums *= self._lam[:, None]
+            self._wsums += d - old
+            sums = self._wsums
+        else:
+            sums = psum - np.where((i >= self.windows)[:, None], self._psum_ring[stale], 0.0) if self._offset else None
         self._psum = psum
         self._psum_ring[i % w] = psum
         self._ring[i % w] = d
@@ -617,17 +744,19 @@ class IncrementalMatcher(_MatcherBase):
             np.matmul((-2.0 * (d[None, :] - old))[:, None, :], self._kernels, out=nxt3)
         nxt = nxt3.reshape(self._e.shape)
         e = self._e
+        if self._decay:  # every term already in the window ages by one sample (e is free after this step)
+            e *= self._lam[:, None]
         first = nxt[:, 0] + e[self._rows, self._last]  # circular: column 0 follows column n - 1
         nxt.ravel()[1:] += e.ravel()[:-1]  # e[r, j-1]: the window and the kernel slide together
         nxt[:, 0] = first
         nxt[self._pad_rows, self._pad_cols] = np.inf
         nxt += base[:, None]
         if full is None:
-            if self._partial:
+            if self._partial or self._decay:
                 nxt += self._kconst
-        else:  # ||k_j||^2 stays until the window is full, then ||k_j||^2 - ||k_{j-W}||^2
+        else:  # ||k_j||^2 stays until the window is full, then ||k_j||^2 - lambda^W ||k_{j-W}||^2
             nxt[~full] += self._ksq[~full]
-            if self._partial:
+            if self._partial or self._decay:
                 nxt[full] += self._kconst[full]
         self._e, self._next = nxt, e.reshape(nxt3.shape)
         if self._offset or self.normalize:
@@ -659,14 +788,14 @@ class IncrementalMatcher(_MatcherBase):
 
     def mean_offset(self, row: int, column: int) -> np.ndarray:
         """Mean of the current window of ``row`` minus the mean of the kernel part it is compared
-        with at ``column`` (4,), degrees: the sensor offset under the hypothesis that the wearer
-        walks that row's mode and time scale. Valid once the row's window is full."""
+        with at ``column`` (4,), degrees, both age-weighted with recency weighting (the means the
+        offset penalty compares): the sensor offset under the hypothesis that the wearer walks that
+        row's mode and time scale. Valid once the row's window is full."""
+        if self.recency_half_life > 0:
+            return (self._wsums[row] / self._wsum[row] - self._mu_seg[row, :, column]) * self._unscale
         w = int(self.windows[row])
         s = self.window_sums()[row]  # not from the prefix-sum ring: the longest window's start slot is overwritten
-        if self._partial:  # the kernel part of a short window depends on the shift
-            mu = self._kernels[row][:, (column - np.arange(w)) % int(self.lengths[row])].astype(np.float64).mean(axis=1)
-        else:
-            mu = self._mu[row]
+        mu = self._mu_seg[row, :, column] if self._partial else self._mu[row]
         return (s / w - mu) * self._unscale
 
     def resync_all(self) -> None:
@@ -694,23 +823,24 @@ class IncrementalMatcher(_MatcherBase):
     def _rows_sse_fft(self, rows: np.ndarray) -> np.ndarray:
         """e[r, :] for ``rows`` from the buffered window by FFT, (len(rows), Nmax), padding inf.
 
-        e[j] = sum_{t<W} ||x_t||^2 - 2 sum_{t<W} x_t . k_{(j-t) mod n} + sum_{t<W} ||k_{(j-t) mod n}||^2
-        with x_t = d_{i-t}: two circular convolutions of length n.
+        e[j] = sum_{t<W} a_t ||x_t||^2 - 2 sum_{t<W} a_t x_t . k_{(j-t) mod n} + sum_{t<W} a_t ||k_{(j-t) mod n}||^2
+        with x_t = d_{i-t} and age weights a_t (lambda^t; 1 without recency weighting): two
+        circular convolutions of length n.
         """
         data = self._window_data()
         out = np.full((rows.size, self.max_length), np.inf)
         for a, r in enumerate(rows):
             n = int(self.lengths[r])
             w = min(self._count, int(self.windows[r]))
+            age = np.zeros(n)
+            age[:w] = self._lam[r] ** np.arange(w)
             x = np.zeros((n, N_CHANNELS))
             x[:w] = data[:w]
-            box = np.zeros(n)
-            box[:w] = 1.0
             k = self._kernels[r, :, :n].astype(np.float64)  # (4, n)
-            fx = np.fft.rfft(x.T, n=n)
+            fx = np.fft.rfft(x.T * age, n=n)
             cross = np.fft.irfft((fx * np.fft.rfft(k, n=n)).sum(axis=0), n=n)
-            ksq = np.fft.irfft(np.fft.rfft(box) * np.fft.rfft((k * k).sum(axis=0)), n=n)
-            out[a, :n] = float((x * x).sum()) - 2.0 * cross + ksq
+            ksq = np.fft.irfft(np.fft.rfft(age) * np.fft.rfft((k * k).sum(axis=0)), n=n)
+            out[a, :n] = float((age[:, None] * x * x).sum()) - 2.0 * cross + ksq
         return out
 
     def state_bytes(self) -> int:
