@@ -484,6 +484,36 @@ def test_recency_weights_can_change_at_any_sample(able_bodied, multispeed_csv, b
         uniform.set_recency_half_life(0.3)
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_start_uniform_keeps_the_weighted_sums_alongside(able_bodied, multispeed_csv, backend) -> None:
+    """start_uniform: the matcher matches with uniform weights (as one made without recency
+    weighting) while updating the weighted sums too, so that switching back is a swap: from then
+    on it equals a matcher that was weighted all along, bit for bit; reset keeps both empty."""
+    x = read_recording(multispeed_csv).angles_deg[3000:4300]
+    opts = {"time_scales": (0.9, 1.0, 1.1), "offset_tolerance_deg": 2.0, "normalize": True, "backend": backend}
+    deferred = IncrementalMatcher(able_bodied, recency_half_life=0.3, **opts)
+    deferred.start_uniform()
+    assert deferred.recency_half_life == 0.0
+    uniform = IncrementalMatcher(able_bodied, **opts)
+    weighted = IncrementalMatcher(able_bodied, recency_half_life=0.3, **opts)
+    a, u = deferred.run(x[:600]), uniform.run(x[:600])
+    np.testing.assert_array_equal(a.mode_index, u.mode_index)
+    np.testing.assert_allclose(a.sse, u.sse, rtol=1e-12)
+    weighted.run(x[:600])
+    deferred.set_recency_half_life(0.3)
+    np.testing.assert_array_equal(deferred.run(x[600:]).sse, weighted.run(x[600:]).sse)
+    uniform.run(x[600:])
+    deferred.start_uniform()  # from the weighted state: the uniform sums are recomputed once
+    np.testing.assert_allclose(deferred.step(x[0]).sse, uniform.step(x[0]).sse, rtol=1e-9)
+    deferred.reset()
+    uniform.reset()
+    np.testing.assert_allclose(deferred.run(x[:300]).sse, uniform.run(x[:300]).sse, rtol=1e-12)
+    with pytest.raises(ValueError, match="start_uniform"):
+        uniform_made = IncrementalMatcher(able_bodied, recency_half_life=0.3, **opts)
+        uniform_made.set_recency_half_life(0.0)
+        uniform_made.start_uniform()
+
+
 @pytest.mark.parametrize(("kwargs", "message"), [
     ({"time_scales": []}, "time_scales"),
     ({"time_scales": [0.3]}, "time_scales"),

@@ -59,6 +59,7 @@ def step_rows(
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
     decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
+    pend: bool, e2: np.ndarray, plam: np.ndarray, plam_w: np.ndarray, ws2: np.ndarray,
     offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray,
     normalize: bool, subsample: bool, n_scales: int,
     allowed: np.ndarray, out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
@@ -73,6 +74,8 @@ def step_rows(
     scalars (the caller builds no array), dsq = ||d||^2; decay: recency weighting, with per row
     lam (R,) the weight factor per sample of age, lam_w = lam^W, wsum the weight sum of a full
     window (W without decay) and wsums (R, 4) the age-weighted window sums, updated in place;
+    pend: also keep the running sums e2 (R, Nmax) and age-weighted sums ws2 (R, 4) of other
+    (pending) age weights plam, plam_w = plam^N (whole-stride windows), not read out;
     offset: apply the offset penalty (mu (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift
     (age-weighted) means of the window's kernel part when W < N or with decay, tau (2, 4):
     tolerances and sensor offsets; with decay the window's weight W_a and age-weighted sums stand
@@ -90,12 +93,12 @@ def step_rows(
         n = lens[r]
         w = wins[r]
         full = i >= w
-        o0 = o1 = o2 = o3 = osq = 0.0
-        lw = lam_w[r]  # weight of the sample leaving the window (1 without decay)
+        r0 = r1 = r2 = r3 = rsq = 0.0
         if full:
             s = (i - w) % wmax
-            o0, o1, o2, o3 = ring[s, 0] * lw, ring[s, 1] * lw, ring[s, 2] * lw, ring[s, 3] * lw
-            osq = ring_sq[s] * lw
+            r0, r1, r2, r3, rsq = ring[s, 0], ring[s, 1], ring[s, 2], ring[s, 3], ring_sq[s]
+        lw = lam_w[r]  # weight of the sample leaving the window (1 without decay)
+        o0, o1, o2, o3, osq = r0 * lw, r1 * lw, r2 * lw, r3 * lw, rsq * lw
         base = dsq - osq
         er = e[r]
         k0, k1, k2, k3 = kern[r, 0], kern[r, 1], kern[r, 2], kern[r, 3]
@@ -131,6 +134,24 @@ def step_rows(
                         lag += n
                     v += 2.0 * (o0 * k0[lag] + o1 * k1[lag] + o2 * k2[lag] + o3 * k3[lag]) - lw * kq[lag]
                 er[j] = v
+
+        if pend:  # the pending weights' sums: e2[j] = plam e2[j-1] + ||d - k_j||^2 - [full] plam^N ||old - k_j||^2
+            a2 = plam[r]
+            lw2 = plam_w[r] if full else 0.0
+            q0, q1, q2, q3 = r0 * lw2, r1 * lw2, r2 * lw2, r3 * lw2
+            base2 = dsq - rsq * lw2
+            kc2 = 1.0 - lw2
+            c0, c1, c2, c3 = -2.0 * (d0 - q0), -2.0 * (d1 - q1), -2.0 * (d2 - q2), -2.0 * (d3 - q3)
+            kq = ksq[r]
+            e2r = e2[r]
+            last2 = e2r[n - 1]
+            for j in range(n - 1, 0, -1):
+                e2r[j] = a2 * e2r[j - 1] + base2 + kc2 * kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
+            e2r[0] = a2 * last2 + base2 + kc2 * kq[0] + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
+            ws2[r, 0] = a2 * ws2[r, 0] + d0 - q0
+            ws2[r, 1] = a2 * ws2[r, 1] + d1 - q1
+            ws2[r, 2] = a2 * ws2[r, 2] + d2 - q2
+            ws2[r, 3] = a2 * ws2[r, 3] + d3 - q3
 
         if decay:  # the weighted window sums age too: S = lam S + d - lam^W old
             a = lam[r]

@@ -294,7 +294,7 @@ class Estimator:
         # learnt, its shorter memory cannot tell the speed classes apart well enough to be confident.
         self._recency_waits = self.matcher.recency_half_life > 0 and (c.offset_calibration_rate > 0 or self._learns_cadence)
         if self._recency_waits:
-            self.matcher.set_recency_half_life(0.0)
+            self.matcher.start_uniform()  # the weighted sums are kept alongside: the switch costs nothing
         self._calib_last: tuple[int, float, bool, bool] | None = None  # mode, phase, passed mid-stride, stride began in mode
         self.last_time: float | None = None
         self.resets = 0
@@ -373,7 +373,7 @@ class Estimator:
         self._calib_last = None
         self.calibration_strides = 0
         if self._recency_waits:
-            self.matcher.set_recency_half_life(0.0)
+            self.matcher.start_uniform()
 
     def adopt_calibration(self, other: Estimator) -> None:
         """Start from the sensor offsets and cadence ``other`` has learnt (same sensors and

@@ -278,11 +278,18 @@ class _MatcherBase:
             raise ValueError("set_recency_half_life needs a matcher made with recency_half_life > 0")
         if h == self.recency_half_life:
             return
+        if self._switch_to_pending(h):
+            return
         self._set_weights(h)
-        for r in range(self.n_rows):
-            n = int(self.lengths[r])
-            self._mu_seg[r, :, :n] = self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r)
+        if h > 0:  # mu_seg: the means of the weights in use (uniform weights use the kernel means)
+            for r in range(self.n_rows):
+                n = int(self.lengths[r])
+                self._mu_seg[r, :, :n] = self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r)
         self._reweighted()
+
+    def _switch_to_pending(self, half_life: float) -> bool:
+        """Adopt running sums kept alongside for ``half_life`` (start_uniform), if any."""
+        return False
 
     def _reweighted(self) -> None:
         """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
@@ -292,14 +299,16 @@ class _MatcherBase:
         at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (4, n) (a_t = 1 without recency weighting); ``k``
         (n, 4)."""
         n, w = k.shape[0], int(self.windows[r])
-        if self._lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
+        pending = getattr(self, "_pending", None)  # mu_seg holds the means of the weights kept alongside
+        lam, wsum = (pending.lam, pending.wsum) if pending is not None else (self._lam, self._wsum)
+        if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
             c = np.cumsum(np.concatenate([k, k]), axis=0)
             j = np.arange(n) + n
             return ((c[j] - c[j - w]) / w).T
         weights = np.zeros(n)
-        weights[:w] = self._lam[r] ** np.arange(w)
+        weights[:w] = lam[r] ** np.arange(w)
         conv = np.fft.irfft(np.fft.rfft(k.T, n=n) * np.fft.rfft(weights), n=n)  # circular: sum_t w_t k_{j-t}
-        return conv / self._wsum[r]
+        return conv / wsum[r]
 
     def row_kernel(self, row: int) -> np.ndarray:
         """The kernel of ``row`` (n, 4), degrees (unweighted channels as given)."""
@@ -431,7 +440,8 @@ class _MatcherBase:
         if self._offset:
             filled = self._count >= self.windows[rows]
             w = self._wsum[rows]
-            if self._per_shift:
+            per_shift = self._partial or self.recency_half_life > 0  # mu_seg: the active weights' means
+            if per_shift:
                 x = sums[:, :, None] / w[:, None, None] - self._mu_seg[rows]  # (r, 4, Nmax)
                 w_ = w[:, None]
                 tol, off = self._tau[0, :, None], self._tau[1, :, None]
@@ -441,8 +451,8 @@ class _MatcherBase:
                 tol, off = self._tau
             excess = np.maximum(np.abs(x - off) - tol, 0.0)
             penalty = w_ * (x * x - excess * excess).sum(axis=1)
-            penalty = np.where(filled[:, None] if self._per_shift else filled, penalty, 0.0)
-            score = e - (penalty if self._per_shift else penalty[:, None])
+            penalty = np.where(filled[:, None] if per_shift else filled, penalty, 0.0)
+            score = e - (penalty if per_shift else penalty[:, None])
         if self.normalize:
             score = score / self.window_weight()[rows][:, None]
         return score
@@ -521,6 +531,23 @@ class _MatcherBase:
 
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
+
+
+@dataclass
+class _Pending:
+    """Running sums kept alongside for other age weights (IncrementalMatcher.start_uniform)."""
+
+    half_life: float
+    lam: np.ndarray
+    lam_w: np.ndarray
+    wsum: np.ndarray
+    e: np.ndarray
+    wsums: np.ndarray
+    buf: np.ndarray = None  # type: ignore[assignment]  # the numpy step's spare array
+
+    def __post_init__(self) -> None:
+        if self.buf is None:
+            self.buf = np.empty((self.e.shape[0], 1, self.e.shape[1]))
 
 
 class NaiveMatcher(_MatcherBase):
@@ -611,6 +638,7 @@ class IncrementalMatcher(_MatcherBase):
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
         self._psum = np.zeros(N_CHANNELS)
         self._wsums = np.zeros((r, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
+        self._pending: _Pending | None = None  # sums kept alongside for other weights (start_uniform)
         self._e = np.empty((r, n))
         self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
         self._update_row_constants()
@@ -645,20 +673,50 @@ class IncrementalMatcher(_MatcherBase):
         return np.where(self._valid[rows], score, np.inf).min(axis=1)
 
     def _reweighted(self) -> None:
-        self._update_row_constants()
+        self._pending = None
         self._e[:] = self._rows_sse_fft(self._rows)
         self._wsums[:] = self.age_weighted_sums()
 
+    def start_uniform(self) -> None:
+        """Match with uniform weights for now, and keep the running sums of this matcher's
+        ``recency_half_life`` alongside (a second update pass per row, not read out), so that
+        ``set_recency_half_life`` back to it later switches at once, without recomputing
+        anything. Free on a fresh or reset matcher; otherwise the uniform sums are recomputed
+        from the window once (as set_recency_half_life(0) does)."""
+        if self._pending is not None:
+            return
+        h = self.recency_half_life
+        if h == 0:
+            raise ValueError("start_uniform needs a matcher using recency_half_life > 0")
+        keep = _Pending(h, self._lam, self._lam_w, self._wsum, self._e.copy(), self._wsums.copy())
+        self._set_weights(0.0)
+        if self._count == 0:
+            self._e[:] = np.where(self._valid, 0.0, np.inf)
+            self._wsums[:] = 0.0
+        else:
+            self._reweighted()
+        self._pending = keep  # mu_seg keeps the means of these weights
+
+    def _switch_to_pending(self, half_life: float) -> bool:
+        p = self._pending
+        if p is None or p.half_life != half_life:
+            return False
+        self.recency_half_life, self._lam, self._lam_w, self._wsum = p.half_life, p.lam, p.lam_w, p.wsum
+        self._e, p.e = p.e, self._e
+        self._wsums = p.wsums
+        self._pending = None
+        return True
+
     def _update_row_constants(self, rows: np.ndarray | None = None) -> None:
         """Per-row kernel constants of the step for ``rows`` (default: all) after their kernels
-        changed: ||k_j||^2, with a shorter window the lagged kernel k_{j-W}, and the constant
-        term of a full window's update, ||k_j||^2 - lambda^W ||k_{j-W}||^2."""
+        changed: ||k_j||^2 and, with a shorter window, the lagged kernel k_{j-W} and the constant
+        term of a full window's update, ||k_j||^2 - ||k_{j-W}||^2."""
         if rows is None:
             rows = self._rows
             self._ksq = np.empty((self.n_rows, self.max_length))
             if self._partial:
                 self._stacked = np.empty((self.n_rows, 2 * N_CHANNELS, self.max_length))
-            if self._partial or self._decay:
+            if self._partial:
                 self._kconst = np.empty((self.n_rows, self.max_length))
         k = self._kernels[rows].astype(np.float64)
         self._ksq[rows] = np.einsum("rcj,rcj->rj", k, k)  # ||k_j||^2, (R, Nmax)
@@ -670,8 +728,6 @@ class IncrementalMatcher(_MatcherBase):
             lagged = k[np.arange(rows.size)[:, None], :, src].transpose(0, 2, 1)  # (R, 4, Nmax)
             self._stacked[rows] = np.concatenate([k, lagged], axis=1)  # (R, 8, Nmax)
             self._kconst[rows] = self._ksq[rows] - lam_w * np.einsum("rcj,rcj->rj", lagged, lagged)
-        elif self._decay:  # W = n: k_{j-W} = k_j
-            self._kconst[rows] = (1.0 - lam_w) * self._ksq[rows]
 
     def reset(self) -> None:
         super().reset()
@@ -680,6 +736,9 @@ class IncrementalMatcher(_MatcherBase):
         self._psum[:] = 0.0
         self._wsums[:] = 0.0
         self._e[:] = np.where(self._valid, 0.0, np.inf)
+        if getattr(self, "_pending", None) is not None:
+            self._pending.e[:] = self._e
+            self._pending.wsums[:] = 0.0
         self._resync_cursor = 0
 
     def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:
@@ -698,10 +757,13 @@ class IncrementalMatcher(_MatcherBase):
         m = self.n_modes
         sse, phases = np.empty(m), np.empty(m)
         variant, column, window = np.empty((3, m), dtype=np.int64)  # fresh arrays: results outlive the step
+        p = self._pending
         b = self._compiled_step(
             self._e, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
+            p is not None, p.e if p else self._e, p.lam if p else self._lam, p.lam_w if p else self._lam_w,
+            p.wsums if p else self._wsums,
             self._offset, self._mu, self._mu_seg, self._tau, self._scratch,
             self.normalize, self.subsample, self.n_scales, self._scale_allowed,
             self._out_col, self._out_score, sse, phases, variant, column, window,
@@ -716,18 +778,16 @@ class IncrementalMatcher(_MatcherBase):
         i = self._count
         w = self.max_window
         stale = (i - self.windows) % w
-        if i >= w:  # every window is full: d_{i-W_r} leaves every row's window (with weight lambda^W)
-            leave = self._lam_w if self._decay else None
-            full = None
-        else:  # windows still filling: nothing leaves them yet
-            full = i >= self.windows
-            leave = full * self._lam_w
-        old = self._ring[stale] if leave is None else self._ring[stale] * leave[:, None]
-        base = dsq - (self._ring_sq[stale] if leave is None else self._ring_sq[stale] * leave)
+        full = None if i >= w else i >= self.windows  # None: every window is full
+        old, old_sq = self._ring[stale], self._ring_sq[stale]
+        p = self._pending
+        if p is not None:
+            p.e, p.buf = self._advance(p.e, p.buf, d, dsq, old, old_sq, full, p.lam, p.lam_w, p.wsums)
+        self._e, self._next = self._advance(
+            self._e, self._next, d, dsq, old, old_sq, full, self._lam, self._lam_w, self._wsums
+        )
         psum = self._psum + d  # kept always: the offset penalty may be switched on at any sample
         if self._decay:
-            self._wsums *= self._lam[:, None]
-            self._wsums += d - old
             sums = self._wsums
         else:
             sums = psum - np.where((i >= self.windows)[:, None], self._psum_ring[stale], 0.0) if self._offset else None
@@ -736,32 +796,55 @@ class IncrementalMatcher(_MatcherBase):
         self._ring[i % w] = d
         self._count += 1
         self._ring_sq[i % w] = dsq
-        nxt3 = self._next
+        if self._offset or self.normalize:
+            return self._result(self._scores(self._e, sums))
+        return self._result(self._e)
+
+    def _advance(
+        self, e: np.ndarray, buf: np.ndarray, d: np.ndarray, dsq: float, old: np.ndarray, old_sq: np.ndarray,
+        full: np.ndarray | None, lam: np.ndarray, lam_w: np.ndarray, wsums: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One step of the running sums e (R, Nmax) for age weights ``lam`` (and, with recency
+        weighting, of the age-weighted window sums ``wsums``, in place); ``old`` (R, 4) and
+        ``old_sq``: the sample each row's window loses; ``full``: which windows are full (None:
+        all). Returns the new sums and the free buffer (e's memory)."""
+        if self._decay:  # the leaving sample counts lambda^W
+            leave = lam_w if full is None else full * lam_w
+        else:
+            leave = None if full is None else full.astype(np.float64)
+        if leave is not None:
+            old, old_sq = old * leave[:, None], old_sq * leave
+        if self._decay:
+            wsums *= lam[:, None]
+            wsums += d - old
         if self._partial:
             vec = np.concatenate([-2.0 * np.broadcast_to(d, old.shape), 2.0 * old], axis=1)  # (R, 8)
-            np.matmul(vec[:, None, :], self._stacked, out=nxt3)
+            np.matmul(vec[:, None, :], self._stacked, out=buf)
         else:
-            np.matmul((-2.0 * (d[None, :] - old))[:, None, :], self._kernels, out=nxt3)
-        nxt = nxt3.reshape(self._e.shape)
-        e = self._e
+            np.matmul((-2.0 * (d[None, :] - old))[:, None, :], self._kernels, out=buf)
+        nxt = buf.reshape(e.shape)
         if self._decay:  # every term already in the window ages by one sample (e is free after this step)
-            e *= self._lam[:, None]
+            e *= lam[:, None]
         first = nxt[:, 0] + e[self._rows, self._last]  # circular: column 0 follows column n - 1
         nxt.ravel()[1:] += e.ravel()[:-1]  # e[r, j-1]: the window and the kernel slide together
         nxt[:, 0] = first
         nxt[self._pad_rows, self._pad_cols] = np.inf
-        nxt += base[:, None]
+        nxt += (dsq - old_sq)[:, None]
+        # ||k_j||^2 stays until the window is full, then ||k_j||^2 - lambda^W ||k_{j-W}||^2
+        if self._partial:
+            const = self._kconst
+        elif self._decay:
+            const = (1.0 - lam_w)[:, None] * self._ksq
+        else:
+            const = None
         if full is None:
-            if self._partial or self._decay:
-                nxt += self._kconst
-        else:  # ||k_j||^2 stays until the window is full, then ||k_j||^2 - lambda^W ||k_{j-W}||^2
+            if const is not None:
+                nxt += const
+        else:
             nxt[~full] += self._ksq[~full]
-            if self._partial or self._decay:
-                nxt[full] += self._kconst[full]
-        self._e, self._next = nxt, e.reshape(nxt3.shape)
-        if self._offset or self.normalize:
-            return self._result(self._scores(self._e, sums))
-        return self._result(self._e)
+            if const is not None:
+                nxt[full] += const[full]
+        return nxt, e.reshape(buf.shape)
 
     def _resync(self) -> None:
         # Errors travel with the diagonal e[r, j] -> e[r, j + 1], so the sweep runs over the
@@ -819,6 +902,14 @@ class IncrementalMatcher(_MatcherBase):
         rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
         self._update_row_constants(rows)
         self._e[rows] = self._rows_sse_fft(rows)
+        p = self._pending
+        if p is not None:  # the sums kept alongside, with their weights
+            active = self._lam
+            self._lam = p.lam
+            try:
+                p.e[rows] = self._rows_sse_fft(rows)
+            finally:
+                self._lam = active
 
     def _rows_sse_fft(self, rows: np.ndarray) -> np.ndarray:
         """e[r, :] for ``rows`` from the buffered window by FFT, (len(rows), Nmax), padding inf.
@@ -846,7 +937,9 @@ class IncrementalMatcher(_MatcherBase):
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
         arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid,
-                  self._psum_ring, self._mu, self._mu_seg]
+                  self._psum_ring, self._mu, self._mu_seg, self._wsums, self._scratch]
+        if self._pending is not None:
+            arrays += [self._pending.e, self._pending.buf, self._pending.wsums]
         if self._partial:
             arrays += [self._stacked, self._kconst]
         return int(sum(a.nbytes for a in arrays))
