@@ -508,6 +508,13 @@ def test_start_uniform_keeps_the_weighted_sums_alongside(able_bodied, multispeed
     deferred.reset()
     uniform.reset()
     np.testing.assert_allclose(deferred.run(x[:300]).sse, uniform.run(x[:300]).sse, rtol=1e-12)
+    other = IncrementalMatcher(able_bodied, recency_half_life=0.3, **opts)  # to weights other than those kept
+    other.start_uniform()
+    other.run(x[:400])
+    other.set_recency_half_life(0.5)
+    ref = IncrementalMatcher(able_bodied, recency_half_life=0.5, **opts)
+    ref.run(x[:400])
+    np.testing.assert_allclose(other.run(x[400:600]).sse, ref.run(x[400:600]).sse, rtol=1e-9)
     with pytest.raises(ValueError, match="start_uniform"):
         uniform_made = IncrementalMatcher(able_bodied, recency_half_life=0.3, **opts)
         uniform_made.set_recency_half_life(0.0)

@@ -181,6 +181,8 @@ class _MatcherBase:
             uniform weights, the paper.
     """
 
+    _pending: _Pending | None = None  # running sums kept alongside for other weights (start_uniform)
+
     def __init__(
         self,
         library: KernelLibrary,
@@ -280,6 +282,7 @@ class _MatcherBase:
             return
         if self._switch_to_pending(h):
             return
+        self._pending = None  # sums kept for other weights are of no use now
         self._set_weights(h)
         if h > 0:  # mu_seg: the means of the weights in use (uniform weights use the kernel means)
             for r in range(self.n_rows):
@@ -299,7 +302,7 @@ class _MatcherBase:
         at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (4, n) (a_t = 1 without recency weighting); ``k``
         (n, 4)."""
         n, w = k.shape[0], int(self.windows[r])
-        pending = getattr(self, "_pending", None)  # mu_seg holds the means of the weights kept alongside
+        pending = self._pending  # mu_seg holds the means of the weights kept alongside
         lam, wsum = (pending.lam, pending.wsum) if pending is not None else (self._lam, self._wsum)
         if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
             c = np.cumsum(np.concatenate([k, k]), axis=0)
@@ -638,7 +641,7 @@ class IncrementalMatcher(_MatcherBase):
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
         self._psum = np.zeros(N_CHANNELS)
         self._wsums = np.zeros((r, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
-        self._pending: _Pending | None = None  # sums kept alongside for other weights (start_uniform)
+        self._pending = None
         self._e = np.empty((r, n))
         self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
         self._update_row_constants()
@@ -736,7 +739,7 @@ class IncrementalMatcher(_MatcherBase):
         self._psum[:] = 0.0
         self._wsums[:] = 0.0
         self._e[:] = np.where(self._valid, 0.0, np.inf)
-        if getattr(self, "_pending", None) is not None:
+        if self._pending is not None:
             self._pending.e[:] = self._e
             self._pending.wsums[:] = 0.0
         self._resync_cursor = 0
