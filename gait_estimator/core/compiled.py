@@ -112,14 +112,7 @@ def step_rows(
                 er[j] = er[j - 1] + base + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
             er[0] = last + base + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
         elif w == n and full:
-            # e[j] = lam e[j-1] + ||d||^2 - lam^W ||old||^2 - 2 k_j . (d - lam^W old) + (1 - lam^W) ||k_j||^2
-            c0, c1, c2, c3 = -2.0 * (d0 - o0), -2.0 * (d1 - o1), -2.0 * (d2 - o2), -2.0 * (d3 - o3)
-            a = lam[r]
-            kc = 1.0 - lw
-            kq = ksq[r]
-            for j in range(n - 1, 0, -1):
-                er[j] = a * er[j - 1] + base + kc * kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
-            er[0] = a * last + base + kc * kq[0] + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
+            _aged_update(er, n, lam[r], lw, base, d0 - o0, d1 - o1, d2 - o2, d3 - o3, k0, k1, k2, k3, ksq[r])
         else:
             # e[j] = lam e[j-1] + ||d - k_j||^2 - [full] lam^W ||old - k_{j-W}||^2   (lam = 1 without decay)
             c0, c1, c2, c3 = -2.0 * d0, -2.0 * d1, -2.0 * d2, -2.0 * d3
@@ -135,30 +128,15 @@ def step_rows(
                     v += 2.0 * (o0 * k0[lag] + o1 * k1[lag] + o2 * k2[lag] + o3 * k3[lag]) - lw * kq[lag]
                 er[j] = v
 
-        if pend:  # the pending weights' sums: e2[j] = plam e2[j-1] + ||d - k_j||^2 - [full] plam^N ||old - k_j||^2
-            a2 = plam[r]
+        if pend:  # the pending weights' sums (whole-stride windows; nothing leaves until full)
             lw2 = plam_w[r] if full else 0.0
             q0, q1, q2, q3 = r0 * lw2, r1 * lw2, r2 * lw2, r3 * lw2
-            base2 = dsq - rsq * lw2
-            kc2 = 1.0 - lw2
-            c0, c1, c2, c3 = -2.0 * (d0 - q0), -2.0 * (d1 - q1), -2.0 * (d2 - q2), -2.0 * (d3 - q3)
-            kq = ksq[r]
-            e2r = e2[r]
-            last2 = e2r[n - 1]
-            for j in range(n - 1, 0, -1):
-                e2r[j] = a2 * e2r[j - 1] + base2 + kc2 * kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
-            e2r[0] = a2 * last2 + base2 + kc2 * kq[0] + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
-            ws2[r, 0] = a2 * ws2[r, 0] + d0 - q0
-            ws2[r, 1] = a2 * ws2[r, 1] + d1 - q1
-            ws2[r, 2] = a2 * ws2[r, 2] + d2 - q2
-            ws2[r, 3] = a2 * ws2[r, 3] + d3 - q3
+            _aged_update(e2[r], n, plam[r], lw2, dsq - rsq * lw2, d0 - q0, d1 - q1, d2 - q2, d3 - q3,
+                         k0, k1, k2, k3, ksq[r])
+            _age_sums(ws2, r, plam[r], d0 - q0, d1 - q1, d2 - q2, d3 - q3)
 
         if decay:  # the weighted window sums age too: S = lam S + d - lam^W old
-            a = lam[r]
-            wsums[r, 0] = a * wsums[r, 0] + d0 - o0
-            wsums[r, 1] = a * wsums[r, 1] + d1 - o1
-            wsums[r, 2] = a * wsums[r, 2] + d2 - o2
-            wsums[r, 3] = a * wsums[r, 3] + d3 - o3
+            _age_sums(wsums, r, lam[r], d0 - o0, d1 - o1, d2 - o2, d3 - o3)
 
         # Read-out of row r: score = (e - offset penalty) / window weight, its argmin over j; only
         # for rows in the scale band (out_score of the others: inf).
@@ -167,7 +145,7 @@ def step_rows(
             out_score[r] = np.inf
             continue
         filled = i + 1 >= w
-        if decay and lam[r] < 1.0:
+        if aged:
             weff = wsum[r] if filled else (1.0 - lam[r] ** (i + 1)) / (1.0 - lam[r])
         else:
             weff = float(w if filled else i + 1)
@@ -266,6 +244,28 @@ _parallel = types.FunctionType(step_rows.__code__, step_rows.__globals__, "step_
 _parallel.__qualname__ = "step_rows_parallel"
 step_rows_parallel = njit(cache=True, nogil=True, parallel=True)(_parallel)
 step_rows = njit(cache=True, nogil=True)(step_rows)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _aged_update(er, n, a, lw, base, x0, x1, x2, x3, k0, k1, k2, k3, kq):  # pragma: no cover - compiled
+    """Running sums of one whole-stride row with age weights, in place from the last column down:
+    e[j] = a e[j-1] + base + (1 - lw) ||k_j||^2 - 2 k_j . x, with base = ||d||^2 - lw ||old||^2,
+    x = d - lw old and lw = a^N (0 while the window fills: nothing leaves it)."""
+    kc = 1.0 - lw
+    c0, c1, c2, c3 = -2.0 * x0, -2.0 * x1, -2.0 * x2, -2.0 * x3
+    last = er[n - 1]
+    for j in range(n - 1, 0, -1):
+        er[j] = a * er[j - 1] + base + kc * kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
+    er[0] = a * last + base + kc * kq[0] + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _age_sums(ws, r, a, x0, x1, x2, x3):  # pragma: no cover - compiled
+    """Age-weighted window sums of row r, in place: S = a S + x, x = d - lw old."""
+    ws[r, 0] = a * ws[r, 0] + x0
+    ws[r, 1] = a * ws[r, 1] + x1
+    ws[r, 2] = a * ws[r, 2] + x2
+    ws[r, 3] = a * ws[r, 3] + x3
 
 
 @njit(cache=True, nogil=True, inline="always")

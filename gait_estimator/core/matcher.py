@@ -677,7 +677,7 @@ class IncrementalMatcher(_MatcherBase):
 
     def _reweighted(self) -> None:
         self._pending = None
-        self._e[:] = self._rows_sse_fft(self._rows)
+        self._e[:] = self._rows_sse_fft(self._rows, self._lam)
         self._wsums[:] = self.age_weighted_sums()
 
     def start_uniform(self) -> None:
@@ -904,18 +904,13 @@ class IncrementalMatcher(_MatcherBase):
         self._set_rows(mode, k)
         rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
         self._update_row_constants(rows)
-        self._e[rows] = self._rows_sse_fft(rows)
-        p = self._pending
-        if p is not None:  # the sums kept alongside, with their weights
-            active = self._lam
-            self._lam = p.lam
-            try:
-                p.e[rows] = self._rows_sse_fft(rows)
-            finally:
-                self._lam = active
+        self._e[rows] = self._rows_sse_fft(rows, self._lam)
+        if self._pending is not None:  # the sums kept alongside, with their weights
+            self._pending.e[rows] = self._rows_sse_fft(rows, self._pending.lam)
 
-    def _rows_sse_fft(self, rows: np.ndarray) -> np.ndarray:
-        """e[r, :] for ``rows`` from the buffered window by FFT, (len(rows), Nmax), padding inf.
+    def _rows_sse_fft(self, rows: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """e[r, :] for ``rows`` from the buffered window by FFT with the age weights of ``lam``
+        (per row, (R,)), (len(rows), Nmax), padding inf.
 
         e[j] = sum_{t<W} a_t ||x_t||^2 - 2 sum_{t<W} a_t x_t . k_{(j-t) mod n} + sum_{t<W} a_t ||k_{(j-t) mod n}||^2
         with x_t = d_{i-t} and age weights a_t (lambda^t; 1 without recency weighting): two
@@ -927,7 +922,7 @@ class IncrementalMatcher(_MatcherBase):
             n = int(self.lengths[r])
             w = min(self._count, int(self.windows[r]))
             age = np.zeros(n)
-            age[:w] = self._lam[r] ** np.arange(w)
+            age[:w] = lam[r] ** np.arange(w)
             x = np.zeros((n, N_CHANNELS))
             x[:w] = data[:w]
             k = self._kernels[r, :, :n].astype(np.float64)  # (4, n)
