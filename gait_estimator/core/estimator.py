@@ -40,7 +40,10 @@ time column), off for unstamped input (timed on arrival, or by sample index)."""
 
 DEFAULT_TIME_SCALES = (0.88, 0.92, 0.96, 1.0, 1.04, 1.08, 1.12)
 RECENCY_HALF_LIFE = 0.3
-"""Default ``recency_half_life`` (strides): chosen by experiments/cross_session.py (docs/new_wearer.md)."""
+OFFSET_CALIBRATION_RATE = 0.15
+CADENCE_CALIBRATION_RATE = 0.1
+"""Defaults of ``recency_half_life`` (strides) and of the two walking calibrations' rates: chosen by
+experiments/cross_session.py (docs/new_wearer.md)."""
 CALIBRATION_CONFIDENCE = 0.1
 CALIBRATION_STEP_DEG = 5.0
 CALIBRATION_MAX_DEG = 15.0
@@ -80,11 +83,13 @@ OPTIONS: tuple[Option, ...] = (
     Option("offset_tolerance_deg", 2.0, "per-channel difference (deg) between window and kernel means, beyond the "
            "learnt sensor offset, that costs nothing (sensor mounting); .inf = shapes only; 0 = none, as the paper",
            0.0),
-    Option("offset_calibration_rate", 0.2, "walking self-calibration of the sensor offsets: weight of one confident "
-           "stride's window-vs-kernel mean difference in the running offset estimate, [0, 1]; 0 = off", 0.0),
-    Option("cadence_calibration_rate", 0.2, "walking self-calibration of the wearer's cadence: weight of one "
-           "confident stride's best time scale in the running (log) scale estimate, [0, 1]; after 3 strides every "
-           "mode is read only at time scales near it (speed classes at the wearer's own cadence); 0 = off", 0.0),
+    Option("offset_calibration_rate", OFFSET_CALIBRATION_RATE, "walking self-calibration of the sensor offsets: "
+           "weight of one confident stride's window-vs-kernel mean difference in the running offset estimate, "
+           "[0, 1]; 0 = off", 0.0),
+    Option("cadence_calibration_rate", CADENCE_CALIBRATION_RATE, "walking self-calibration of the wearer's cadence: "
+           "weight of one confident stride's best time scale in the running (log) scale estimate, [0, 1]; after 3 "
+           "strides every mode is read only at time scales near it (speed classes at the wearer's own cadence); "
+           "0 = off", 0.0),
     Option("cadence_tolerance", 0.04, "cadence calibration: relative band around the learnt time scale in which "
            "a mode may be read (0.04: 4 percent either side; wider while the strides' scales spread more; "
            "the nearest scale always counts)"),
@@ -137,8 +142,8 @@ class EstimatorConfig:
     resample: str = "auto"
     time_scales: tuple[float, ...] = DEFAULT_TIME_SCALES
     offset_tolerance_deg: float = 2.0
-    offset_calibration_rate: float = 0.2
-    cadence_calibration_rate: float = 0.2
+    offset_calibration_rate: float = OFFSET_CALIBRATION_RATE
+    cadence_calibration_rate: float = CADENCE_CALIBRATION_RATE
     cadence_tolerance: float = 0.04
     normalize_error: bool = True
     window_fraction: float = 1.0
