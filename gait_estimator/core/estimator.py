@@ -16,7 +16,7 @@ import argparse
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -233,6 +233,15 @@ class EstimatorConfig:
         return self.resample == "on" or (self.resample == "auto" and stamped)
 
 
+class _StrideTrack(NamedTuple):
+    """What the walking calibrations know of the stride in progress, after the last sample."""
+
+    mode: int  # reported mode
+    phase: float  # its phase
+    passed_mid: bool  # the phase was mid-stride (MID_STRIDE) since the stride began
+    began_in_mode: bool  # the stride began at a heel strike of this mode (not at a mode change)
+
+
 class Estimator:
     """Streams time-stamped samples through gap check, resampling, matcher, supervisor and
     personalisation; every accepted sample gets exactly one estimate.
@@ -300,7 +309,7 @@ class Estimator:
         self._recency_waits = self.matcher.recency_half_life > 0 and (c.offset_calibration_rate > 0 or self._learns_cadence)
         if self._recency_waits:
             self.matcher.start_uniform()  # the weighted sums are kept alongside: the switch costs nothing
-        self._calib_last: tuple[int, float, bool, bool] | None = None  # mode, phase, passed mid-stride, stride began in mode
+        self._calib_last: _StrideTrack | None = None
         self.last_time: float | None = None
         self.resets = 0
         self._last: Estimate | None = None
@@ -420,12 +429,12 @@ class Estimator:
         stride in which the reported mode changed (a blend of two modes) is not read."""
         m, phase = est.mode_index, est.phase
         last = self._calib_last
-        same = last is not None and last[0] == m
-        wrapped = same and phase < last[1] - 0.5
-        passed_mid = same and last[2]
-        whole = same and last[3]
+        same = last is not None and last.mode == m
+        wrapped = same and phase < last.phase - 0.5
+        passed_mid = same and last.passed_mid
+        whole = same and last.began_in_mode
         midway = MID_STRIDE[0] <= phase < MID_STRIDE[1] or (passed_mid and not wrapped)
-        self._calib_last = (m, phase, midway, wrapped or whole) if est.ready else None
+        self._calib_last = _StrideTrack(m, phase, midway, wrapped or whole) if est.ready else None
         return wrapped and whole and passed_mid and not est.held and est.confidence >= CALIBRATION_CONFIDENCE
 
     def _calibrate_offset(self, est: Estimate, result: Any) -> None:
