@@ -37,6 +37,7 @@ import argparse
 import json
 import math
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -482,7 +483,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     res, raw_base = compute(args, out)
-    res["command"] = "python experiments/beyond_paper.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    res["command"] = "python experiments/beyond_paper.py " + shlex.join(argv if argv is not None else sys.argv[1:])
     res["runtime_s"] = round(time.perf_counter() - start, 1)
     report(res, raw_base, out)
     print(f"wrote {out}/summary.json, tables.md, confidence.png, tradeoff.png in {time.perf_counter() - start:.0f} s")

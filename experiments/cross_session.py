@@ -62,6 +62,7 @@ import json
 import math
 import multiprocessing
 import os
+import shlex
 import sys
 import time
 from collections.abc import Sequence
@@ -708,7 +709,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     out.mkdir(parents=True, exist_ok=True)
     res = compute(args, out)
-    res["command"] = "python experiments/cross_session.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    res["command"] = "python experiments/cross_session.py " + shlex.join(argv if argv is not None else sys.argv[1:])
     res["command"] = res["command"].strip()
     res["runtime_s"] = round(time.perf_counter() - start, 1)
     (out / "summary.json").write_text(json.dumps(res, indent=1, default=float) + "\n", encoding="utf-8")
