@@ -49,7 +49,7 @@ class SwitchingDecoder:
     def _build(self, old: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> None:
         m = self.matcher
         rows = np.arange(m.n_modes) * m.n_scales + self.scale_index
-        kernels = [m._kernels[r, :, : m.lengths[r]].T for r in rows]  # weighted units, as the matcher's
+        kernels = [m.row_kernel(int(r)) for r in rows]  # degrees (the default channel weights: all 1)
         self.n = np.array([k.shape[0] for k in kernels])
         self.start = np.r_[0, np.cumsum(self.n)[:-1]]
         self.end = self.start + self.n - 1
@@ -71,7 +71,7 @@ class SwitchingDecoder:
             self._build(old)
 
     def step(self, x: np.ndarray) -> tuple[int, float]:
-        """Consume one sample (4,) in the matcher's units, offset removed; return (mode, phase)."""
+        """Consume one sample (4,), degrees, sensor offset removed; return (mode, phase)."""
         d = self.cost
         best = d + self.warp
         best[1:] = np.minimum(best[1:], np.where(self.j[1:] >= 1, d[:-1], np.inf))
@@ -98,7 +98,7 @@ class EstimatorWithDecoder(Estimator):
         m = self.matcher
         if math.isfinite(self.cadence_scale):
             self.decoder.set_scale_index(int(np.abs(np.log(m.time_scales / self.cadence_scale)).argmin()))
-        mode, _ = self.decoder.step(np.asarray(x) * m._scale - m._tau[1])
+        mode, _ = self.decoder.step(np.asarray(x) - m.sensor_offset_deg)
         self.steps.append((time_s, est.ready, est.mode_index, mode))
         return est
 
