@@ -154,7 +154,7 @@ def step_rows(
         s0 = s1 = s2 = s3 = 0.0
         if use_offset:
             s0, s1, s2, s3 = _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w)
-        per_shift = use_offset and (w < n or aged)
+        per_shift = _per_shift_row(offset, i, w, n, aged)
         wp = wsum[r]
         const = 0.0
         if use_offset and not per_shift:
@@ -203,7 +203,7 @@ def step_rows(
         pos = float(j + 1)
         if subsample:
             w = wins[rb]
-            shifted = offset and i + 1 >= w and (w < n or (decay and lam[rb] < 1.0))  # the penalty depends on the shift
+            shifted = _per_shift_row(offset, i, w, n, decay and lam[rb] < 1.0)
             s0, s1, s2, s3 = _row_sums(decay, wsums, rb, p0, p1, p2, p3, psum_ring, i, w)
             wp = wsum[rb]
             a = _row_score(e, rb, j - 1 if j > 0 else n - 1, shifted, mu_seg, s0, s1, s2, s3, wp, tau)
@@ -244,6 +244,13 @@ _parallel = types.FunctionType(step_rows.__code__, step_rows.__globals__, "step_
 _parallel.__qualname__ = "step_rows_parallel"
 step_rows_parallel = njit(cache=True, nogil=True, parallel=True)(_parallel)
 step_rows = njit(cache=True, nogil=True)(step_rows)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _per_shift_row(offset, i, w, n, aged):  # pragma: no cover - compiled
+    """True when a row's scores carry a per-shift offset penalty: offset on, window full after
+    this sample, and the kernel part's mean depends on the shift (W < N, or age weights)."""
+    return offset and i + 1 >= w and (w < n or aged)
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -302,11 +302,12 @@ class Estimator:
         self.cadence_spread = 0.0
         """Running RMS deviation of the strides' log time scale from the learnt one."""
         self._learns_cadence = c.cadence_calibration_rate > 0 and self.matcher.n_scales > 1
+        self._calibrates = c.offset_calibration_rate > 0 or self._learns_cadence  # a walking calibration is on
         self.calibration_strides = 0
         """Strides the walking calibrations have read since they (re)started."""
         # Recency weighting waits for the calibrations: before the sensor offsets and cadence are
         # learnt, its shorter memory cannot tell the speed classes apart well enough to be confident.
-        self._recency_waits = self.matcher.recency_half_life > 0 and (c.offset_calibration_rate > 0 or self._learns_cadence)
+        self._recency_waits = self.matcher.recency_half_life > 0 and self._calibrates
         if self._recency_waits:
             self.matcher.start_uniform()  # the weighted sums are kept alongside: the switch costs nothing
         self._calib_last: _StrideTrack | None = None
@@ -363,7 +364,7 @@ class Estimator:
         result = self.matcher.step(x)
         est = self.supervisor.update(time_s, result)
         c = self.config
-        if (c.offset_calibration_rate > 0 or self._learns_cadence) and self._confident_stride_end(est):
+        if self._calibrates and self._confident_stride_end(est):
             if c.offset_calibration_rate > 0:
                 self._calibrate_offset(est, result)
             if self._learns_cadence:
@@ -399,7 +400,7 @@ class Estimator:
             self.cadence_scale, self.cadence_strides = other.cadence_scale, other.cadence_strides
             self.cadence_spread = other.cadence_spread
             self._narrow_scales()
-        if self.config.offset_calibration_rate > 0 or self._learns_cadence:
+        if self._calibrates:
             self.calibration_strides = other.calibration_strides
         if self._recency_waits and self.calibration_strides >= CADENCE_MIN_STRIDES:
             self.matcher.set_recency_half_life(self.config.effective_recency_half_life)

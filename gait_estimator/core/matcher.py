@@ -719,18 +719,16 @@ class IncrementalMatcher(_MatcherBase):
             self._ksq = np.empty((self.n_rows, self.max_length))
             if self._partial:
                 self._stacked = np.empty((self.n_rows, 2 * N_CHANNELS, self.max_length))
-            if self._partial:
                 self._kconst = np.empty((self.n_rows, self.max_length))
         k = self._kernels[rows].astype(np.float64)
         self._ksq[rows] = np.einsum("rcj,rcj->rj", k, k)  # ||k_j||^2, (R, Nmax)
-        lam_w = self._lam_w[rows, None]
-        if self._partial:
+        if self._partial:  # (no age weights: they need the whole-stride window)
             # k_{j-W} for every column j: the kernel column the stale sample was compared with.
             j = np.arange(self.max_length)[None, :]
             src = np.where(self._valid[rows], (j - self.windows[rows, None]) % self.lengths[rows, None], j)
             lagged = k[np.arange(rows.size)[:, None], :, src].transpose(0, 2, 1)  # (R, 4, Nmax)
             self._stacked[rows] = np.concatenate([k, lagged], axis=1)  # (R, 8, Nmax)
-            self._kconst[rows] = self._ksq[rows] - lam_w * np.einsum("rcj,rcj->rj", lagged, lagged)
+            self._kconst[rows] = self._ksq[rows] - np.einsum("rcj,rcj->rj", lagged, lagged)
 
     def reset(self) -> None:
         super().reset()
