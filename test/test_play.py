@@ -125,8 +125,8 @@ class Collector:
 
 
 def _player(args: list[str], env: dict[str, str]) -> subprocess.Popen:
-    # Unbuffered, with faulthandler: if it ever hangs, _stop's SIGABRT shows where (every thread).
-    env = {**env, "PYTHONUNBUFFERED": "1", "PYTHONFAULTHANDLER": "1"}
+    # With faulthandler (unbuffered already: _ros_env): if it ever hangs, _stop's SIGABRT shows where.
+    env = {**env, "PYTHONFAULTHANDLER": "1"}
     return subprocess.Popen(
         [sys.executable, "-m", "gait_estimator.cli", "play", *args],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
