@@ -37,7 +37,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from gait_estimator.core.kernels import KernelLibrary, KernelMode
+from gait_estimator.core.kernels import KernelLibrary, KernelMode, make_mode, resample_stride
 from gait_estimator.io.recording import Recording
 
 FOOT_SHARPNESS = 10.0
@@ -86,6 +86,22 @@ class WearerConfig:
 
 WEARER_STREAM = 0x5EA2E2
 """First word of the seed of ``new_wearer``'s random stream (separate from ``generate``'s)."""
+
+
+def near_copies(library: KernelLibrary, copies: int) -> KernelLibrary:
+    """Every mode of ``library`` as ``copies`` kernels a fraction of a degree and of a percent apart,
+    as a library with one kernel per ramp angle or walking speed step would hold them: copy v of
+    N samples is stretched to N * (1 + 0.005 f) samples, its amplitude scaled by 1 + 0.01 f and
+    its channels shifted by (0.25, -0.25, 0.1, 0) * f degrees, f = v - (copies - 1) / 2. Named
+    MODE_0, MODE_1, ... (the mode is the part before the last underscore)."""
+    modes = []
+    for m in library.modes:
+        for v in range(copies):
+            f = v - (copies - 1) / 2
+            k = m.samples * (1 + 0.01 * f) + np.array([0.25, -0.25, 0.1, 0.0]) * f
+            modes.append(make_mode(f"{m.name}_{v}", resample_stride(k, round(m.length * (1 + 0.005 * f))),
+                                   m.sample_rate_hz))
+    return KernelLibrary(f"{library.name}_near_copies", tuple(modes))
 
 
 def new_wearer(seed: int, ranges: WearerConfig | None = None, base: SyntheticConfig | None = None) -> SyntheticConfig:

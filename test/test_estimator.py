@@ -437,6 +437,34 @@ def test_walking_calibration_finds_constant_sensor_offsets(able_bodied) -> None:
     assert "Med" not in set(np.asarray(off.modes)[tail])
 
 
+def test_walking_calibration_counts_near_copies_as_one_mode(able_bodied, monkeypatch) -> None:
+    """A library holding near copies of every mode: few strides are confident against the other
+    copies, and the reported mode moves between them within a stride. Counted as one mode, they
+    let the calibrations learn the offsets as with the bundled library, and recency weighting
+    starts; counted apart (NEAR_COPY_RMS_DEG 0), a stride is confident only when it happens to fit
+    one copy much better than its neighbours (a few of these noise-free strides), and the right
+    thigh's 6 deg offset is far from learnt."""
+    from synthetic import near_copies
+
+    from gait_estimator.core import estimator as estimator_module
+
+    lib = near_copies(able_bodied, 5)
+    offsets = np.array([6.0, 1.0, 0.0, -1.0])
+    x = np.tile(able_bodied.mode("Med").samples, (25, 1)) + offsets
+    t = np.arange(len(x)) / 230.0
+    est = Estimator(lib)
+    trace = run_estimator(est, t, x)
+    np.testing.assert_allclose(est.sensor_offset_deg, offsets, atol=0.5)
+    assert est.calibration_strides >= 3 and est.matcher.recency_half_life == est.config.recency_half_life
+    tail = trace.ready & (t > t[-1] - 5.0)
+    assert {name.rsplit("_", 1)[0] for name in np.asarray(trace.modes)[tail]} == {"Med"}
+    monkeypatch.setattr(estimator_module, "NEAR_COPY_RMS_DEG", 0.0)
+    apart = Estimator(lib)
+    run_estimator(apart, t, x)
+    assert apart.calibration_strides < est.calibration_strides / 4
+    assert abs(apart.sensor_offset_deg[0] - offsets[0]) > 2.0
+
+
 def _stretched_strides(able_bodied, mode: str, strides: int, cadence: float) -> np.ndarray:
     """``strides`` kernel strides of ``mode`` stretched to last 1/cadence as long, (T, 4) deg."""
     k = able_bodied.mode(mode).samples

@@ -195,3 +195,29 @@ def test_cli_errors_exit_2_with_one_line(tmp_path: Path) -> None:
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0
     assert str(bad) in proc.stderr and "missing metadata key" in proc.stderr
+
+
+def test_near_duplicates_finds_copies_by_shape_and_length(able_bodied: KernelLibrary) -> None:
+    """Near copies: a kernel started at another phase with 0.3 deg added, or with one channel
+    1.5 deg off (0.75 deg RMS over four channels); not near: 5 % longer, or one channel 2.5 deg
+    off (1.25 deg RMS), unless that channel has no weight. The bundled modes are all distinct
+    (the closest pair, Med and Fast, is 1.6 deg and 11 % apart)."""
+    from gait_estimator.core.kernels import near_duplicates, resample_stride
+
+    med = able_bodied.mode("Med")
+    k = med.samples
+    rate = med.sample_rate_hz
+    variants = {
+        "shifted": np.roll(k, 40, axis=0) + 0.3,
+        "one_channel_1.5": k + np.array([1.5, 0, 0, 0]),
+        "longer": resample_stride(k, round(1.05 * len(k))),
+        "one_channel_2.5": k + np.array([0, 0, 2.5, 0]),
+    }
+    lib = KernelLibrary("v", (med, *(make_mode(n, v, rate) for n, v in variants.items())))
+    near = near_duplicates(lib, 1.0, 0.02)
+    assert near[0].tolist() == [True, True, True, False, False]
+    assert (near == near.T).all()
+    unweighted = near_duplicates(lib, 1.0, 0.02, np.array([1.0, 1.0, 0.0, 1.0]))
+    assert unweighted[0, 4] and not unweighted[0, 3]
+    assert (near_duplicates(able_bodied, 1.0, 0.02) == np.eye(len(able_bodied), dtype=bool)).all()
+    assert near_duplicates(able_bodied, 1.7, 0.2)[1, 2] and not near_duplicates(able_bodied, 1.5, 0.2)[1, 2]

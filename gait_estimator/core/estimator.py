@@ -22,7 +22,7 @@ import numpy as np
 
 from .adapt import AdaptOptions, KernelAdapter
 from .channels import CHANNELS, N_CHANNELS, Sample, sample_values
-from .kernels import KernelLibrary
+from .kernels import KernelLibrary, near_duplicates
 from .matcher import (
     IncrementalMatcher,
     check_channel_weights,
@@ -50,6 +50,13 @@ CALIBRATION_MAX_DEG = 15.0
 MID_STRIDE = (0.25, 0.75)
 """A heel strike ends a stride for the calibrations only if the phase was in this range since the
 previous one."""
+NEAR_COPY_RMS_DEG = 1.0
+NEAR_COPY_LENGTH_RATIO = 0.02
+"""Modes whose kernels are this close (shape RMS, degrees; |ln| of the stride-length ratio) count
+as one for the calibrations (``near_duplicates``): half the offset band and the cadence band of the
+defaults, so reading a stride against either copy moves the offsets and the time scale by less
+than the matcher already lets pass. Without this a library holding near copies (e.g. one kernel
+per ramp angle) would never give a confident stride, and would never calibrate."""
 CADENCE_MIN_STRIDES = 3
 """Confident strides the cadence calibration reads before it narrows the time scales, and the
 calibrations read before recency weighting starts."""
@@ -242,6 +249,16 @@ class _StrideTrack(NamedTuple):
     began_in_mode: bool  # the stride began at a heel strike of this mode (not at a mode change)
 
 
+def _margin_over(sse: np.ndarray, mode: int, rivals: np.ndarray) -> float:
+    """(lowest SSE among the ``rivals`` (bool mask) - SSE of ``mode``) / SSE of ``mode``: the
+    supervisor's confidence margin against those modes only (inf without rivals)."""
+    best = float(sse[rivals].min()) if rivals.any() else math.inf
+    own = float(sse[mode])
+    if own <= 0.0:
+        return math.inf if best > 0 else 0.0
+    return (best - own) / own
+
+
 class Estimator:
     """Streams time-stamped samples through gap check, resampling, matcher, supervisor and
     personalisation; every accepted sample gets exactly one estimate.
@@ -305,6 +322,10 @@ class Estimator:
         self._calibrates = c.offset_calibration_rate > 0 or self._learns_cadence  # a walking calibration is on
         self.calibration_strides = 0
         """Strides the walking calibrations have read since they (re)started."""
+        self._near_copies: np.ndarray | None = None  # (M, M) bool, when the library holds near copies
+        if self._calibrates:
+            near = near_duplicates(library, NEAR_COPY_RMS_DEG, NEAR_COPY_LENGTH_RATIO, c.effective_weights())
+            self._near_copies = near if near.sum() > len(library) else None
         # Recency weighting waits for the calibrations: before the sensor offsets and cadence are
         # learnt, its shorter memory cannot tell the speed classes apart well enough to be confident.
         self._recency_waits = self.matcher.recency_half_life > 0 and self._calibrates
@@ -425,18 +446,23 @@ class Estimator:
     def _confident_stride_end(self, est: Estimate) -> bool:
         """True at a heel strike (the phase wrapped) that ends a stride reported as one mode from
         the previous heel strike on, whose phase passed mid-stride (MID_STRIDE), confident (margin
-        >= CALIBRATION_CONFIDENCE) and not held: where the calibrations read. A phase that
+        >= CALIBRATION_CONFIDENCE) and not held: where the calibrations read. Near copies of a mode
+        (NEAR_COPY_RMS_DEG) count as that mode here. A phase that
         flickers across the wrap (0.99, 0.01, 0.99, ...) ends one stride, not one per flicker; the
         stride in which the reported mode changed (a blend of two modes) is not read."""
         m, phase = est.mode_index, est.phase
         last = self._calib_last
-        same = last is not None and last.mode == m
+        near = self._near_copies
+        same = last is not None and (last.mode == m or (near is not None and near[last.mode, m]))
         wrapped = same and phase < last.phase - 0.5
         passed_mid = same and last.passed_mid
         whole = same and last.began_in_mode
         midway = MID_STRIDE[0] <= phase < MID_STRIDE[1] or (passed_mid and not wrapped)
         self._calib_last = _StrideTrack(m, phase, midway, wrapped or whole) if est.ready else None
-        return wrapped and whole and passed_mid and not est.held and est.confidence >= CALIBRATION_CONFIDENCE
+        if not (wrapped and whole and passed_mid) or est.held:
+            return False
+        confidence = est.confidence if near is None else _margin_over(est.sse, m, ~near[m])
+        return confidence >= CALIBRATION_CONFIDENCE
 
     def _calibrate_offset(self, est: Estimate, result: Any) -> None:
         """Move the sensor offset estimate towards this stride's window-vs-kernel mean difference."""

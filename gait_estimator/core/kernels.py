@@ -168,6 +168,45 @@ def make_mode(
     return KernelMode(str(name), arr, float(sample_rate_hz), int(mode_id), dict(info or {}))
 
 
+def near_duplicates(
+    library: KernelLibrary,
+    max_rms_deg: float,
+    max_length_ratio: float,
+    channel_weights: np.ndarray | None = None,
+) -> np.ndarray:
+    """Which modes' kernels are near copies of each other: (M, M) bool, True on the diagonal.
+
+    Modes a and b are near copies when their stride lengths differ by at most
+    ``max_length_ratio`` (|ln(N_a / N_b)| <=) and their shapes, both resampled to the library's
+    longest stride, differ by at most ``max_rms_deg`` (RMS over samples and channels, degrees,
+    channels weighted by ``channel_weights``, at the best circular shift). A matcher tells such
+    modes apart only by noise: a library can hold them (e.g. one kernel per ramp angle).
+    """
+    m = len(library)
+    lengths = library.lengths
+    big = int(lengths.max())
+    w = np.ones(N_CHANNELS) if channel_weights is None else np.asarray(channel_weights, dtype=np.float64)
+    w = w / w.sum()
+    x = np.stack([resample_stride(k.samples, big) for k in library.modes]) * np.sqrt(w)  # (M, L, C)
+    f = np.fft.rfft(x, axis=1)
+    energy = np.einsum("mlc,mlc->m", x, x)
+    log_len = np.log(lengths)
+    order = np.argsort(log_len, kind="stable")  # chunks of similar lengths: few candidates each
+    sorted_len = log_len[order]
+    near = np.eye(m, dtype=bool)
+    chunk = max(1, 4096 // m)
+    for a0 in range(0, m, chunk):
+        a = order[a0:a0 + chunk]
+        lo = np.searchsorted(sorted_len, log_len[a].min() - max_length_ratio, side="left")
+        hi = np.searchsorted(sorted_len, log_len[a].max() + max_length_ratio, side="right")
+        b = order[lo:hi]
+        cross = np.fft.irfft(np.einsum("afc,bfc->abf", f[a], f[b].conj()), n=big, axis=2)  # (A, B, L) over shifts
+        msd = (energy[a, None] + energy[None, b] - 2.0 * cross.max(axis=2)) / big
+        close = np.sqrt(np.maximum(msd, 0.0)) <= max_rms_deg
+        near[a[:, None], b[None, :]] |= close & (np.abs(log_len[a, None] - log_len[None, b]) <= max_length_ratio)
+    return near
+
+
 def resample_stride(samples: np.ndarray, n: int) -> np.ndarray:
     """One stride (N, C) resampled to ``n`` samples by periodic linear interpolation.
 
