@@ -577,6 +577,35 @@ def test_cadence_options_are_checked(bad) -> None:
         EstimatorConfig(**bad)
 
 
+def test_a_long_gap_forgets_the_calibrations(able_bodied) -> None:
+    """Sensors re-donned while the stream stopped: a Med walk with one set of offsets, a gap, the
+    same walk with another. A gap longer than calibration_reset_gap_s (5 s) forgets the learnt
+    offsets (as reset_calibration does), so the second set is learnt from zero; a shorter gap only
+    restarts the window and keeps them; 0 keeps them whatever the gap."""
+    med = able_bodied.mode("Med").samples
+    before, after = np.array([6.0, 1.0, 0.0, -1.0]), np.array([-6.0, -1.0, 0.0, 1.0])
+    x1, x2 = np.tile(med, (25, 1)) + before, np.tile(med, (2, 1)) + after
+    t1 = np.arange(len(x1)) / 230.0
+    runs = {}
+    for name, gap, config in (("long", 6.0, EstimatorConfig()), ("short", 4.0, EstimatorConfig()),
+                              ("never", 60.0, EstimatorConfig(calibration_reset_gap_s=0.0))):
+        est = Estimator(able_bodied, config)
+        run_estimator(est, t1, x1)
+        learnt = est.sensor_offset_deg.copy()
+        est.update(t1[-1] + gap, x2[0])
+        runs[name] = (learnt, est.sensor_offset_deg.copy(), est.calibration_resets, est.resets)
+    for learnt, _, _, _ in runs.values():
+        np.testing.assert_allclose(learnt, before, atol=0.5)
+    assert not runs["long"][1].any() and runs["long"][2:] == (1, 1)
+    np.testing.assert_array_equal(runs["short"][1], runs["short"][0])
+    assert runs["short"][2:] == (0, 1)
+    np.testing.assert_array_equal(runs["never"][1], runs["never"][0])
+    assert runs["never"][2:] == (0, 1)
+    assert EstimatorConfig.preset("paper").calibration_reset_gap_s == 0.0
+    with pytest.raises(ValueError, match="calibration_reset_gap_s"):
+        EstimatorConfig(calibration_reset_gap_s=-1.0)
+
+
 def test_recency_weighting_starts_once_the_calibrations_have_read_three_strides(able_bodied) -> None:
     """A sensor 6 deg off while walking Med: with recency weighting from the first stride the
     speed classes are not told apart confidently enough for the calibrations to start (Fast is

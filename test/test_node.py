@@ -383,7 +383,8 @@ def test_config_yaml_holds_the_declared_defaults(ros, tmp_path: Path) -> None:
 def test_preset_services_and_new_wearer_outputs(ros, multispeed_csv: Path, able_bodied, tmp_path: Path) -> None:
     """preset: paper at start-up gives the paper's options (explicit ones still win); the
     estimate carries cadence_ratio; save_library writes the personalised kernels (or says why
-    not); reset_calibration zeroes the learnt sensor offsets and forgets the learnt time scale."""
+    not); reset_calibration zeroes the learnt sensor offsets and forgets the learnt time scale, and
+    so does a gap in the stream longer than calibration_reset_gap_s."""
     from std_srvs.srv import Trigger
 
     from gait_estimator.core.estimator import EstimatorConfig
@@ -438,3 +439,14 @@ def test_preset_services_and_new_wearer_outputs(ros, multispeed_csv: Path, able_
     assert result.successful
     off = call("save_library")
     assert not off.success and "personalisation is off" in off.message
+
+    # A gap in the stream longer than calibration_reset_gap_s forgets them too (the sensors may
+    # have been re-donned); changing that threshold keeps the estimator and its window.
+    est = node._estimator
+    (result,) = node.set_parameters([Parameter("calibration_reset_gap_s", value=4.0)])
+    assert result.successful and node._estimator is est and est.config.calibration_reset_gap_s == 4.0
+    later = stamps_ns(rec) + (stamps_ns(rec)[-1] - stamps_ns(rec)[0]) + 10**8
+    lockstep(client, np.radians(rec.angles_deg), 2000.0, later)
+    assert np.any(est.sensor_offset_deg != 0) and est.calibration_resets == 0
+    lockstep(client, np.radians(rec.angles_deg[:5]), 2000.0, later[-1] + 4_500_000_000 + PERIOD_NS * np.arange(5))
+    assert not np.any(est.sensor_offset_deg) and est.calibration_resets == 1 and est.resets >= 1

@@ -44,6 +44,9 @@ OFFSET_CALIBRATION_RATE = 0.15
 CADENCE_CALIBRATION_RATE = 0.1
 """Defaults of ``recency_half_life`` (strides) and of the two walking calibrations' rates: chosen by
 experiments/cross_session.py (docs/new_wearer.md)."""
+CALIBRATION_RESET_GAP_S = 5.0
+"""Default of ``calibration_reset_gap_s``: a stream that stops this long may have had its sensors
+re-donned (docs/new_wearer.md, re-donned sensors)."""
 CALIBRATION_CONFIDENCE = 0.1
 CALIBRATION_STEP_DEG = 5.0
 CALIBRATION_MAX_DEG = 15.0
@@ -122,7 +125,12 @@ OPTIONS: tuple[Option, ...] = (
     Option("adapt_max_step_deg", 5.0, "personalisation: per-sample clip (deg) of stride - kernel before weighting "
            "(one stride moves a kernel by at most adapt_rate x this)"),
     Option("max_gap_s", 0.5, "a longer gap (s) between samples restarts the window (not ready until refilled); 0 = never"),
+    Option("calibration_reset_gap_s", CALIBRATION_RESET_GAP_S, "a longer gap (s) between samples also forgets the "
+           "learnt sensor offsets and cadence, as reset_calibration does (the sensors may have been re-donned "
+           "meanwhile); 0 = never", 0.0),
 )
+GAP_OPTIONS = frozenset({"max_gap_s", "calibration_reset_gap_s"})
+"""Options read at every update: changing them keeps the window and what was learnt."""
 
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {o.name: o.default for o in OPTIONS},
@@ -167,6 +175,7 @@ class EstimatorConfig:
     adapt_min_confidence: float = 0.2
     adapt_max_step_deg: float = 5.0
     max_gap_s: float = 0.5
+    calibration_reset_gap_s: float = CALIBRATION_RESET_GAP_S
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "resample", _resample_mode(self.resample))
@@ -181,7 +190,7 @@ class EstimatorConfig:
             raise ValueError(f"channels must be a non-empty subset of {', '.join(CHANNELS)}, got {list(self.channels)}")
         check_channel_weights(self.channel_weights)
         check_channel_weights(self.effective_weights())
-        for name in ("min_confidence", "min_dwell_s", "max_gap_s", "adapt_min_confidence"):
+        for name in ("min_confidence", "min_dwell_s", "max_gap_s", "calibration_reset_gap_s", "adapt_min_confidence"):
             v = getattr(self, name)
             if isinstance(v, bool) or not (isinstance(v, (int, float)) and v >= 0 and not math.isnan(v)):
                 raise ValueError(f"{name} must be a number >= 0, got {v!r}")
@@ -322,6 +331,8 @@ class Estimator:
         self._calibrates = c.offset_calibration_rate > 0 or self._learns_cadence  # a walking calibration is on
         self.calibration_strides = 0
         """Strides the walking calibrations have read since they (re)started."""
+        self.calibration_resets = 0
+        """Gaps longer than ``calibration_reset_gap_s`` that made the calibrations start again."""
         self._near_copies: np.ndarray | None = None  # (M, M) bool, when the library holds near copies
         if self._calibrates:
             near = near_duplicates(library, NEAR_COPY_RMS_DEG, NEAR_COPY_LENGTH_RATIO, c.effective_weights())
@@ -351,11 +362,6 @@ class Estimator:
         self.last_time = None
         self._last = None
 
-    def gap_exceeded(self, time_s: float) -> bool:
-        """True if a sample at ``time_s`` comes more than max_gap_s after the previous one."""
-        gap = self.config.max_gap_s
-        return self.last_time is not None and gap > 0 and time_s - self.last_time > gap
-
     def update(self, time_s: float, sample_deg: Sequence[float] | np.ndarray) -> Estimate:
         """Consume one sample (4 angles, degrees, CHANNELS order) stamped ``time_s`` (seconds,
         strictly increasing); return its estimate.
@@ -368,9 +374,14 @@ class Estimator:
             raise ValueError(f"non-finite sample {list(x)} at {time_s}")
         if self.last_time is not None and time_s <= self.last_time:
             raise ValueError(f"stamp {time_s} is not after the previous {self.last_time}")
-        if self.gap_exceeded(time_s):
-            self.reset()
-            self.resets += 1
+        if self.last_time is not None:
+            gap = time_s - self.last_time
+            if 0 < self.config.max_gap_s < gap:
+                self.reset()
+                self.resets += 1
+            if self._calibrates and 0 < self.config.calibration_reset_gap_s < gap:
+                self.reset_calibration()
+                self.calibration_resets += 1
         self.last_time = time_s
         if self.resampler is None:
             est = self._step(time_s, x)

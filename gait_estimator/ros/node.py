@@ -65,7 +65,7 @@ from std_srvs.srv import Trigger
 
 from ..core.channels import CHANNELS, N_CHANNELS, Sample
 from ..core.errors import GaitEstimatorError
-from ..core.estimator import OPTIONS, PRESETS, Estimator, EstimatorConfig
+from ..core.estimator import GAP_OPTIONS, OPTIONS, PRESETS, Estimator, EstimatorConfig
 from ..core.kernels import KernelLibrary
 from ..core.supervisor import Estimate
 from ..io.cdr import CdrError, Stamp, read_joint_state
@@ -170,7 +170,7 @@ DESCRIPTIONS: dict[str, str] = {
     "implementation). Options set explicitly (command line, params file) override it.",
     **{
         o.name: o.description[0].upper() + o.description[1:]
-        + ("" if o.name == "max_gap_s" else ". Changing it at run time restarts the window.")
+        + ("" if o.name in GAP_OPTIONS else ". Changing it at run time restarts the window.")
         for o in OPTIONS
     },
 }
@@ -410,7 +410,7 @@ class EstimatorNode(Node):
             self._library = lib
         self._config = config
         self._guard.restart_back_s = restart_threshold(config.max_gap_s)
-        restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - {"max_gap_s"})
+        restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - GAP_OPTIONS)
         if restart and estimator is not None:
             self._resets_before += self._estimator.resets
             kept = ""
@@ -426,8 +426,8 @@ class EstimatorNode(Node):
                 f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: {self._options_summary()}: "
                 "window restarted" + kept
             )
-        elif "max_gap_s" in names:
-            self._estimator.config = config  # only the gap threshold changed: keep the window
+        elif names & GAP_OPTIONS:
+            self._estimator.config = config  # only gap thresholds changed: keep the window
 
     def _set_priority(self, priority: int) -> None:
         """Apply ``thread_priority`` to every thread of the process; a refusal is a warning (the
@@ -576,13 +576,19 @@ class EstimatorNode(Node):
         if restart:  # stamps jumped back by more than restart_back_s: a restarted stream
             est.reset()
             self._log_restart("back", f"input stamps jumped back by {(prev or t) - t:.3f} s (> {guard.restart_back_s:g} s)")
-        resets = est.resets
+        resets, recalibrations = est.resets, est.calibration_resets
         estimate = est.update(t, angles_deg)
         if est.resets != resets:
             self._log_restart(
                 "gap",
                 f"gap of {t - (prev if prev is not None else t):.3f} s in input stamps > max_gap_s "
                 f"{est.config.max_gap_s:g} s"
+            )
+        if est.calibration_resets != recalibrations:  # at most one per calibration_reset_gap_s: not throttled
+            self.get_logger().info(
+                f"gap of {t - (prev if prev is not None else t):.3f} s in input stamps > calibration_reset_gap_s "
+                f"{est.config.calibration_reset_gap_s:g} s: learnt sensor offsets and cadence forgotten "
+                "(the sensors may have been re-donned)"
             )
         t1 = time.perf_counter()
         self._publish(estimate, stamp)
