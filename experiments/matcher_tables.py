@@ -81,6 +81,11 @@ def two_cores(report: dict[str, Any]) -> str:
             notes.append(f"M = {m}: a whole `Estimator.update` (resampling, matcher, supervisor, calibration) takes "
                          f"{est['default']['step_us_median']:,.1f} µs with the default preset and "
                          f"{est['paper']['step_us_median']:,.1f} µs with the paper preset (median)")
+        fallback = by.get((m, "estimator (numpy)", "default"))
+        if fallback and est["default"]:
+            notes.append(f"M = {m}: without numba (the numpy fallback) a whole default-preset update takes "
+                         f"{fallback['step_us_median']:,.1f} µs, "
+                         f"{fallback['step_us_median'] / est['default']['step_us_median']:.1f}× the compiled one")
     drift = report.get("drift")
     if drift:
         notes.append(f"long run: after {drift['steps']:,} steps (M = {drift['modes']}) the running sums differ from a "

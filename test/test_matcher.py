@@ -363,12 +363,16 @@ def test_scale_band_limits_the_time_scales_a_mode_is_read_at(able_bodied, backen
 
 
 @pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")
-def test_numba_and_numpy_agree_with_a_scale_band(multispeed_csv, able_bodied) -> None:
+@pytest.mark.parametrize("half_life", [0.0, 0.3])
+def test_numba_and_numpy_agree_with_a_scale_band(multispeed_csv, able_bodied, half_life) -> None:
+    """Both steps read out only the rows in the band (with recency weighting: their per-shift
+    offset penalty); the results and every mode's row scores agree."""
     x = read_recording(multispeed_csv).angles_deg[2000:3500]
     scales = (0.88, 0.94, 1.0, 1.06, 1.12)
     out, matchers = [], []
     for backend in ("numba", "numpy"):
-        m = IncrementalMatcher(able_bodied, backend=backend, time_scales=scales, offset_tolerance_deg=2.0, normalize=True)
+        m = IncrementalMatcher(able_bodied, backend=backend, time_scales=scales, offset_tolerance_deg=2.0, normalize=True,
+                               recency_half_life=half_life)
         rows = []
         for i, d in enumerate(x):
             if i == 600:
@@ -380,7 +384,7 @@ def test_numba_and_numpy_agree_with_a_scale_band(multispeed_csv, able_bodied) ->
         assert a.mode_index == b.mode_index and np.array_equal(a.variant, b.variant)
         np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10)
     assert {int(v) for r in out[0][700:] for v in r.variant} <= {1, 2}
-    # The compiled step reads out only the band's rows; the calibrations' row scores cover all.
+    # The steps read out only the band's rows; the calibrations' row scores cover all.
     for mode in range(len(able_bodied)):
         np.testing.assert_allclose(matchers[0].mode_row_scores(mode), matchers[1].mode_row_scores(mode), rtol=1e-10)
         assert np.isfinite(matchers[0].mode_row_scores(mode)).all()

@@ -160,3 +160,24 @@ def test_summary_lists_mode_segments(multispeed_csv: Path, capsys) -> None:
     out = capsys.readouterr().out
     assert "segments:" in out and "Slow" in out and "Med" in out
     assert "no time stamps" in out
+
+
+def test_bench_command_times_every_implementation(tmp_path: Path) -> None:
+    """`gait-estimator bench` (short run, no naive matcher): the paper matcher with each backend,
+    the default preset's matcher and whole updates, and at the smallest M the default preset's
+    update without numba too; every median and p99 positive."""
+    import json
+
+    from gait_estimator.core import compiled
+
+    report = tmp_path / "bench.json"
+    assert cli_main(["bench", "--modes", "7,14", "--steps", "200", "--naive-max-modes", "0", "--json", str(report)]) == 0
+    rows = {(r["modes"], r["impl"], r["preset"]): r for r in json.loads(report.read_text())["results"]}
+    first = "numba" if compiled.AVAILABLE else "numpy"
+    expected = {(7, f"estimator ({first})", "default"), (14, f"estimator ({first})", "paper"),
+                (14, f"incremental ({first})", "default")}
+    if compiled.AVAILABLE:
+        expected |= {(7, "estimator (numpy)", "default"), (7, "incremental (numpy)", "paper")}
+        assert (14, "estimator (numpy)", "default") not in rows
+    assert expected <= set(rows) and not any(k[1] == "naive" for k in rows)
+    assert all(r["step_us_median"] > 0 and r["step_us_p99"] >= r["step_us_median"] for r in rows.values())

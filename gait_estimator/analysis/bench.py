@@ -136,7 +136,8 @@ def bench(
     """Per-step time at each M in ``modes``: the paper's incremental matcher with each backend
     (``numba``, ``numpy``; numba only if installed), the naive matcher (M <= naive_max_modes), and
     for M <= preset_max_modes the default preset's matcher (all its time-scaled rows) and the whole
-    default-preset ``Estimator.update`` (and the paper preset's, for the ratio), all in one run."""
+    default-preset ``Estimator.update`` (and the paper preset's, for the ratio; at the smallest M
+    also the default preset's with the other backends), all in one run."""
     backends = backends or ["numba", "numpy"]
     backends = [b for b in backends if b != "numba" or compiled.AVAILABLE]
     if not backends:
@@ -175,6 +176,11 @@ def bench(
                 warmup = est.matcher.max_window
                 results.append({"modes": m, "impl": f"estimator ({backend})", "preset": preset,
                                 **time_updates(est, xd, lib.sample_rate_hz, warmup)})
+            if m == min(modes):  # the default preset without numba (the fallback), too
+                for other in backends[1:]:
+                    est = Estimator(lib, EstimatorConfig.preset("default"), backend=other)
+                    results.append({"modes": m, "impl": f"estimator ({other})", "preset": "default",
+                                    **time_updates(est, xd, lib.sample_rate_hz, est.matcher.max_window)})
     by_key = {(r["modes"], r["impl"], r["preset"]): r for r in results}
     for (m, impl, preset), r in by_key.items():
         paper = by_key.get((m, impl, "paper"))

@@ -428,6 +428,8 @@ class _MatcherBase:
     def window_weight(self) -> np.ndarray:
         """Per row, the weight of its current window (R,): the number of samples in it, or with
         ``recency_half_life`` the sum of their age weights."""
+        if self._count >= self.max_window:  # every window full
+            return self._wsum
         seen = np.minimum(self._count, self.windows)
         if self.recency_half_life > 0:
             return (1.0 - self._lam ** seen) / (1.0 - self._lam)
@@ -665,9 +667,7 @@ class IncrementalMatcher(_MatcherBase):
             self.reset()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
-        if self.backend != "numba":
-            return super().mode_row_scores(mode)
-        # The compiled step reads out only the rows in the scale band: score this mode's rows now.
+        # Both steps read out only the rows in the scale band: score this mode's rows now.
         rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
         sums = None
         if self._offset:
@@ -797,9 +797,21 @@ class IncrementalMatcher(_MatcherBase):
         self._ring[i % w] = d
         self._count += 1
         self._ring_sq[i % w] = dsq
-        if self._offset or self.normalize:
+        if not (self._offset or self.normalize):
+            return self._result(self._e)
+        if self._scale_allowed.all():
             return self._result(self._scores(self._e, sums))
-        return self._result(self._e)
+        # As the compiled step: read out only the rows in the scale band (mode_row_scores scores
+        # a mode's other rows when they are asked for).
+        rows = self._band_rows()
+        score = np.full(self._e.shape, np.inf)
+        score[rows] = self._scores(self._e[rows], None if sums is None else sums[rows], rows)
+        return self._result(score)
+
+    def _band_rows(self) -> np.ndarray:
+        """Indices of the rows in the scale band, mode-major."""
+        scales = np.flatnonzero(self._scale_allowed)
+        return (np.arange(self.n_modes)[:, None] * self.n_scales + scales[None, :]).ravel()
 
     def _advance(
         self, e: np.ndarray, buf: np.ndarray, d: np.ndarray, dsq: float, old: np.ndarray, old_sq: np.ndarray,
