@@ -11,11 +11,14 @@ Not a module of the package: the scripts import it from their own directory.
 
 from __future__ import annotations
 
+import json
 import math
 import multiprocessing
 import os
 import platform
+import shlex
 import sys
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -439,3 +442,24 @@ def train_lg2(shared: Path) -> KernelLibrary:
     raw stamps, the library at the recording's median rate)."""
     raw, _ = lg2_uniform(shared, None)
     return train_library([raw], "lg2", TrainOptions(heel_strikes="right_foot")).library
+
+
+def run_script_jobs(
+    script: str, argv: Sequence[str] | None, run: Any, jobs: Sequence[Any], workers: int
+) -> tuple[list[Any], str, float]:
+    """``run`` over ``jobs`` in ``workers`` forked processes (in order); also the command line that
+    reruns the script (``script`` with ``argv``, default sys.argv) and the seconds it took."""
+    t0 = time.perf_counter()
+    with multiprocessing.get_context("fork").Pool(workers) as p:
+        results = p.map(run, jobs, chunksize=1)
+    command = shlex.join(["python", f"experiments/{script}", *(sys.argv[1:] if argv is None else argv)])
+    return results, command, time.perf_counter() - t0
+
+
+def write_report(out: Path, text: str, summary: Any) -> None:
+    """``out``/tables.md (``text``, also printed) and ``out``/summary.json."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "tables.md").write_text(text, encoding="utf-8")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+    print(text)
+

@@ -14,17 +14,25 @@ counts as its mode. Deterministic apart from the per-update times (two workers o
 from __future__ import annotations
 
 import argparse
-import json
-import multiprocessing
-import shlex
-import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from bench_common import ROUTE, Dataset, Part, column_hs, md_table, part_stats, pct, pool, sec
+from bench_common import (
+    ROUTE,
+    Dataset,
+    Part,
+    column_hs,
+    md_table,
+    part_stats,
+    pct,
+    pool,
+    run_script_jobs,
+    sec,
+    write_report,
+)
 from synthetic import generate, near_copies, new_wearer
 
 from gait_estimator.analysis.bench import machine_info
@@ -138,16 +146,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=REPO / "experiments/results/near_copies", help="output directory")
     args = ap.parse_args(argv)
     jobs = [(lib, rule, s) for lib in libraries() for rule in RULES for s in range(args.wearers)]
-    t0 = time.perf_counter()
-    with multiprocessing.get_context("fork").Pool(args.jobs) as p:
-        results = p.map(run, jobs, chunksize=1)
+    results, command, seconds = run_script_jobs("near_copies.py", argv, run, jobs, args.jobs)
     summary = summarise(results)
-    command = shlex.join(["python", "experiments/near_copies.py", *(sys.argv[1:] if argv is None else argv)])
-    text = tables(summary, args.wearers, command, time.perf_counter() - t0)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "tables.md").write_text(text)
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    print(text)
+    write_report(args.out, tables(summary, args.wearers, command, seconds), summary)
     return 0
 
 

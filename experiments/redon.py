@@ -14,18 +14,25 @@ fresh estimator reads the second walk alone. Scored on the second walk. Determin
 from __future__ import annotations
 
 import argparse
-import json
-import multiprocessing
-import shlex
-import sys
-import time
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from bench_common import ROUTE, Dataset, Part, column_hs, md_table, part_stats, pct, pool, sec
+from bench_common import (
+    ROUTE,
+    Dataset,
+    Part,
+    column_hs,
+    md_table,
+    part_stats,
+    pct,
+    pool,
+    run_script_jobs,
+    sec,
+    write_report,
+)
 from synthetic import generate, new_wearer
 
 from gait_estimator.analysis.bench import machine_info
@@ -109,16 +116,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=REPO / "experiments/results/redon", help="output directory")
     args = ap.parse_args(argv)
     jobs = [(sensors, reader, s, args.gap) for sensors in SENSORS for reader in READERS for s in range(args.wearers)]
-    t0 = time.perf_counter()
-    with multiprocessing.get_context("fork").Pool(args.jobs) as p:
-        results = p.map(run, jobs, chunksize=1)
+    results, command, seconds = run_script_jobs("redon.py", argv, run, jobs, args.jobs)
     summary = summarise(results)
-    command = shlex.join(["python", "experiments/redon.py", *(sys.argv[1:] if argv is None else argv)])
-    text = tables(summary, args.wearers, args.gap, command, time.perf_counter() - t0)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "tables.md").write_text(text)
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    print(text)
+    write_report(args.out, tables(summary, args.wearers, args.gap, command, seconds), summary)
     return 0
 
 

@@ -420,13 +420,19 @@ def test_cli_save_adapted(tmp_path: Path, multispeed_csv: Path, capsys) -> None:
     assert cli_main(["process", str(multispeed_csv), "--save-adapted", str(out), "-q"]) == 2
 
 
+def _med_walk_with_offsets(able_bodied) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """25 kernel strides of Med read by sensors offset by (6, 1, 0, -1) deg (the right thigh's
+    far off): (offsets, times s at 230 Hz, samples deg)."""
+    offsets = np.array([6.0, 1.0, 0.0, -1.0])
+    x = np.tile(able_bodied.mode("Med").samples, (25, 1)) + offsets
+    return offsets, np.arange(len(x)) / 230.0, x
+
+
 def test_walking_calibration_finds_constant_sensor_offsets(able_bodied) -> None:
     """Level walking with sensors that read differently (re-donned; the right thigh 6 deg up):
     the default estimator learns the offsets from confident strides and keeps the mode; without
     calibration and with the paper's zero tolerance the offsets cost it the mode."""
-    offsets = np.array([6.0, 1.0, 0.0, -1.0])
-    x = np.tile(able_bodied.mode("Med").samples, (25, 1)) + offsets
-    t = np.arange(len(x)) / 230.0
+    offsets, t, x = _med_walk_with_offsets(able_bodied)
     est = Estimator(able_bodied)
     trace = run_estimator(est, t, x)
     np.testing.assert_allclose(est.sensor_offset_deg, offsets, atol=0.3)
@@ -449,9 +455,7 @@ def test_walking_calibration_counts_near_copies_as_one_mode(able_bodied, monkeyp
     from gait_estimator.core import estimator as estimator_module
 
     lib = near_copies(able_bodied, 5)
-    offsets = np.array([6.0, 1.0, 0.0, -1.0])
-    x = np.tile(able_bodied.mode("Med").samples, (25, 1)) + offsets
-    t = np.arange(len(x)) / 230.0
+    offsets, t, x = _med_walk_with_offsets(able_bodied)
     est = Estimator(lib)
     trace = run_estimator(est, t, x)
     np.testing.assert_allclose(est.sensor_offset_deg, offsets, atol=0.5)
@@ -578,21 +582,19 @@ def test_cadence_options_are_checked(bad) -> None:
 
 
 def test_a_long_gap_forgets_the_calibrations(able_bodied) -> None:
-    """Sensors re-donned while the stream stopped: a Med walk with one set of offsets, a gap, the
-    same walk with another. A gap longer than calibration_reset_gap_s (5 s) forgets the learnt
-    offsets (as reset_calibration does), so the second set is learnt from zero; a shorter gap only
-    restarts the window and keeps them; 0 keeps them whatever the gap."""
-    med = able_bodied.mode("Med").samples
-    before, after = np.array([6.0, 1.0, 0.0, -1.0]), np.array([-6.0, -1.0, 0.0, 1.0])
-    x1, x2 = np.tile(med, (25, 1)) + before, np.tile(med, (2, 1)) + after
-    t1 = np.arange(len(x1)) / 230.0
+    """Sensors re-donned while the stream stopped: a Med walk with one set of offsets, a gap, a
+    sample with the opposite offsets. A gap longer than calibration_reset_gap_s (5 s) forgets the
+    learnt offsets (as reset_calibration does), so the new ones are learnt starting from zero; a
+    shorter gap only restarts the window and keeps them; 0 keeps them whatever the gap."""
+    before, t1, x1 = _med_walk_with_offsets(able_bodied)
+    redonned = able_bodied.mode("Med").samples[0] - before
     runs = {}
     for name, gap, config in (("long", 6.0, EstimatorConfig()), ("short", 4.0, EstimatorConfig()),
                               ("never", 60.0, EstimatorConfig(calibration_reset_gap_s=0.0))):
         est = Estimator(able_bodied, config)
         run_estimator(est, t1, x1)
         learnt = est.sensor_offset_deg.copy()
-        est.update(t1[-1] + gap, x2[0])
+        est.update(t1[-1] + gap, redonned)
         runs[name] = (learnt, est.sensor_offset_deg.copy(), est.calibration_resets, est.resets)
     for learnt, _, _, _ in runs.values():
         np.testing.assert_allclose(learnt, before, atol=0.5)
@@ -612,9 +614,7 @@ def test_recency_weighting_starts_once_the_calibrations_have_read_three_strides(
     reported on a quarter of the strides, the offset is never learnt), so the default estimator
     matches with uniform weights until the calibrations have read 3 strides, then with
     recency_half_life; reset_calibration goes back to uniform weights."""
-    offsets = np.array([6.0, 1.0, 0.0, -1.0])
-    x = np.tile(able_bodied.mode("Med").samples, (25, 1)) + offsets
-    t = np.arange(len(x)) / 230.0
+    offsets, t, x = _med_walk_with_offsets(able_bodied)
     est = Estimator(able_bodied)
     weights = []
     for ti, xi in zip(t, x, strict=True):
