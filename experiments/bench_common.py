@@ -462,4 +462,3 @@ def write_report(out: Path, text: str, summary: Any) -> None:
     (out / "tables.md").write_text(text, encoding="utf-8")
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
     print(text)
-

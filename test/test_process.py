@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -166,8 +167,6 @@ def test_bench_command_times_every_implementation(tmp_path: Path) -> None:
     """`gait-estimator bench` (short run, no naive matcher): the paper matcher with each backend,
     the default preset's matcher and whole updates, and at the smallest M the default preset's
     update without numba too; every median and p99 positive."""
-    import json
-
     from gait_estimator.core import compiled
 
     report = tmp_path / "bench.json"
