@@ -41,6 +41,8 @@ from gait_estimator.io.library_io import load_library
 from gait_estimator.io.recording import Recording
 
 REPO = Path(__file__).resolve().parent.parent
+EARLY_S = 20.0
+"""The learnt offsets are compared with the true ones this long into the second walk."""
 SENSORS = ("re-donned", "same sensors")
 READERS = {
     "forgets after the gap (default)": EstimatorConfig(),
@@ -65,13 +67,17 @@ def run(job: tuple[str, str, int, float]) -> dict[str, Any]:
     if not reader.startswith("fresh"):
         for t, x in zip(first.time_s, first.angles_deg, strict=True):
             est.update(float(t), x)
-    rows = [(int(second.index[i]), est.update(float(second.time_s[i]), second.angles_deg[i])) for i in range(len(second))]
+    rows, early = [], None
+    for i in range(len(second)):
+        rows.append((int(second.index[i]), est.update(float(second.time_s[i]), second.angles_deg[i])))
+        if early is None and second.time_s[i] - second.time_s[0] >= EARLY_S:
+            early = est.sensor_offset_deg.copy()
     trace = trace_from_estimates(ab.mode_names, rows)
     part = Part(f"wearer {seed}", second, second, column_hs(second))
     stats = part_stats(Dataset("REDON", "", ab, [part]), part, trace)
     return {
         "sensors": sensors, "reader": reader, "seed": seed, "stats": stats,
-        "offset_error_deg": float(np.sqrt(np.mean((est.sensor_offset_deg - np.asarray(again.channel_offset_deg)) ** 2))),
+        "offset_error_deg": float(np.sqrt(np.mean((early - np.asarray(again.channel_offset_deg)) ** 2))),
         "calibration_resets": est.calibration_resets,
     }
 
@@ -96,7 +102,7 @@ def tables(summary: list[dict[str, Any]], wearers: int, gap: float, command: str
              sec(s["mean_delay_s"]), ", ".join(pct(a) for a in s["per_wearer_accuracy"]), f"{s['offset_error_deg']:.2f}°"]
             for s in summary]
     header = ["second walk", "estimator", "accuracy", "steady", "phase error", "transition delay",
-              "accuracy per wearer", "offset error at the end (RMS)"]
+              "accuracy per wearer", f"offset error {EARLY_S:g} s into it (RMS)"]
     m = machine_info()
     return (
         "### Re-donned sensors: the second of two walks with a stop between\n\n"
@@ -104,7 +110,8 @@ def tables(summary: list[dict[str, Any]], wearers: int, gap: float, command: str
         f"{m['python']}, numpy {m['numpy']}; deterministic). {wearers} synthetic new wearers (cross_session.py's "
         f"SYN-NEW) walk the route twice with a {gap:g} s stop between; re-donned = the second walk with other sensor "
         "offsets (those of wearer N + 10). Scored on the second walk. Offset error: RMS over the four channels of "
-        "learnt minus true sensor offset after the second walk, mean over wearers.\n\n" + md_table(header, rows) + "\n"
+        f"learnt minus true sensor offset {EARLY_S:g} s into the second walk, mean over wearers.\n\n"
+        + md_table(header, rows) + "\n"
     )
 
 
