@@ -231,6 +231,7 @@ class _MatcherBase:
         self._all = np.arange(self.n_modes)
         self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
         self._scale_allowed = np.ones(self.n_scales, dtype=np.bool_)
+        self._band_rows = np.arange(self.n_rows)  # the rows at those scales, mode-major
         self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
         self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
         self._mu = np.zeros((self.n_rows, N_CHANNELS))
@@ -347,6 +348,7 @@ class _MatcherBase:
         if a.size != self.n_scales or not a.any():
             raise ValueError(f"scale band needs {self.n_scales} flags, at least one true, got {a.tolist()}")
         self._scale_allowed[:] = a
+        self._band_rows = (np.arange(self.n_modes)[:, None] * self.n_scales + np.flatnonzero(a)[None, :]).ravel()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
         """The best score of every row (time scale) of ``mode`` at the last step, (S,), whatever
@@ -803,15 +805,10 @@ class IncrementalMatcher(_MatcherBase):
             return self._result(self._scores(self._e, sums))
         # As the compiled step: read out only the rows in the scale band (mode_row_scores scores
         # a mode's other rows when they are asked for).
-        rows = self._band_rows()
+        rows = self._band_rows
         score = np.full(self._e.shape, np.inf)
         score[rows] = self._scores(self._e[rows], None if sums is None else sums[rows], rows)
         return self._result(score)
-
-    def _band_rows(self) -> np.ndarray:
-        """Indices of the rows in the scale band, mode-major."""
-        scales = np.flatnonzero(self._scale_allowed)
-        return (np.arange(self.n_modes)[:, None] * self.n_scales + scales[None, :]).ravel()
 
     def _advance(
         self, e: np.ndarray, buf: np.ndarray, d: np.ndarray, dsq: float, old: np.ndarray, old_sq: np.ndarray,
