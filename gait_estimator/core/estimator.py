@@ -32,7 +32,7 @@ from .matcher import (
     check_window_fraction,
 )
 from .resample import UniformResampler
-from .supervisor import Estimate, Supervisor, load_transitions
+from .supervisor import Estimate, Supervisor, load_transitions, relative_margin
 
 RESAMPLE_MODES = ("auto", "on", "off")
 """``resample``: ``auto`` = on when the input has time stamps (JointState stamps, a recording's
@@ -259,13 +259,9 @@ class _StrideTrack(NamedTuple):
 
 
 def _margin_over(sse: np.ndarray, mode: int, rivals: np.ndarray) -> float:
-    """(lowest SSE among the ``rivals`` (bool mask) - SSE of ``mode``) / SSE of ``mode``: the
-    supervisor's confidence margin against those modes only (inf without rivals)."""
-    best = float(sse[rivals].min()) if rivals.any() else math.inf
-    own = float(sse[mode])
-    if own <= 0.0:
-        return math.inf if best > 0 else 0.0
-    return (best - own) / own
+    """The supervisor's confidence margin of ``mode`` against the ``rivals`` (bool mask) only
+    (inf without rivals)."""
+    return relative_margin(float(sse[mode]), float(sse[rivals].min()) if rivals.any() else math.inf)
 
 
 class Estimator:

@@ -236,7 +236,12 @@ def _margin(values: list[float], sse: np.ndarray, candidate: int, argmin: int) -
         best_other = sorted(values)[1] if len(values) <= 64 else float(np.partition(sse, 1)[1])
     else:
         best_other = values[argmin]
-    own = values[candidate]
+    return relative_margin(values[candidate], best_other)
+
+
+def relative_margin(own: float, best_other: float) -> float:
+    """The confidence margin (best_other - own) / own of an error ``own`` over the best other
+    ``best_other`` (inf when own is 0 and the other is not, 0 when both are)."""
     if own <= 0.0:
         return math.inf if best_other > 0 else 0.0
     return (best_other - own) / own
