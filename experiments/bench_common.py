@@ -444,6 +444,22 @@ def train_lg2(shared: Path) -> KernelLibrary:
     return train_library([raw], "lg2", TrainOptions(heel_strikes="right_foot")).library
 
 
+def machine_text() -> str:
+    """The machine a script's tables were measured on, for their first line."""
+    from gait_estimator.analysis.bench import machine_info
+
+    m = machine_info()
+    return (f"{m['processor']}, {m['cpus_allowed']} CPUs, Python {m['python']}, numpy {m['numpy']}, "
+            f"numba {m['numba'] or 'not installed'}")
+
+
+def recording_stats(lib: KernelLibrary, rec: Recording, trace: EstimateTrace) -> dict[str, Any]:
+    """``part_stats`` of ``trace`` against a recording that carries its own truth (labels and a
+    heel-strike column, as synthetic recordings do)."""
+    part = Part(rec.source, rec, rec, column_hs(rec))
+    return part_stats(Dataset("", "", lib, [part]), part, trace)
+
+
 def run_script_jobs(
     script: str, argv: Sequence[str] | None, run: Any, jobs: Sequence[Any], workers: int
 ) -> tuple[list[Any], str, float]:

@@ -20,22 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from bench_common import (
-    ROUTE,
-    Dataset,
-    Part,
-    column_hs,
-    md_table,
-    part_stats,
-    pct,
-    pool,
-    run_script_jobs,
-    sec,
-    write_report,
-)
+from bench_common import ROUTE, machine_text, md_table, pct, pool, recording_stats, run_script_jobs, sec, write_report
 from synthetic import generate, near_copies, new_wearer
 
-from gait_estimator.analysis.bench import machine_info
 from gait_estimator.core import estimator as estimator_module
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, trace_from_estimates
 from gait_estimator.core.kernels import KernelLibrary
@@ -78,8 +65,7 @@ def run(job: tuple[str, str, int]) -> dict[str, Any]:
         rows.append((int(rec.index[i]), e))
     names = [base_name(n, ab.mode_names) for n in lib.mode_names]
     trace = trace_from_estimates(names, rows)
-    part = Part(f"wearer {seed}", rec, rec, column_hs(rec), synthetic=syn)
-    stats = part_stats(Dataset("SYN-NEW", "", lib, [part]), part, trace)
+    stats = recording_stats(lib, rec, trace)
     truth_offset = np.asarray(wearer.channel_offset_deg)
     return {
         "library": lib_name, "rule": rule, "seed": seed, "stats": stats,
@@ -127,11 +113,9 @@ def tables(summary: list[dict[str, Any]], wearers: int, command: str, seconds: f
     header = ["library", "near copies", "accuracy", "steady", "phase error", "transition delay",
               "calibration strides per wearer", "offset error (RMS)", "cadence error", "recency weighting started",
               "µs per update (median)"]
-    m = machine_info()
-    machine = f"{m['processor']}, {m['cpus_allowed']} CPUs, Python {m['python']}, numpy {m['numpy']}, numba {m['numba']}"
     return (
         "### Near copies: SYN-NEW wearers read with libraries holding near copies of their modes\n\n"
-        f"Measured by `{command}` in {seconds:.0f} s ({machine}; per-update times from two workers sharing two "
+        f"Measured by `{command}` in {seconds:.0f} s ({machine_text()}; per-update times from two workers sharing two "
         f"cores). {wearers} synthetic new wearers (cross_session.py's SYN-NEW), default options; a reported copy "
         "counts as its mode. Offset error: RMS over the four channels of learnt minus true sensor offset, mean "
         "over wearers (0 learnt = the true offset's RMS). Cadence error: learnt time scale against the wearer's, "

@@ -20,22 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from bench_common import (
-    ROUTE,
-    Dataset,
-    Part,
-    column_hs,
-    md_table,
-    part_stats,
-    pct,
-    pool,
-    run_script_jobs,
-    sec,
-    write_report,
-)
+from bench_common import ROUTE, machine_text, md_table, pct, pool, recording_stats, run_script_jobs, sec, write_report
 from synthetic import generate, new_wearer
 
-from gait_estimator.analysis.bench import machine_info
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, trace_from_estimates
 from gait_estimator.io.library_io import load_library
 from gait_estimator.io.recording import Recording
@@ -73,8 +60,7 @@ def run(job: tuple[str, str, int, float]) -> dict[str, Any]:
         if early is None and second.time_s[i] - second.time_s[0] >= EARLY_S:
             early = est.sensor_offset_deg.copy()
     trace = trace_from_estimates(ab.mode_names, rows)
-    part = Part(f"wearer {seed}", second, second, column_hs(second))
-    stats = part_stats(Dataset("REDON", "", ab, [part]), part, trace)
+    stats = recording_stats(ab, second, trace)
     return {
         "sensors": sensors, "reader": reader, "seed": seed, "stats": stats,
         "offset_error_deg": float(np.sqrt(np.mean((early - np.asarray(again.channel_offset_deg)) ** 2))),
@@ -103,11 +89,10 @@ def tables(summary: list[dict[str, Any]], wearers: int, gap: float, command: str
             for s in summary]
     header = ["second walk", "estimator", "accuracy", "steady", "phase error", "transition delay",
               "accuracy per wearer", f"offset error {EARLY_S:g} s into it (RMS)"]
-    m = machine_info()
     return (
         "### Re-donned sensors: the second of two walks with a stop between\n\n"
-        f"Measured by `{command}` in {seconds:.0f} s ({m['processor']}, {m['cpus_allowed']} CPUs, Python "
-        f"{m['python']}, numpy {m['numpy']}; deterministic). {wearers} synthetic new wearers (cross_session.py's "
+        f"Measured by `{command}` in {seconds:.0f} s ({machine_text()}; deterministic). {wearers} synthetic new "
+        "wearers (cross_session.py's "
         f"SYN-NEW) walk the route twice with a {gap:g} s stop between; re-donned = the second walk with other sensor "
         "offsets (those of wearer N + 10). Scored on the second walk. Offset error: RMS over the four channels of "
         f"learnt minus true sensor offset {EARLY_S:g} s into the second walk, mean over wearers.\n\n"

@@ -19,10 +19,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from bench_common import ROUTE, md_table, run_script_jobs, write_report
+from bench_common import ROUTE, machine_text, md_table, run_script_jobs, write_report
 from synthetic import generate, new_wearer
 
-from gait_estimator.analysis.bench import machine_info
 from gait_estimator.core.estimator import Estimator, EstimatorConfig
 from gait_estimator.io.library_io import load_library
 
@@ -76,11 +75,10 @@ def tables(results: list[dict[str, Any]], command: str, seconds: float) -> str:
     duration = sum(r["duration_s"] for r in results)
     wrong = sum(r["wrong_s"] for r in results)
     changes = sum(len(es) for es in by.values())
-    m = machine_info()
     return (
         "### Transition errors: SYN-NEW's wrong time, per mode change\n\n"
-        f"Measured by `{command}` in {seconds:.0f} s ({m['processor']}, {m['cpus_allowed']} CPUs, Python "
-        f"{m['python']}, numpy {m['numpy']}; deterministic). {len(results)} synthetic new wearers, default options; "
+        f"Measured by `{command}` in {seconds:.0f} s ({machine_text()}; deterministic). {len(results)} synthetic new "
+        "wearers, default options; "
         f"{changes} truth mode changes in {duration:.0f} s. Per change (mean over wearers): time until the new mode "
         "is first reported, and the wrong time until the next change, reported as the previous mode or as a third "
         "mode.\n\n"
