@@ -32,6 +32,7 @@ from .matcher import (
     check_window_fraction,
 )
 from .resample import UniformResampler
+from .stride_reader import StrideStartReader
 from .supervisor import Estimate, Supervisor, load_transitions, relative_margin
 
 RESAMPLE_MODES = ("auto", "on", "off")
@@ -60,6 +61,13 @@ as one for the calibrations (``near_duplicates``): half the offset band and the 
 defaults, so reading a stride against either copy moves the offsets and the time scale by less
 than the matcher already lets pass. Without this a library holding near copies (e.g. one kernel
 per ramp angle) would never give a confident stride, and would never calibrate."""
+SWITCH_EVIDENCE_DEG2S = 20.0
+"""Default of ``switch_evidence_deg2s`` (the stride-start reader), chosen by
+experiments/cross_session.py (docs/new_wearer.md)."""
+READER_PHASE_AGREEMENT = 0.2
+"""Where the stride-start reader reports another mode, the supervised phase (the previous mode's,
+over the whole window) is kept if it is within this of the reader's (time since the heel strike
+over the new mode's stride), the reader's taken otherwise."""
 CADENCE_MIN_STRIDES = 3
 """Confident strides the cadence calibration reads before it narrows the time scales, and the
 calibrations read before recency weighting starts."""
@@ -124,6 +132,11 @@ OPTIONS: tuple[Option, ...] = (
     Option("adapt_min_confidence", 0.2, "personalisation: lowest confidence margin allowed during an adapted stride"),
     Option("adapt_max_step_deg", 5.0, "personalisation: per-sample clip (deg) of stride - kernel before weighting "
            "(one stride moves a kernel by at most adapt_rate x this)"),
+    Option("switch_evidence_deg2s", SWITCH_EVIDENCE_DEG2S, "stride-start reader: from every heel strike, compare the "
+           "stride so far with the start of every kernel (joined to the pose at the heel strike) and report "
+           "another mode once its squared error there is this much (deg^2 s) below every other's, so a mode change "
+           "shows within the stride it starts in (allowed transitions respected; dwell and confidence holds apply "
+           "to the matcher only); 0 = off", 0.0),
     Option("max_gap_s", 0.5, "a longer gap (s) between samples restarts the window (not ready until refilled); 0 = never"),
     Option("calibration_reset_gap_s", CALIBRATION_RESET_GAP_S, "a longer gap (s) between samples also forgets the "
            "learnt sensor offsets and cadence, as reset_calibration does (the sensors may have been re-donned "
@@ -174,6 +187,7 @@ class EstimatorConfig:
     adapt_rate: float = 0.0
     adapt_min_confidence: float = 0.2
     adapt_max_step_deg: float = 5.0
+    switch_evidence_deg2s: float = SWITCH_EVIDENCE_DEG2S
     max_gap_s: float = 0.5
     calibration_reset_gap_s: float = CALIBRATION_RESET_GAP_S
 
@@ -190,7 +204,8 @@ class EstimatorConfig:
             raise ValueError(f"channels must be a non-empty subset of {', '.join(CHANNELS)}, got {list(self.channels)}")
         check_channel_weights(self.channel_weights)
         check_channel_weights(self.effective_weights())
-        for name in ("min_confidence", "min_dwell_s", "max_gap_s", "calibration_reset_gap_s", "adapt_min_confidence"):
+        for name in ("min_confidence", "min_dwell_s", "max_gap_s", "calibration_reset_gap_s", "adapt_min_confidence",
+                     "switch_evidence_deg2s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not (isinstance(v, (int, float)) and v >= 0 and not math.isnan(v)):
                 raise ValueError(f"{name} must be a number >= 0, got {v!r}")
@@ -309,6 +324,11 @@ class Estimator:
             normalized=c.normalize_error,
             time_scales=self.matcher.time_scales,
         )
+        self.reader: StrideStartReader | None = None
+        if c.switch_evidence_deg2s > 0:
+            self.reader = StrideStartReader(library, c.effective_weights(), c.switch_evidence_deg2s, allowed,
+                                            self.matcher.backend)
+        self._reader_phase = math.nan  # the supervised phase at the previous step, for its heel strikes
         self.stamped = bool(stamped)
         self.resampler = UniformResampler(library.sample_rate_hz) if c.resamples(stamped) else None
         self.adapter: KernelAdapter | None = None
@@ -355,6 +375,9 @@ class Estimator:
             self.resampler.reset()
         if self.adapter is not None:
             self.adapter.reset()
+        if self.reader is not None:
+            self.reader.reset()
+            self._reader_phase = math.nan
         self.last_time = None
         self._last = None
 
@@ -402,7 +425,37 @@ class Estimator:
                 self.matcher.set_recency_half_life(c.effective_recency_half_life)
         if self.adapter is not None:
             self._adapt(x, est, result)
+        if self.reader is not None:
+            est = self._read_stride(x, est, result)
         return est
+
+    def _read_stride(self, x: Sample, est: Estimate, result: Any) -> Estimate:
+        """The stride-start reader's look at this sample: it restarts at a heel strike of the
+        supervised estimate (its phase wrapped) and its mode is reported where it differs."""
+        reader = self.reader
+        assert reader is not None
+        sample = np.array(x)
+        last, self._reader_phase = self._reader_phase, est.phase if est.ready else math.nan
+        if est.phase < last - 0.5:
+            band = self.matcher.time_scales[self.matcher.scale_band]
+            reader.start(sample, est.mode_index, self.sensor_offset_deg, band)
+            return est
+        read = reader.step(sample)
+        if read is None:
+            return est
+        m, phase, scale = read
+        if abs((est.phase - phase + 0.5) % 1.0 - 0.5) < READER_PHASE_AGREEMENT:
+            phase = est.phase  # the stride's phase clock goes on through the change (it is the steadier)
+        sse = est.sse
+        others = np.ones(sse.shape[0], dtype=bool)
+        others[m] = False
+        per_sample = max(float(sse[m]), 0.0) / (1 if self.config.normalize_error else max(int(result.window[m]), 1))
+        return Estimate(
+            time_s=est.time_s, mode_index=m, mode=self.library.mode_names[m], phase=phase, ready=True, sse=sse,
+            phases=est.phases, raw_mode_index=est.raw_mode_index, confidence=_margin_over(sse, m, others),
+            fit_rms_deg=math.sqrt(per_sample / self.matcher.active_channels), held=False,
+            phase_rate=est.phase_rate, cadence_ratio=1.0 / scale if self.matcher.n_scales > 1 else math.nan,
+        )
 
     def reset_calibration(self) -> None:
         """Forget the learnt sensor offsets and cadence (e.g. after the sensors were re-donned,
@@ -448,6 +501,8 @@ class Estimator:
         mine.adopt(theirs)
         for m in np.flatnonzero(mine.accepted):  # once per option change, not per sample
             self.matcher.set_kernel(int(m), mine.kernels[m])
+            if self.reader is not None:
+                self.reader.set_kernel(int(m), mine.kernels[m])
         return strides
 
     def _confident_stride_end(self, est: Estimate) -> bool:
@@ -540,6 +595,8 @@ class Estimator:
             new = adapter.finish_stride(m, stride, float(self.matcher.lengths[m * self.matcher.n_scales + variant]))
             if new is not None:
                 self.matcher.set_kernel(m, new)
+                if self.reader is not None:
+                    self.reader.set_kernel(m, new)
         adapter.track(step, m, est.phase, est.held, est.confidence, est.ready)
 
     def adapted_library(self) -> KernelLibrary:

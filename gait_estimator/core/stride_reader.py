@@ -1,0 +1,138 @@
+"""The stride-start reader: a second look at each stride from its heel strike, for mode changes.
+
+The matcher compares a whole stride's window with every kernel, so after a mode change the
+window holds mostly the old mode for a while. People change mode at a heel strike, and their
+joints do not jump there: the new mode's stride starts from the pose the old one ended in and
+joins its own course within about a quarter of a stride. The reader restarts at every reported
+heel strike and, for every mode m and time scale s, accumulates the squared error between the
+samples since then and the start of kernel m stretched by s, at the learnt sensor offsets, the
+kernel joined to the pose at the heel strike by a cosine fade over the first JOIN_FRACTION of
+the stride:
+
+    pred(t) = k_m(phi) + offset + w(phi) * (x_hs - k_m(0) - offset),   phi = t / (s * N_m)
+
+with w = 1 at the heel strike and 0 from phi = JOIN_FRACTION on. A mode's error is that of its
+best scale. Another mode than the one reported at the heel strike is reported once its error is
+``evidence`` below every other's, the reported one's included. Cost O(M * S * C) per step.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import compiled
+from .channels import N_CHANNELS
+from .kernels import KernelLibrary
+
+JOIN_FRACTION = 0.5
+"""Part of a stride (from the heel strike) over which a new mode's stride joins its own course
+from the pose the previous stride ended in. Chosen on LG_2_Ramp's real mode changes (0.25, the
+synthetic wearers' own fade, reads them less well; docs/new_wearer.md)."""
+READ_STRIDES = 1.5
+"""A reading stops this many (longest, most stretched) kernel strides after its heel strike if no
+other heel strike came."""
+
+
+class StrideStartReader:
+    """Reads each stride from its heel strike against the start of every kernel.
+
+    Args:
+        library: Kernel library (degrees); kernels may be replaced later (``set_kernel``).
+        channel_weights: Weight per channel in the squared error, CHANNELS order.
+        evidence_deg2s: How much lower a mode's squared error since the heel strike (deg^2,
+            weighted, summed over the library-rate samples, times the sample interval: deg^2 s)
+            must be than any other's, the reported mode's included, for the reader to report it; > 0.
+        allowed: Optional (M, M) bool: allowed[i, j] = mode j may follow mode i.
+        backend: ``numba`` (compiled step) or ``numpy``; ``auto`` = numba if installed.
+    """
+
+    def __init__(self, library: KernelLibrary, channel_weights: np.ndarray, evidence_deg2s: float,
+                 allowed: np.ndarray | None = None, backend: str = "auto") -> None:
+        if not (evidence_deg2s > 0 and math.isfinite(evidence_deg2s)):
+            raise ValueError(f"evidence_deg2s must be a finite number > 0, got {evidence_deg2s!r}")
+        self.lengths = np.array(library.lengths, dtype=np.int64)
+        self._starts = np.r_[0, np.cumsum(self.lengths)[:-1]]
+        self._flat = np.concatenate([m.samples for m in library.modes]).astype(np.float64)
+        self._weights = np.asarray(channel_weights, dtype=np.float64)
+        self._penalty = float(evidence_deg2s) * library.sample_rate_hz
+        self._allowed = allowed
+        self.compiled = compiled.AVAILABLE and backend in ("auto", "numba")
+        self.scales = np.ones(1)
+        self._active = False
+        self._steps = 0
+        self._max_steps = 0.0
+        self._reported = 0
+        self._bias = np.zeros(len(self.lengths))
+        self._error = np.zeros((len(self.lengths), 1))
+        self._join = np.zeros((len(self.lengths), N_CHANNELS))
+        self._offset = np.zeros(N_CHANNELS)
+
+    def set_kernel(self, mode: int, samples: np.ndarray) -> None:
+        """Replace the kernel of ``mode`` (same shape), degrees."""
+        s = self._starts[mode]
+        self._flat[s:s + self.lengths[mode]] = samples
+
+    def reset(self) -> None:
+        """Stop reading (until the next heel strike)."""
+        self._active = False
+
+    def start(self, sample_deg: np.ndarray, reported_mode: int, sensor_offset_deg: np.ndarray,
+              scales: np.ndarray) -> None:
+        """Begin reading at a heel strike.
+
+        Args:
+            sample_deg: The pose at the heel strike (C,), degrees.
+            reported_mode: The mode reported at the heel strike.
+            sensor_offset_deg: The learnt sensor offsets (C,), degrees.
+            scales: Stride-duration scales (S,) every mode is read at; its best one counts.
+        """
+        self._active = True
+        self._steps = 0
+        self.scales = np.asarray(scales, dtype=np.float64)
+        self._reported = reported_mode
+        self._offset = np.asarray(sensor_offset_deg, dtype=np.float64)
+        self._join = np.asarray(sample_deg, dtype=np.float64) - self._flat[self._starts] - self._offset  # (M, C)
+        self._error = np.zeros((len(self.lengths), self.scales.size))
+        self._bias = np.full(len(self.lengths), self._penalty)
+        if self._allowed is not None:
+            self._bias[~self._allowed[reported_mode]] = math.inf
+        self._bias[reported_mode] = 0.0
+        self._max_steps = READ_STRIDES * float(self.scales.max() * self.lengths.max())
+
+    def step(self, sample_deg: np.ndarray) -> tuple[int, float, float] | None:
+        """Read one library-rate sample (C,), degrees. Returns (mode, phase, time scale) while
+        the reader reports another mode than the one reported at the heel strike, else None."""
+        if not self._active:
+            return None
+        self._steps += 1
+        if self._steps > self._max_steps:
+            self._active = False
+            return None
+        x = np.asarray(sample_deg, dtype=np.float64)
+        if self.compiled:
+            best = int(compiled.reader_step(self._error, self._flat, self._starts, self.lengths, self.scales,
+                                            float(self._steps), x, self._offset, self._join, self._weights,
+                                            self._bias, JOIN_FRACTION))
+        else:
+            best = self._step_numpy(x)
+        if best == self._reported:
+            return None
+        s = int(self._error[best].argmin())
+        return best, float(self._steps / (self.scales[s] * self.lengths[best]) % 1.0), float(self.scales[s])
+
+    def _step_numpy(self, x: np.ndarray) -> int:
+        """``compiled.reader_step`` in numpy: update the errors, return the winning mode."""
+        pos = self._steps / self.scales  # (S,) kernel samples since the heel strike
+        whole = np.floor(pos)
+        frac = (pos - whole)[None, :, None]
+        i0 = whole.astype(np.int64)[None, :] % self.lengths[:, None]  # (M, S)
+        i1 = (i0 + 1) % self.lengths[:, None]
+        rows = self._starts[:, None]
+        k = (1.0 - frac) * self._flat[rows + i0] + frac * self._flat[rows + i1]
+        phi = pos[None, :] / self.lengths[:, None]
+        w = 0.5 * (1.0 + np.cos(np.pi * np.minimum(phi, JOIN_FRACTION) / JOIN_FRACTION))
+        r = x - k - self._offset - w[:, :, None] * self._join[:, None, :]
+        self._error += (r * r) @ self._weights
+        return int(np.argmin(self._error.min(axis=1) + self._bias))
