@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from synthetic import generate, new_wearer
@@ -9,18 +11,18 @@ from synthetic import generate, new_wearer
 from gait_estimator.core import compiled
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
 from gait_estimator.core.kernels import KernelLibrary, resample_stride
-from gait_estimator.core.stride_reader import JOIN_FRACTION, StrideStartReader
+from gait_estimator.core.stride_reader import JOIN_FRACTIONS, StrideStartReader
 
 ROUTE = [("Med", 5), ("RA", 5), ("Med", 4), ("SA", 5), ("Slow", 5), ("SD", 5), ("Fast", 5), ("RD", 5), ("Med", 5)]
 
 
-def _joined_stride(lib: KernelLibrary, old: str, new: str) -> np.ndarray:
-    """One stride of ``new`` from its heel strike, joined to the pose ``old`` ended in (the
-    reader's model), without the heel-strike sample itself."""
+def _joined_stride(lib: KernelLibrary, old: str, new: str, join: float = JOIN_FRACTIONS[-1]) -> np.ndarray:
+    """One stride of ``new`` from its heel strike, joined to the pose ``old`` ended in over
+    ``join`` of the stride (the reader's model), without the heel-strike sample itself."""
     k = lib.mode(new).samples
     n = k.shape[0]
     phi = np.arange(n) / n
-    w = np.where(phi < JOIN_FRACTION, 0.5 * (1 + np.cos(np.pi * phi / JOIN_FRACTION)), 0.0)
+    w = np.where(phi < join, 0.5 * (1 + np.cos(np.pi * phi / join)), 0.0)
     return (k + w[:, None] * (lib.mode(old).samples[0] - k[0]))[1:]
 
 
@@ -28,12 +30,12 @@ def test_reader_reads_the_new_mode_early_in_its_stride(able_bodied) -> None:
     names = able_bodied.mode_names
     reader = StrideStartReader(able_bodied, np.ones(4), evidence_deg2s=20.0)
     med = names.index("Med")
-    for new in ("SA", "RD", "SD"):
-        stride = _joined_stride(able_bodied, "Med", new)
+    for new, join in itertools.product(("SA", "RD", "SD"), JOIN_FRACTIONS):
+        stride = _joined_stride(able_bodied, "Med", new, join)
         reader.start(able_bodied.mode("Med").samples[0], med, np.zeros(4), np.array([1.0]))
         reads = [reader.step(x) for x in stride]
         first = next(i for i, r in enumerate(reads) if r is not None)
-        assert first < 0.4 * len(stride), (new, first)
+        assert first < 0.4 * len(stride), (new, join, first)
         assert {r[0] for r in reads[first:] if r is not None} == {names.index(new)}
         _, phase, scale = reads[len(stride) // 2]
         assert abs(phase - (len(stride) // 2 + 1) / able_bodied.mode(new).length) < 1e-9 and scale == 1.0
@@ -107,15 +109,20 @@ def test_default_estimator_follows_mode_changes_within_the_stride(able_bodied) -
     assert s1 >= s0 - 0.005, results
 
 
-def test_reader_is_silent_in_steady_walking(able_bodied) -> None:
-    """A new wearer walking Med only: the default estimator reports what it reports without the
-    reader, sample for sample."""
-    syn = generate(able_bodied, [("Med", 25)], new_wearer(2), seed=7)
-    rec = syn.recording
-    traces = [run_estimator(Estimator(able_bodied, EstimatorConfig(switch_evidence_deg2s=e)), rec.time_s, rec.angles_deg)
-              for e in (0.0, EstimatorConfig().switch_evidence_deg2s)]
-    np.testing.assert_array_equal(traces[0].mode_index, traces[1].mode_index)
-    np.testing.assert_array_equal(traces[0].phase, traces[1].phase)
+def test_reader_changes_little_in_steady_walking(able_bodied) -> None:
+    """New wearers walking Med or RA only, no mode change: the default estimator reports another
+    mode than without the reader on about 1 % of the rows (a stride start now and then fits a
+    neighbouring mode better), and is right as often within a point."""
+    changed, lost = [], []
+    for mode, seed in itertools.product(("Med", "RA"), (2, 3, 4)):
+        rec = generate(able_bodied, [(mode, 25)], new_wearer(seed), seed=7).recording
+        traces = [run_estimator(Estimator(able_bodied, EstimatorConfig(switch_evidence_deg2s=e)), rec.time_s,
+                                rec.angles_deg) for e in (0.0, EstimatorConfig().switch_evidence_deg2s)]
+        modes = [np.asarray(t.modes)[traces[0].ready] for t in traces]
+        changed.append(np.mean(modes[0] != modes[1]))
+        lost.append(np.mean(modes[0] == mode) - np.mean(modes[1] == mode))
+    assert np.mean(changed) < 0.02 and max(changed) < 0.04, changed
+    assert np.mean(lost) < 0.01, lost
 
 
 def test_reader_option_is_checked_and_off_in_the_paper_preset(able_bodied) -> None:

@@ -303,33 +303,37 @@ def _row_score(e, r, j, per_shift, mu_seg, s0, s1, s2, s3, wp, tau):  # pragma: 
 
 @njit(cache=True, nogil=True)
 def reader_step(  # pragma: no cover - compiled
-    err, flat, starts, lengths, scales, steps, x, offset, join, weights, bias, join_fraction
+    err, flat, starts, lengths, scales, steps, x, offset, join, weights, bias, joins
 ):
-    """One sample of the stride-start reader (``stride_reader.py``), in place on ``err`` (M, S):
-    add every (mode, scale) row's weighted squared error against its kernel start joined to the
-    heel-strike pose; return the mode whose best row plus ``bias`` is lowest."""
+    """One sample of the stride-start reader (``stride_reader.py``), in place on ``err``
+    (M, S * J): add every (mode, scale, join fraction) row's weighted squared error against its
+    kernel start joined to the heel-strike pose; return the mode whose best row plus ``bias`` is
+    lowest."""
     best_mode = 0
     best_value = np.inf
+    nj = joins.shape[0]
     for m in range(err.shape[0]):
         n = lengths[m]
         first = starts[m]
         mode_min = np.inf
-        for s in range(err.shape[1]):
+        for s in range(scales.shape[0]):
             pos = steps / scales[s]
             whole = np.floor(pos)
             f = pos - whole
             i0 = first + int(whole) % n
             i1 = first + (int(whole) + 1) % n
             phi = pos / n
-            w = 0.5 * (1.0 + np.cos(np.pi * phi / join_fraction)) if phi < join_fraction else 0.0
-            total = 0.0
-            for c in range(4):
-                r = x[c] - (1.0 - f) * flat[i0, c] - f * flat[i1, c] - offset[c] - w * join[m, c]
-                total += weights[c] * r * r
-            value = err[m, s] + total
-            err[m, s] = value
-            if value < mode_min:
-                mode_min = value
+            for q in range(nj):
+                jf = joins[q]
+                w = 0.5 * (1.0 + np.cos(np.pi * phi / jf)) if phi < jf else 0.0
+                total = 0.0
+                for c in range(4):
+                    r = x[c] - (1.0 - f) * flat[i0, c] - f * flat[i1, c] - offset[c] - w * join[m, c]
+                    total += weights[c] * r * r
+                value = err[m, s * nj + q] + total
+                err[m, s * nj + q] = value
+                if value < mode_min:
+                    mode_min = value
         if mode_min + bias[m] < best_value:
             best_value = mode_min + bias[m]
             best_mode = m

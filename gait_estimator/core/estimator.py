@@ -441,7 +441,7 @@ class Estimator:
             reader.start(sample, est.mode_index, self.sensor_offset_deg, band)
             return est
         read = reader.step(sample)
-        if read is None:
+        if read is None or read[0] == est.mode_index:  # nothing to add where the matcher agrees
             return est
         m, phase, scale = read
         if abs((est.phase - phase + 0.5) % 1.0 - 0.5) < READER_PHASE_AGREEMENT:

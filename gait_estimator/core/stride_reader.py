@@ -3,17 +3,17 @@
 The matcher compares a whole stride's window with every kernel, so after a mode change the
 window holds mostly the old mode for a while. People change mode at a heel strike, and their
 joints do not jump there: the new mode's stride starts from the pose the old one ended in and
-joins its own course within about a quarter of a stride. The reader restarts at every reported
-heel strike and, for every mode m and time scale s, accumulates the squared error between the
-samples since then and the start of kernel m stretched by s, at the learnt sensor offsets, the
-kernel joined to the pose at the heel strike by a cosine fade over the first JOIN_FRACTION of
-the stride:
+joins its own course within part of a stride. The reader restarts at every reported heel strike
+and, for every mode m, time scale s and join fraction f (JOIN_FRACTIONS), accumulates the squared
+error between the samples since then and the start of kernel m stretched by s, at the learnt
+sensor offsets, the kernel joined to the pose at the heel strike by a cosine fade over the first
+f of the stride:
 
-    pred(t) = k_m(phi) + offset + w(phi) * (x_hs - k_m(0) - offset),   phi = t / (s * N_m)
+    pred(t) = k_m(phi) + offset + w_f(phi) * (x_hs - k_m(0) - offset),   phi = t / (s * N_m)
 
-with w = 1 at the heel strike and 0 from phi = JOIN_FRACTION on. A mode's error is that of its
-best scale. Another mode than the one reported at the heel strike is reported once its error is
-``evidence`` below every other's, the reported one's included. Cost O(M * S * C) per step.
+with w_f = 1 at the heel strike and 0 from phi = f on. A mode's error is that of its best (scale,
+join) row. Another mode than the one reported at the heel strike is reported once its error is
+``evidence`` below every other's, the reported one's included. Cost O(M * S * F * C) per step.
 """
 
 from __future__ import annotations
@@ -26,10 +26,11 @@ from . import compiled
 from .channels import N_CHANNELS
 from .kernels import KernelLibrary
 
-JOIN_FRACTION = 0.5
-"""Part of a stride (from the heel strike) over which a new mode's stride joins its own course
-from the pose the previous stride ended in. Chosen on LG_2_Ramp's real mode changes (0.25, the
-synthetic wearers' own fade, reads them less well; docs/new_wearer.md)."""
+JOIN_FRACTIONS = (0.25, 0.65)
+"""Parts of a stride (from the heel strike) over which a new mode's stride may join its own course
+from the pose the previous stride ended in; each mode is read with the one that fits it best.
+0.25 is the synthetic wearers' own fade; LG_2_Ramp's real mode changes are read best with 0.4-0.65
+(experiments/stride_reader.py, docs/new_wearer.md)."""
 READ_STRIDES = 1.5
 """A reading stops this many (longest, most stretched) kernel strides after its heel strike if no
 other heel strike came."""
@@ -65,6 +66,7 @@ class StrideStartReader:
         self._max_steps = 0.0
         self._reported = 0
         self._bias = np.zeros(len(self.lengths))
+        self._joins = np.asarray(JOIN_FRACTIONS, dtype=np.float64)
         self._error = np.zeros((len(self.lengths), 1))
         self._join = np.zeros((len(self.lengths), N_CHANNELS))
         self._offset = np.zeros(N_CHANNELS)
@@ -94,7 +96,8 @@ class StrideStartReader:
         self._reported = reported_mode
         self._offset = np.asarray(sensor_offset_deg, dtype=np.float64)
         self._join = np.asarray(sample_deg, dtype=np.float64) - self._flat[self._starts] - self._offset  # (M, C)
-        self._error = np.zeros((len(self.lengths), self.scales.size))
+        self._joins = np.asarray(JOIN_FRACTIONS, dtype=np.float64)
+        self._error = np.zeros((len(self.lengths), self.scales.size * self._joins.size))
         self._bias = np.full(len(self.lengths), self._penalty)
         if self._allowed is not None:
             self._bias[~self._allowed[reported_mode]] = math.inf
@@ -114,12 +117,12 @@ class StrideStartReader:
         if self.compiled:
             best = int(compiled.reader_step(self._error, self._flat, self._starts, self.lengths, self.scales,
                                             float(self._steps), x, self._offset, self._join, self._weights,
-                                            self._bias, JOIN_FRACTION))
+                                            self._bias, self._joins))
         else:
             best = self._step_numpy(x)
         if best == self._reported:
             return None
-        s = int(self._error[best].argmin())
+        s = int(self._error[best].argmin()) // self._joins.size
         return best, float(self._steps / (self.scales[s] * self.lengths[best]) % 1.0), float(self.scales[s])
 
     def _step_numpy(self, x: np.ndarray) -> int:
@@ -130,9 +133,9 @@ class StrideStartReader:
         i0 = whole.astype(np.int64)[None, :] % self.lengths[:, None]  # (M, S)
         i1 = (i0 + 1) % self.lengths[:, None]
         rows = self._starts[:, None]
-        k = (1.0 - frac) * self._flat[rows + i0] + frac * self._flat[rows + i1]
-        phi = pos[None, :] / self.lengths[:, None]
-        w = 0.5 * (1.0 + np.cos(np.pi * np.minimum(phi, JOIN_FRACTION) / JOIN_FRACTION))
-        r = x - k - self._offset - w[:, :, None] * self._join[:, None, :]
-        self._error += (r * r) @ self._weights
+        k = (1.0 - frac) * self._flat[rows + i0] + frac * self._flat[rows + i1]  # (M, S, C)
+        phi = (pos[None, :] / self.lengths[:, None])[:, :, None]  # (M, S, 1) against joins (F,)
+        w = np.where(phi < self._joins, 0.5 * (1.0 + np.cos(np.pi * np.minimum(phi / self._joins, 1.0))), 0.0)
+        r = (x - k - self._offset)[:, :, None, :] - w[..., None] * self._join[:, None, None, :]  # (M, S, F, C)
+        self._error += ((r * r) @ self._weights).reshape(self._error.shape)
         return int(np.argmin(self._error.min(axis=1) + self._bias))
