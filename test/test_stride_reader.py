@@ -13,6 +13,7 @@ from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estima
 from gait_estimator.core.kernels import KernelLibrary, resample_stride
 from gait_estimator.core.stride_reader import JOIN_FRACTIONS, StrideStartReader
 
+EVIDENCE = 20.0  # deg^2 s: the value measured in docs/new_wearer.md (the reader is opt-in)
 ROUTE = [("Med", 5), ("RA", 5), ("Med", 4), ("SA", 5), ("Slow", 5), ("SD", 5), ("Fast", 5), ("RD", 5), ("Med", 5)]
 
 
@@ -64,7 +65,8 @@ def test_reader_stops_after_one_and_a_half_strides_and_on_reset(able_bodied) -> 
     assert all(reader.step(x) is None for x in stride)
     reader.start(able_bodied.mode("Med").samples[0], 0, np.zeros(4), np.array([1.0]))
     longest = int(1.5 * able_bodied.lengths.max())
-    reads = [reader.step(stride[i % len(stride)]) for i in range(longest + 5)]
+    sd = able_bodied.mode("SD").samples
+    reads = [reader.step(stride[i] if i < len(stride) else sd[i % len(sd)]) for i in range(longest + 5)]
     assert reads[longest - 1] is not None and reads[longest:] == [None] * 5
 
 
@@ -83,10 +85,10 @@ def test_reader_numba_and_numpy_agree(able_bodied) -> None:
     np.testing.assert_allclose(runs[0][1], runs[1][1], rtol=1e-12)
 
 
-def test_default_estimator_follows_mode_changes_within_the_stride(able_bodied) -> None:
-    """Synthetic new wearer 0 walks a route with 8 mode changes: with the reader (the default)
-    the first correct estimate after a change comes much sooner and more rows are right; in
-    steady walking (from a whole stride into a run on) nothing is lost."""
+def test_reader_follows_mode_changes_within_the_stride(able_bodied) -> None:
+    """Synthetic new wearer 0 walks a route with 8 mode changes: with the reader the first
+    correct estimate after a change comes much sooner and more rows are right; in steady walking
+    (from a whole stride into a run on) nothing is lost."""
     syn = generate(able_bodied, ROUTE, new_wearer(0), seed=1000)
     rec = syn.recording
     truth = np.asarray(rec.labels).astype(str)
@@ -95,7 +97,7 @@ def test_default_estimator_follows_mode_changes_within_the_stride(able_bodied) -
     run_start = starts[np.searchsorted(starts, np.arange(len(truth)), side="right") - 1]
     steady = rec.time_s - rec.time_s[run_start] > 1.4  # a whole stride (up to 1.1 s) into the run
     results = {}
-    for evidence in (0.0, EstimatorConfig().switch_evidence_deg2s):
+    for evidence in (0.0, EVIDENCE):
         est = Estimator(able_bodied, EstimatorConfig(switch_evidence_deg2s=evidence))
         assert (est.reader is None) == (evidence == 0.0)
         trace = run_estimator(est, rec.time_s, rec.angles_deg)
@@ -110,14 +112,14 @@ def test_default_estimator_follows_mode_changes_within_the_stride(able_bodied) -
 
 
 def test_reader_changes_little_in_steady_walking(able_bodied) -> None:
-    """New wearers walking Med or RA only, no mode change: the default estimator reports another
-    mode than without the reader on about 1 % of the rows (a stride start now and then fits a
-    neighbouring mode better), and is right as often within a point."""
+    """New wearers walking Med or RA only, no mode change: with the reader the estimator reports
+    another mode than without it on at most a few rows in a hundred (a stride start now and then
+    fits a neighbouring mode better), and is right as often within a point."""
     changed, lost = [], []
     for mode, seed in itertools.product(("Med", "RA"), (2, 3, 4)):
         rec = generate(able_bodied, [(mode, 25)], new_wearer(seed), seed=7).recording
         traces = [run_estimator(Estimator(able_bodied, EstimatorConfig(switch_evidence_deg2s=e)), rec.time_s,
-                                rec.angles_deg) for e in (0.0, EstimatorConfig().switch_evidence_deg2s)]
+                                rec.angles_deg) for e in (0.0, EVIDENCE)]
         modes = [np.asarray(t.modes)[traces[0].ready] for t in traces]
         changed.append(np.mean(modes[0] != modes[1]))
         lost.append(np.mean(modes[0] == mode) - np.mean(modes[1] == mode))
@@ -125,13 +127,13 @@ def test_reader_changes_little_in_steady_walking(able_bodied) -> None:
     assert np.mean(lost) < 0.01, lost
 
 
-def test_reader_option_is_checked_and_off_in_the_paper_preset(able_bodied) -> None:
+def test_reader_option_is_checked_and_off_by_default(able_bodied) -> None:
     with pytest.raises(ValueError, match="switch_evidence_deg2s"):
         EstimatorConfig(switch_evidence_deg2s=-1.0)
     with pytest.raises(ValueError, match="evidence_deg2s"):
         StrideStartReader(able_bodied, np.ones(4), float("inf"))
-    assert EstimatorConfig.preset("paper").switch_evidence_deg2s == 0.0
-    assert Estimator(able_bodied, EstimatorConfig.preset("paper")).reader is None
+    assert EstimatorConfig.preset("paper").switch_evidence_deg2s == 0.0 == EstimatorConfig().switch_evidence_deg2s
+    assert Estimator(able_bodied).reader is None
 
 
 def test_reader_reads_personalised_kernels(able_bodied) -> None:

@@ -61,9 +61,6 @@ as one for the calibrations (``near_duplicates``): half the offset band and the 
 defaults, so reading a stride against either copy moves the offsets and the time scale by less
 than the matcher already lets pass. Without this a library holding near copies (e.g. one kernel
 per ramp angle) would never give a confident stride, and would never calibrate."""
-SWITCH_EVIDENCE_DEG2S = 20.0
-"""Default of ``switch_evidence_deg2s`` (the stride-start reader), chosen by
-experiments/cross_session.py (docs/new_wearer.md)."""
 READER_PHASE_AGREEMENT = 0.2
 """Where the stride-start reader reports another mode, the supervised phase (the previous mode's,
 over the whole window) is kept if it is within this of the reader's (time since the heel strike
@@ -132,11 +129,12 @@ OPTIONS: tuple[Option, ...] = (
     Option("adapt_min_confidence", 0.2, "personalisation: lowest confidence margin allowed during an adapted stride"),
     Option("adapt_max_step_deg", 5.0, "personalisation: per-sample clip (deg) of stride - kernel before weighting "
            "(one stride moves a kernel by at most adapt_rate x this)"),
-    Option("switch_evidence_deg2s", SWITCH_EVIDENCE_DEG2S, "stride-start reader: from every heel strike, compare the "
+    Option("switch_evidence_deg2s", 0.0, "stride-start reader (opt-in, e.g. 20): from every heel strike, compare the "
            "stride so far with the start of every kernel (joined to the pose at the heel strike) and report "
-           "another mode once its squared error there is this much (deg^2 s) below every other's, so a mode change "
-           "shows within the stride it starts in (allowed transitions respected; dwell and confidence holds apply "
-           "to the matcher only); 0 = off", 0.0),
+           "another mode once its squared error there is this much (deg^2 s) below every other's and a third of "
+           "the reported mode's, so a mode change shows within the stride it starts in, at the price of short "
+           "false switches in irregular strides (allowed transitions respected; dwell and confidence holds apply "
+           "to the matcher only); 0 = off"),
     Option("max_gap_s", 0.5, "a longer gap (s) between samples restarts the window (not ready until refilled); 0 = never"),
     Option("calibration_reset_gap_s", CALIBRATION_RESET_GAP_S, "a longer gap (s) between samples also forgets the "
            "learnt sensor offsets and cadence, as reset_calibration does (the sensors may have been re-donned "
@@ -187,7 +185,7 @@ class EstimatorConfig:
     adapt_rate: float = 0.0
     adapt_min_confidence: float = 0.2
     adapt_max_step_deg: float = 5.0
-    switch_evidence_deg2s: float = SWITCH_EVIDENCE_DEG2S
+    switch_evidence_deg2s: float = 0.0
     max_gap_s: float = 0.5
     calibration_reset_gap_s: float = CALIBRATION_RESET_GAP_S
 
