@@ -150,3 +150,25 @@ def test_reader_reads_personalised_kernels(able_bodied) -> None:
         reader.start(able_bodied.mode("Med").samples[0], med, np.zeros(4), np.array([1.0]))
         reads[personalised] = {r[0] for r in (reader.step(x) for x in stride) if r is not None}
     assert sd in reads[False] and sd not in reads[True]
+
+
+def test_reader_reads_only_after_strides_that_fitted_as_usual(able_bodied) -> None:
+    """No reading before the first confident stride has shown how well this wearer's strides fit,
+    nor at a heel strike after a stride the reported mode fitted worse than that; the learnt fit
+    is forgotten with the calibrations and kept across an option change."""
+    rec = generate(able_bodied, [("Med", 8), ("SD", 4)], new_wearer(1), seed=3).recording
+    est = Estimator(able_bodied, EstimatorConfig(switch_evidence_deg2s=EVIDENCE))
+    reader = est.reader
+    assert reader is not None
+    starts = []
+    original = reader.start
+    reader.start = lambda *a: (starts.append((est.fit_strides, est.last_time)), original(*a))  # type: ignore[method-assign]
+    for t, x in zip(rec.time_s, rec.angles_deg, strict=True):
+        est.update(float(t), x)
+    assert starts and min(n for n, _ in starts) >= 1 and est.fit_strides >= 1
+    assert np.isfinite(est.typical_fit2) and est.typical_fit2 > 0
+    other = Estimator(able_bodied, EstimatorConfig(switch_evidence_deg2s=40.0))
+    other.adopt_calibration(est)
+    assert (other.fit_strides, other.typical_fit2) == (est.fit_strides, est.typical_fit2)
+    est.reset_calibration()
+    assert est.fit_strides == 0 and np.isnan(est.typical_fit2)

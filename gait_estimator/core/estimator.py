@@ -61,6 +61,12 @@ as one for the calibrations (``near_duplicates``): half the offset band and the 
 defaults, so reading a stride against either copy moves the offsets and the time scale by less
 than the matcher already lets pass. Without this a library holding near copies (e.g. one kernel
 per ramp angle) would never give a confident stride, and would never calibrate."""
+READER_FIT_GATE = 1.0
+"""The stride-start reader starts a reading only at a heel strike where the reported mode fitted
+the stride that ended (its RMS fit over the window) within this factor of how the wearer's
+confident strides usually fit: a stride that starts a new mode follows a stride the old mode
+explained, while in turns, stops or a treadmill slowing down no kernel fits the strides before
+either (docs/new_wearer.md)."""
 READER_PHASE_AGREEMENT = 0.2
 """Where the stride-start reader reports another mode, the supervised phase (the previous mode's,
 over the whole window) is kept if it is within this of the reader's (time since the heel strike
@@ -129,12 +135,12 @@ OPTIONS: tuple[Option, ...] = (
     Option("adapt_min_confidence", 0.2, "personalisation: lowest confidence margin allowed during an adapted stride"),
     Option("adapt_max_step_deg", 5.0, "personalisation: per-sample clip (deg) of stride - kernel before weighting "
            "(one stride moves a kernel by at most adapt_rate x this)"),
-    Option("switch_evidence_deg2s", 0.0, "stride-start reader (opt-in, e.g. 20): from every heel strike, compare the "
-           "stride so far with the start of every kernel (joined to the pose at the heel strike) and report "
-           "another mode once its squared error there is this much (deg^2 s) below every other's and a third of "
-           "the reported mode's, so a mode change shows within the stride it starts in, at the price of short "
-           "false switches in irregular strides (allowed transitions respected; dwell and confidence holds apply "
-           "to the matcher only); 0 = off"),
+    Option("switch_evidence_deg2s", 0.0, "stride-start reader (opt-in, e.g. 20): from every heel strike after a stride "
+           "the reported mode fitted as well as the wearer's strides usually fit, compare the stride so far with "
+           "the start of every kernel (joined to the pose at the heel strike) and report another mode once its "
+           "squared error there is this much (deg^2 s) below every other's, so a mode change shows within the "
+           "stride it starts in (allowed transitions respected; dwell and confidence holds apply to the matcher "
+           "only); 0 = off"),
     Option("max_gap_s", 0.5, "a longer gap (s) between samples restarts the window (not ready until refilled); 0 = never"),
     Option("calibration_reset_gap_s", CALIBRATION_RESET_GAP_S, "a longer gap (s) between samples also forgets the "
            "learnt sensor offsets and cadence, as reset_calibration does (the sensors may have been re-donned "
@@ -327,6 +333,9 @@ class Estimator:
             self.reader = StrideStartReader(library, c.effective_weights(), c.switch_evidence_deg2s, allowed,
                                             self.matcher.backend)
         self._reader_phase = math.nan  # the supervised phase at the previous step, for its heel strikes
+        self.fit_strides = 0
+        self.typical_fit2 = math.nan
+        """Mean squared RMS fit (deg^2) of the confident strides read so far (``fit_strides``)."""
         self.stamped = bool(stamped)
         self.resampler = UniformResampler(library.sample_rate_hz) if c.resamples(stamped) else None
         self.adapter: KernelAdapter | None = None
@@ -413,12 +422,14 @@ class Estimator:
         result = self.matcher.step(x)
         est = self.supervisor.update(time_s, result)
         c = self.config
-        if self._calibrates and self._confident_stride_end(est):
+        if (self._calibrates or self.reader is not None) and self._confident_stride_end(est):
             if c.offset_calibration_rate > 0:
                 self._calibrate_offset(est, result)
             if self._learns_cadence:
                 self._calibrate_cadence(est)
-            self.calibration_strides += 1
+            if self._calibrates:
+                self.calibration_strides += 1
+            self._learn_typical_fit(est.fit_rms_deg)
             if self._recency_waits and self.calibration_strides == CADENCE_MIN_STRIDES:
                 self.matcher.set_recency_half_life(c.effective_recency_half_life)
         if self.adapter is not None:
@@ -435,8 +446,11 @@ class Estimator:
         sample = np.array(x)
         last, self._reader_phase = self._reader_phase, est.phase if est.ready else math.nan
         if est.phase < last - 0.5:
-            band = self.matcher.time_scales[self.matcher.scale_band]
-            reader.start(sample, est.mode_index, self.sensor_offset_deg, band)
+            if est.fit_rms_deg ** 2 <= READER_FIT_GATE ** 2 * self.typical_fit2:  # False while nan
+                band = self.matcher.time_scales[self.matcher.scale_band]
+                reader.start(sample, est.mode_index, self.sensor_offset_deg, band)
+            else:
+                reader.reset()
             return est
         read = reader.step(sample)
         if read is None or read[0] == est.mode_index:  # nothing to add where the matcher agrees
@@ -455,9 +469,19 @@ class Estimator:
             phase_rate=est.phase_rate, cadence_ratio=1.0 / scale if self.matcher.n_scales > 1 else math.nan,
         )
 
+    def _learn_typical_fit(self, fit_rms_deg: float) -> None:
+        """Running mean of the squared RMS fit of confident strides (the mean of the first ten,
+        then a tenth of the way per stride): how well this wearer's strides usually fit."""
+        self.fit_strides += 1
+        rate = max(0.1, 1.0 / self.fit_strides)
+        f2 = fit_rms_deg * fit_rms_deg
+        self.typical_fit2 = f2 if self.fit_strides == 1 else self.typical_fit2 + rate * (f2 - self.typical_fit2)
+
     def reset_calibration(self) -> None:
         """Forget the learnt sensor offsets and cadence (e.g. after the sensors were re-donned,
-        or for another wearer)."""
+        or for another wearer), and how well the wearer's strides usually fit."""
+        self.fit_strides = 0
+        self.typical_fit2 = math.nan
         self.sensor_offset_deg = np.zeros(N_CHANNELS)
         self.matcher.set_sensor_offset(self.sensor_offset_deg)
         self.cadence_scale = math.nan
@@ -481,6 +505,7 @@ class Estimator:
             self._narrow_scales()
         if self._calibrates:
             self.calibration_strides = other.calibration_strides
+        self.fit_strides, self.typical_fit2 = other.fit_strides, other.typical_fit2
         if self._recency_waits and self.calibration_strides >= CADENCE_MIN_STRIDES:
             self.matcher.set_recency_half_life(self.config.effective_recency_half_life)
 

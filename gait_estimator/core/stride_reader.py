@@ -13,8 +13,7 @@ f of the stride:
 
 with w_f = 1 at the heel strike and 0 from phi = f on. A mode's error is that of its best (scale,
 join) row. Another mode than the one reported at the heel strike is reported once its error is
-``evidence`` below every other's, the reported one's included, and at most 1 / ERROR_RATIO of the
-reported one's. Cost O(M * S * F * C) per step.
+``evidence`` below every other's, the reported one's included. Cost O(M * S * F * C) per step.
 """
 
 from __future__ import annotations
@@ -32,10 +31,6 @@ JOIN_FRACTIONS = (0.25, 0.65)
 from the pose the previous stride ended in; each mode is read with the one that fits it best.
 0.25 is the synthetic wearers' own fade; LG_2_Ramp's real mode changes are read best with 0.4-0.65
 (experiments/stride_reader.py, docs/new_wearer.md)."""
-ERROR_RATIO = 3.0
-"""The reported mode's error since the heel strike must be at least this many times another
-mode's for the reader to report that one: where no kernel fits the stride (turns, stops, a
-treadmill slowing down) the least bad one is not taken for a mode change."""
 READ_STRIDES = 1.5
 """A reading stops this many (longest, most stretched) kernel strides after its heel strike if no
 other heel strike came."""
@@ -126,9 +121,6 @@ class StrideStartReader:
         else:
             best = self._step_numpy(x)
         if best == self._reported:
-            return None
-        error = self._error[best].min()
-        if error * ERROR_RATIO > self._error[self._reported].min():
             return None
         s = int(self._error[best].argmin()) // self._joins.size
         return best, float(self._steps / (self.scales[s] * self.lengths[best]) % 1.0), float(self.scales[s])
