@@ -439,8 +439,9 @@ class Estimator:
         return est
 
     def _read_stride(self, x: Sample, est: Estimate, result: Any) -> Estimate:
-        """The stride-start reader's look at this sample: it restarts at a heel strike of the
-        supervised estimate (its phase wrapped) and its mode is reported where it differs."""
+        """The stride-start reader's look at this sample: a reading starts at a heel strike of the
+        supervised estimate (its phase wrapped) after a stride it fitted as well as usual
+        (READER_FIT_GATE), and the reader's mode is reported where it differs."""
         reader = self.reader
         assert reader is not None
         sample = np.array(x)

@@ -3,11 +3,11 @@
 The matcher compares a whole stride's window with every kernel, so after a mode change the
 window holds mostly the old mode for a while. People change mode at a heel strike, and their
 joints do not jump there: the new mode's stride starts from the pose the old one ended in and
-joins its own course within part of a stride. The reader restarts at every reported heel strike
-and, for every mode m, time scale s and join fraction f (JOIN_FRACTIONS), accumulates the squared
-error between the samples since then and the start of kernel m stretched by s, at the learnt
-sensor offsets, the kernel joined to the pose at the heel strike by a cosine fade over the first
-f of the stride:
+joins its own course within part of a stride. A reading starts at a reported heel strike (the
+estimator starts one after a stride the reported mode fitted as well as usual) and, for every mode
+m, time scale s and join fraction f (JOIN_FRACTIONS), accumulates the squared error between the
+samples since then and the start of kernel m stretched by s, at the learnt sensor offsets, the
+kernel joined to the pose at the heel strike by a cosine fade over the first f of the stride:
 
     pred(t) = k_m(phi) + offset + w_f(phi) * (x_hs - k_m(0) - offset),   phi = t / (s * N_m)
 
@@ -70,6 +70,10 @@ class StrideStartReader:
         self._error = np.zeros((len(self.lengths), 1))
         self._join = np.zeros((len(self.lengths), N_CHANNELS))
         self._offset = np.zeros(N_CHANNELS)
+        if self.compiled:  # compile (or load the cached code) now, not at the first heel strike
+            compiled.reader_step(np.zeros((len(self.lengths), self._joins.size)), self._flat, self._starts,
+                                 self.lengths, self.scales, 1.0, np.zeros(N_CHANNELS), self._offset, self._join,
+                                 self._weights, self._bias, self._joins)
 
     def set_kernel(self, mode: int, samples: np.ndarray) -> None:
         """Replace the kernel of ``mode`` (same shape), degrees."""
