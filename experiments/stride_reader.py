@@ -35,7 +35,7 @@ from typing import Any
 
 import cross_session
 import numpy as np
-from bench_common import data_root, machine_text, md_table, write_report
+from bench_common import data_root, machine_text, md_table, pct, write_report
 
 from gait_estimator.core import estimator, stride_reader
 from gait_estimator.core.estimator import Estimator, EstimatorConfig
@@ -85,9 +85,6 @@ def run_joins(evidence: Sequence[float], jobs: int, out: Path) -> dict[str, Any]
 
 
 def row(join: str, gate: str, name: str, r: dict[str, Any]) -> list[str]:
-    def pct(x: float | None, digits: int = 1) -> str:
-        return "–" if x is None else f"{100 * x:.{digits}f} %"
-
     lg2, f = r["LG2-AB"], r["false"]
     return [join, gate, name, pct(r["SYN-NEW"]["accuracy"]), pct(r["SYN-NEW-L"]["accuracy"]), pct(lg2["accuracy"]),
             pct(lg2["per_mode_accuracy"].get("level")), pct(lg2["phase_error_mean"], 2),
@@ -113,7 +110,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for j in joins:
             for gate in gates:
-                # read at every heel strike; forked workers inherit them
+                # read when each estimator is built; forked workers inherit them
                 stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE = j, gate
                 name = " + ".join(f"{v:g}" for v in j) + f" / {gate:g}"
                 summary[name] = run_joins(evidence, args.jobs, Path(tmp) / name.replace(" ", "").replace("/", "_"))

@@ -444,16 +444,15 @@ class Estimator:
         (READER_FIT_GATE), and the reader's mode is reported where it differs."""
         reader = self.reader
         assert reader is not None
-        sample = np.array(x)
         last, self._reader_phase = self._reader_phase, est.phase if est.ready else math.nan
         if est.phase < last - 0.5:
             if est.fit_rms_deg ** 2 <= READER_FIT_GATE ** 2 * self.typical_fit2:  # False while nan
                 band = self.matcher.time_scales[self.matcher.scale_band]
-                reader.start(sample, est.mode_index, self.sensor_offset_deg, band)
+                reader.start(x, est.mode_index, self.sensor_offset_deg, band)
             else:
                 reader.reset()
             return est
-        read = reader.step(sample)
+        read = reader.step(x)
         if read is None or read[0] == est.mode_index:  # nothing to add where the matcher agrees
             return est
         m, phase, scale = read
@@ -462,11 +461,10 @@ class Estimator:
         sse = est.sse
         others = np.ones(sse.shape[0], dtype=bool)
         others[m] = False
-        per_sample = max(float(sse[m]), 0.0) / (1 if self.config.normalize_error else max(int(result.window[m]), 1))
         return Estimate(
             time_s=est.time_s, mode_index=m, mode=self.library.mode_names[m], phase=phase, ready=True, sse=sse,
             phases=est.phases, raw_mode_index=est.raw_mode_index, confidence=_margin_over(sse, m, others),
-            fit_rms_deg=math.sqrt(per_sample / self.matcher.active_channels), held=False,
+            fit_rms_deg=self.supervisor.fit_rms(float(sse[m]), int(result.window[m])), held=False,
             phase_rate=est.phase_rate, cadence_ratio=1.0 / scale if self.matcher.n_scales > 1 else math.nan,
         )
 

@@ -19,6 +19,7 @@ join) row. Another mode than the one reported at the heel strike is reported onc
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -84,7 +85,7 @@ class StrideStartReader:
         """Stop reading (until the next heel strike)."""
         self._active = False
 
-    def start(self, sample_deg: np.ndarray, reported_mode: int, sensor_offset_deg: np.ndarray,
+    def start(self, sample_deg: Sequence[float] | np.ndarray, reported_mode: int, sensor_offset_deg: np.ndarray,
               scales: np.ndarray) -> None:
         """Begin reading at a heel strike.
 
@@ -100,7 +101,6 @@ class StrideStartReader:
         self._reported = reported_mode
         self._offset = np.asarray(sensor_offset_deg, dtype=np.float64)
         self._join = np.asarray(sample_deg, dtype=np.float64) - self._flat[self._starts] - self._offset  # (M, C)
-        self._joins = np.asarray(JOIN_FRACTIONS, dtype=np.float64)
         self._error = np.zeros((len(self.lengths), self.scales.size * self._joins.size))
         self._bias = np.full(len(self.lengths), self._penalty)
         if self._allowed is not None:
@@ -108,7 +108,7 @@ class StrideStartReader:
         self._bias[reported_mode] = 0.0
         self._max_steps = READ_STRIDES * float(self.scales.max() * self.lengths.max())
 
-    def step(self, sample_deg: np.ndarray) -> tuple[int, float, float] | None:
+    def step(self, sample_deg: Sequence[float] | np.ndarray) -> tuple[int, float, float] | None:
         """Read one library-rate sample (C,), degrees. Returns (mode, phase, time scale) while
         the reader reports another mode than the one reported at the heel strike, else None."""
         if not self._active:

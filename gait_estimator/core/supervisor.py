@@ -172,8 +172,7 @@ class Supervisor:
             reported = candidate
         else:
             reported, held = self._choose(time_s, candidate, confidence)
-        per_sample = max(values[reported], 0.0) / (1 if self.normalized else max(int(result.window[reported]), 1))
-        fit_rms = math.sqrt(per_sample / self.active_channels)
+        fit_rms = self.fit_rms(values[reported], int(result.window[reported]))
         phase = result.phase if reported == result.mode_index else float(result.phases[reported])
         rate = self._phase_rate(time_s, reported, phase) if result.ready else math.nan
         return Estimate(
@@ -191,6 +190,12 @@ class Supervisor:
             phase_rate=rate,
             cadence_ratio=math.nan if result.variant is None else self._inverse_scales[int(result.variant[reported])],
         )
+
+    def fit_rms(self, error: float, window: int) -> float:
+        """RMS error per sample and channel, degrees, of a mode whose matcher error is ``error``
+        over a window of ``window`` samples."""
+        per_sample = max(error, 0.0) / (1 if self.normalized else max(window, 1))
+        return math.sqrt(per_sample / self.active_channels)
 
     def _choose(self, time_s: float, candidate: int, confidence: float) -> tuple[int, bool]:
         low = self.min_confidence > 0 and confidence < self.min_confidence
