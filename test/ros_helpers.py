@@ -18,7 +18,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 
-from gait_estimator.core.estimator import Estimator, trace_from_estimates
+from gait_estimator.core.estimator import Estimator, EstimatorConfig, trace_from_estimates
 from gait_estimator.core.kernels import KernelLibrary
 from gait_estimator.io.process import predict
 from gait_estimator.io.readers import read_recording
@@ -51,11 +51,13 @@ def as_node_sees(angles_deg: np.ndarray, units: str) -> np.ndarray:
     return np.degrees(np.radians(angles_deg)) if units == "rad" else np.asarray(angles_deg, dtype=np.float64)
 
 
-def offline(angles_deg: np.ndarray, lib: KernelLibrary, stamps: np.ndarray | None = None):
+def offline(angles_deg: np.ndarray, lib: KernelLibrary, stamps: np.ndarray | None = None,
+            config: EstimatorConfig | None = None):
     """Offline ``predict`` (the ``process`` command's engine) on these samples: an EstimateTrace.
 
     ``stamps`` (int ns) are the stamps the node saw, converted to seconds as the node does (the
     default resampling interpolates at the stamps, so skipped samples matter); None: 230 Hz.
+    ``config``: the estimator options (None: the defaults).
     """
     n = len(angles_deg)
     if stamps is None:
@@ -63,7 +65,7 @@ def offline(angles_deg: np.ndarray, lib: KernelLibrary, stamps: np.ndarray | Non
     stamps = np.asarray(stamps, dtype=np.int64)
     sec = stamps // 1_000_000_000
     time_s = (sec - sec[0]) + (stamps % 1_000_000_000) * 1e-9  # as the node: seconds since its first stamp
-    return predict(Recording(time_s=time_s, angles_deg=np.asarray(angles_deg)), lib).trace
+    return predict(Recording(time_s=time_s, angles_deg=np.asarray(angles_deg)), lib, config).trace
 
 
 def offline_stream(angles_deg: np.ndarray, stamps: np.ndarray, lib: KernelLibrary):

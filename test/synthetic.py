@@ -246,3 +246,44 @@ def generate(
         time_s=t, angles_deg=angles, labels=labels, heel_strike=heel, extra={"right_foot_deg": foot}, source=source
     )
     return Synthetic(rec, hs, np.mod(frac, 1.0), [m.name for m in modes], dur)
+
+
+def with_stops(
+    rec: Recording, stops: Mapping[int, float], stand_deg: np.ndarray, seed: int = 0, fade_s: float = 0.6,
+    sway_deg: float = 0.5, sway_hz: float = 0.3,
+) -> Recording:
+    """``rec`` (a ``generate`` recording) with a stop of ``stops[k]`` seconds at its heel strike k:
+    a cosine fade over ``fade_s`` from the pose at the heel strike to the standing pose
+    ``stand_deg`` (C,), standing with a sinusoidal sway and the recording's noise level (estimated
+    from its first 200 samples' sample-to-sample changes), a fade back,
+    then the walk goes on from that heel strike (repeated). Stop rows are unlabelled and carry no
+    heel strike (the right foot angle is held 40 deg below its heel-strike value); later rows are
+    shifted in time."""
+    rng = np.random.default_rng(seed)
+    dt = float(np.median(np.diff(rec.time_s)))
+    noise = float(np.std(np.diff(rec.angles_deg[:200], axis=0)) / math.sqrt(2))
+    hs_rows = np.flatnonzero(rec.heel_strike)
+    foot = rec.extra["right_foot_deg"]
+    cols = {"t": rec.time_s, "a": rec.angles_deg, "l": rec.labels, "h": rec.heel_strike, "f": foot}
+    out: dict[str, list[np.ndarray]] = {key: [] for key in cols}
+    start, shift = 0, 0.0
+    for k in sorted(stops):
+        i = int(hs_rows[k])
+        for key, v in cols.items():
+            out[key].append(v[start:i + 1] + shift if key == "t" else v[start:i + 1])
+        n = round(stops[k] / dt)
+        u = np.arange(1, n + 1) * dt
+        w = 0.5 * (1.0 - np.cos(np.pi * np.clip(np.minimum(u, stops[k] - u) / fade_s, 0.0, 1.0)))[:, None]
+        sway = sway_deg * np.sin(2 * np.pi * sway_hz * u)[:, None]
+        out["t"].append(rec.time_s[i] + shift + u)
+        out["a"].append((1.0 - w) * rec.angles_deg[i] + w * (stand_deg + sway) + noise * rng.standard_normal((n, 4)))
+        out["l"].append(np.full(n, "", dtype=object))
+        out["h"].append(np.zeros(n, dtype=bool))
+        out["f"].append(np.full(n, foot[i] - 40.0))
+        shift += stops[k] + dt
+        start = i
+    for key, v in cols.items():
+        out[key].append(v[start:] + shift if key == "t" else v[start:])
+    joined = {key: np.concatenate(v) for key, v in out.items()}
+    return Recording(time_s=joined["t"], angles_deg=joined["a"], labels=joined["l"], heel_strike=joined["h"],
+                     extra={"right_foot_deg": joined["f"]}, source=f"{rec.source} with stops")

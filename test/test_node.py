@@ -1,11 +1,12 @@
 """estimator_node in-process: real rclpy publishers/subscribers over DDS on loopback (no mocks).
 
-Domain IDs 11..20 and 26, one per test; LOCALHOST discovery; a namespace unique to the run.
+Domain IDs 11..20, 26 and 28, one per test; LOCALHOST discovery; a namespace unique to the run.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +30,10 @@ from ros_helpers import (
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from synthetic import generate, new_wearer
 
 from gait_estimator import load_library
-from gait_estimator.core.estimator import Estimator
+from gait_estimator.core.estimator import Estimator, EstimatorConfig
 from gait_estimator.io.stream import REASONS
 from gait_estimator.ros.node import DEFAULTS, DESCRIPTIONS, EstimatorNode, StartupError
 
@@ -189,6 +191,22 @@ def test_bad_input_is_dropped_counted_warned_and_state_stays_valid(ros, multispe
     for r in REASONS:
         assert sum(f": {r}: " in w for w in warnings) == 1, (r, warnings)
     assert any("left_shank" in w for w in warnings if "missing_joint" in w)
+
+
+def test_stride_start_reader_over_dds(ros, able_bodied) -> None:
+    """With ``switch_evidence_deg2s`` set, every estimate equals offline predict with that option,
+    and the reader changed some of them: a synthetic wearer walking Med -> SA -> Med, as
+    Float64MultiArray in degrees (no stamps: the library rate, published faster in lockstep)."""
+    rec = generate(able_bodied, [("Med", 8), ("SA", 4), ("Med", 4)], replace(new_wearer(2), rate_hz=None, jitter=0.0),
+                   seed=2).recording
+    h = ros(28)
+    node = h.estimator(input_type="float64_multi_array", input_units="deg", switch_evidence_deg2s=40.0)
+    client = h.client(node, input_type="float64_multi_array")
+    assert client.wait_for_node(10.0, settle_s=0.0)
+    lockstep(client, rec.angles_deg, 1000.0)
+    ref = offline(rec.angles_deg, able_bodied, config=EstimatorConfig(switch_evidence_deg2s=40.0))
+    assert_same_trace(client.received.trace(able_bodied.mode_names), ref)
+    assert (ref.mode_index != offline(rec.angles_deg, able_bodied).mode_index).sum() > 100
 
 
 def test_float64_multi_array_wrong_length_and_non_finite(ros) -> None:

@@ -67,6 +67,11 @@ the stride that ended (its RMS fit over the window) within this factor of how th
 confident strides usually fit: a stride that starts a new mode follows a stride the old mode
 explained, while in turns, stops or a treadmill slowing down no kernel fits the strides before
 either (docs/new_wearer.md)."""
+READER_SWITCH_FIT = 1.25
+"""The stride-start reader's mode is reported only while its RMS fit since the heel strike is
+within this factor of how the wearer's confident strides usually fit: when a walk stops (or turns),
+no kernel fits the stride that starts, and the least bad one is no new mode
+(experiments/reader_heldout.py, docs/new_wearer.md)."""
 READER_PHASE_AGREEMENT = 0.2
 """Where the stride-start reader reports another mode, the supervised phase (the previous mode's,
 over the whole window) is kept if it is within this of the reader's (time since the heel strike
@@ -135,11 +140,12 @@ OPTIONS: tuple[Option, ...] = (
     Option("adapt_min_confidence", 0.2, "personalisation: lowest confidence margin allowed during an adapted stride"),
     Option("adapt_max_step_deg", 5.0, "personalisation: per-sample clip (deg) of stride - kernel before weighting "
            "(one stride moves a kernel by at most adapt_rate x this)"),
-    Option("switch_evidence_deg2s", 0.0, "stride-start reader (opt-in, e.g. 20): from every heel strike after a stride "
+    Option("switch_evidence_deg2s", 0.0, "stride-start reader (opt-in, e.g. 40): from every heel strike after a stride "
            "the reported mode fitted as well as the wearer's strides usually fit, compare the stride so far with "
            "the start of every kernel (joined to the pose at the heel strike) and report another mode once its "
-           "squared error there is this much (deg^2 s) below every other's, so a mode change shows within the "
-           "stride it starts in (allowed transitions respected; dwell and confidence holds apply to the matcher "
+           "squared error there is this much (deg^2 s) below every other's, from a quarter of its stride on and "
+           "while it fits about as well as usual, so a mode change shows within the stride it starts in "
+           "(allowed transitions respected; dwell and confidence holds apply to the matcher "
            "only); 0 = off"),
     Option("max_gap_s", 0.5, "a longer gap (s) between samples restarts the window (not ready until refilled); 0 = never"),
     Option("calibration_reset_gap_s", CALIBRATION_RESET_GAP_S, "a longer gap (s) between samples also forgets the "
@@ -456,6 +462,8 @@ class Estimator:
         if read is None or read[0] == est.mode_index:  # nothing to add where the matcher agrees
             return est
         m, phase, scale = read
+        if reader.mean_error(m) / self.matcher.active_channels > READER_SWITCH_FIT ** 2 * self.typical_fit2:
+            return est
         if abs((est.phase - phase + 0.5) % 1.0 - 0.5) < READER_PHASE_AGREEMENT:
             phase = est.phase  # the stride's phase clock goes on through the change (it is the steadier)
         sse = est.sse

@@ -32,6 +32,10 @@ JOIN_FRACTIONS = (0.25, 0.65)
 from the pose the previous stride ended in; each mode is read with the one that fits it best.
 0.25 is the synthetic wearers' own fade; LG_2_Ramp's real mode changes are read best with 0.4-0.65
 (experiments/stride_reader.py, docs/new_wearer.md)."""
+REPORT_FROM = 0.25
+"""The reader reports a mode only from this part of that mode's stride (at its best scale) on:
+before it, every mode's prediction is still mostly the pose at the heel strike, and a walk that
+stops looks like the start of a stair ascent (experiments/reader_heldout.py)."""
 READ_STRIDES = 1.5
 """A reading stops this many (longest, most stretched) kernel strides after its heel strike if no
 other heel strike came."""
@@ -68,6 +72,7 @@ class StrideStartReader:
         self._reported = 0
         self._bias = np.zeros(len(self.lengths))
         self._joins = np.asarray(JOIN_FRACTIONS, dtype=np.float64)
+        self._report_from = REPORT_FROM
         self._error = np.zeros((len(self.lengths), 1))
         self._join = np.zeros((len(self.lengths), N_CHANNELS))
         self._offset = np.zeros(N_CHANNELS)
@@ -127,7 +132,15 @@ class StrideStartReader:
         if best == self._reported:
             return None
         s = int(self._error[best].argmin()) // self._joins.size
-        return best, float(self._steps / (self.scales[s] * self.lengths[best]) % 1.0), float(self.scales[s])
+        phase = self._steps / (self.scales[s] * self.lengths[best])
+        if phase < self._report_from:
+            return None
+        return best, float(phase % 1.0), float(self.scales[s])
+
+    def mean_error(self, mode: int) -> float:
+        """Weighted squared error per sample (deg^2, summed over channels) of ``mode``'s best
+        (scale, join) row since the heel strike; nan before the first sample read."""
+        return float(self._error[mode].min() / self._steps) if self._active and self._steps else math.nan
 
     def _step_numpy(self, x: np.ndarray) -> int:
         """``compiled.reader_step`` in numpy: update the errors, return the winning mode."""
