@@ -1,4 +1,4 @@
-"""How the stride-start reader's joins, fit gate and evidence were measured (docs/new_wearer.md, "The stride-start reader").
+"""How the stride-start reader's joins, guards and evidence were measured (docs/new_wearer.md, "The stride-start reader").
 
 The reader (gait_estimator/core/stride_reader.py; opt-in, ``switch_evidence_deg2s``) assumes that a
 new mode's stride joins its own course from the pose at the heel strike within one of
@@ -6,18 +6,21 @@ JOIN_FRACTIONS of the stride (each mode read with the one that fits it best), an
 mode once its error since the heel strike is ``switch_evidence_deg2s`` below every other's. It
 starts a reading only at heel strikes after a stride the reported mode fitted within
 READER_FIT_GATE of how the wearer's confident strides usually fit (core/estimator.py; "off" here:
-at every heel strike once a confident stride has shown that fit). This runs cross_session.py's
-SYN-NEW (synthetic: their generator fades over 0.25 of the stride), LG2-AB (LG_2_Ramp's real mode
-changes) and MS-LG2 (no mode change: every switch is a false one) for each set of join fractions,
-gate and evidence, all other options the defaults, and tabulates accuracy, LG_2_Ramp's level
-accuracy and phase error, MS-LG2's phase error and the reported mode changes per minute. The
-accuracy scores only labelled rows; the false switches in the unlabelled parts (standing up, turns,
+at every heel strike once a confident stride has shown that fit), and reports a mode only while it
+fits the stride since the heel strike within READER_SWITCH_FIT of that usual fit and only from
+REPORT_FROM of its stride on (core/estimator.py, core/stride_reader.py; both chosen in
+experiments/reader_heldout.py). This runs cross_session.py's SYN-NEW (synthetic: their generator
+fades over 0.25 of the stride), LG2-AB (LG_2_Ramp's real mode changes) and MS-LG2 (no mode change:
+every switch is a false one) for each variant of those constants (VARIANTS) and evidence, all
+other options the defaults, and tabulates accuracy, LG_2_Ramp's level accuracy and phase error,
+MS-LG2's phase error and the reported mode changes per minute. The accuracy scores only labelled
+rows; the false switches in the unlabelled parts (standing up, turns,
 stops, a treadmill slowing down) are counted apart: the time LG_2_Ramp (raw stamps) and Multispeed
 (230 Hz) are reported as a stair mode, with the bundled kernels (neither has stairs), and the time
-Multispeed (level walking only) is reported as a ramp. Deterministic; about 1 min per set of join
-fractions and gate with two workers.
+Multispeed (level walking only) is reported as a ramp. Deterministic; about 1 min per variant with
+two workers.
 
-    python experiments/stride_reader.py [--joins 0.5 0.25+0.65] [--gates off,1] [--evidence 10,20,40] [--jobs 2]
+    python experiments/stride_reader.py [--variants 0.25+0.65/1/1.25/0.25 ...] [--evidence 10,20,40] [--jobs 2]
 """
 
 from __future__ import annotations
@@ -29,7 +32,8 @@ import shlex
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +50,7 @@ REPO = Path(__file__).resolve().parent.parent
 DATASETS = ("SYN-NEW", "LG2-AB", "MS-LG2")
 OFF = "no reader"
 MULTISPEED = "data/swge/recordings/Multispeed_Walk_AB.csv"
-DEFAULT_EVIDENCE = 20.0  # the value docs/new_wearer.md suggests for those who opt in
+DEFAULT_EVIDENCE = 40.0  # the value docs/new_wearer.md suggests for those who opt in
 
 
 def false_switches(evidence: Sequence[float]) -> dict[str, dict[str, float]]:
@@ -84,46 +88,71 @@ def run_joins(evidence: Sequence[float], jobs: int, out: Path) -> dict[str, Any]
     return {name: {**{key: res[key][name] for key in (*DATASETS, "SYN-NEW-L")}, "false": false[name]} for name in names}
 
 
-def row(join: str, gate: str, name: str, r: dict[str, Any]) -> list[str]:
+Constants = tuple[tuple[float, ...], float, float, float]
+"""JOIN_FRACTIONS, READER_FIT_GATE, READER_SWITCH_FIT, REPORT_FROM."""
+
+
+def parse_variant(text: str) -> Constants:
+    j, gate, fit, start = text.split("/")
+    return (tuple(float(v) for v in j.split("+")), math.inf if gate == "off" else float(gate),
+            math.inf if fit == "off" else float(fit), float(start))
+
+
+def current_constants() -> Constants:
+    return (stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE, estimator.READER_SWITCH_FIT,
+            stride_reader.REPORT_FROM)
+
+
+@contextmanager
+def reader_constants(c: Constants) -> Iterator[None]:
+    """The reader's constants as ``c`` for estimators built inside (and workers forked inside)."""
+    default = current_constants()
+    stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE, estimator.READER_SWITCH_FIT, stride_reader.REPORT_FROM = c
+    try:
+        yield
+    finally:
+        (stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE, estimator.READER_SWITCH_FIT,
+         stride_reader.REPORT_FROM) = default
+
+
+def row(name: str, r: dict[str, Any]) -> list[str]:
     lg2, f = r["LG2-AB"], r["false"]
-    return [join, gate, name, pct(r["SYN-NEW"]["accuracy"]), pct(r["SYN-NEW-L"]["accuracy"]), pct(lg2["accuracy"]),
+    return [name, pct(r["SYN-NEW"]["accuracy"]), pct(r["SYN-NEW-L"]["accuracy"]), pct(lg2["accuracy"]),
             pct(lg2["per_mode_accuracy"].get("level")), pct(lg2["phase_error_mean"], 2),
             f"{lg2['switches_per_min']:.0f}", pct(r["MS-LG2"]["accuracy"]), pct(r["MS-LG2"]["phase_error_mean"], 2),
             f"{f['stairs_s']:.2f} s ({f['stair_episodes']})", f"{f['multispeed_ramps_s']:.2f} s"]
 
 
+VARIANTS = ("0.25+0.65/off/off/0", "0.25+0.65/1/off/0", "0.25+0.65/1/1.25/0", "0.5/1/1.25/0.25",
+            "0.25+0.65/1/1.25/0.25")
+"""JOIN_FRACTIONS / READER_FIT_GATE / READER_SWITCH_FIT / REPORT_FROM: the reader without guards, with
+the fit gate (as first shipped), with the switch fit, with one join, and as now."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--joins", nargs="+", default=["0.5", "0.25+0.65"],
-                    help="sets of join fractions, each fractions joined by +")
-    ap.add_argument("--gates", default="off,1", help="comma-separated READER_FIT_GATE values (off = none)")
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS),
+                    help="JOINS/GATE/SWITCH_FIT/REPORT_FROM, join fractions joined by +, off = no gate or switch fit")
     ap.add_argument("--evidence", default="10,20,40", help="comma-separated switch_evidence_deg2s values")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")
     ap.add_argument("--out", type=Path, default=REPO / "experiments/results/stride_reader", help="output directory")
     args = ap.parse_args(argv)
-    joins = [tuple(float(v) for v in j.split("+")) for j in args.joins]
-    gates = [math.inf if v == "off" else float(v) for v in args.gates.split(",")]
     evidence = [float(v) for v in args.evidence.split(",")]
-    default = (stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE)
+    default = current_constants()
     t0 = time.perf_counter()
     summary: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for j in joins:
-            for gate in gates:
-                # read when each estimator is built; forked workers inherit them
-                stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE = j, gate
-                name = " + ".join(f"{v:g}" for v in j) + f" / {gate:g}"
-                summary[name] = run_joins(evidence, args.jobs, Path(tmp) / name.replace(" ", "").replace("/", "_"))
-    stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE = default
+        for variant in args.variants:
+            with reader_constants(parse_variant(variant)):
+                summary[variant] = run_joins(evidence, args.jobs, Path(tmp) / variant.replace("/", "_"))
     seconds = time.perf_counter() - t0
-    rows = [row("–", "–", "off", next(iter(summary.values()))[OFF])]
-    for key, by in summary.items():
-        j, gate = key.split(" / ")
+    rows = [["–", "–", "–", "–", *row("off", next(iter(summary.values()))[OFF])]]
+    for variant, by in summary.items():
+        j, gate, fit, start = variant.split("/")
         for name, r in by.items():
             if name != OFF:
-                mark = (" (suggested)" if (tuple(float(v) for v in j.split(" + ")), float(gate), float(name))
-                        == (*default, DEFAULT_EVIDENCE) else "")
-                rows.append(row(j, "off" if gate == "inf" else gate, name + mark, r))
+                now = parse_variant(variant) == default and float(name) == DEFAULT_EVIDENCE
+                rows.append([j.replace("+", " + "), gate, fit, start, *row(name + (" (suggested)" if now else ""), r)])
     command = shlex.join(["python", "experiments/stride_reader.py", *(sys.argv[1:] if argv is None else argv)])
     text = (
         "### The stride-start reader: join fractions, fit gate and evidence\n\n"
@@ -135,8 +164,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         "with the bundled kernels, over the whole recordings (34 s and 62 s, most of it outside the labelled "
         "rows); false ramps: Multispeed (level walking only) reported as RA or RD. Fit gate: a reading starts only at "
         "heel strikes after a stride the reported mode fitted within this factor (RMS) of the wearer's usual fit; off: "
-        "at every heel strike once a confident stride has shown that fit.\n\n"
-        + md_table(["join fractions", "fit gate", "evidence (deg² s)", "SYN-NEW", "SYN-NEW-L", "LG2-AB",
+        "at every heel strike once a confident stride has shown that fit. Switch fit: the reader's mode is reported only "
+        "while it fits the stride since the heel strike within this factor (RMS) of that usual fit; off: always. Report "
+        "from: the reader's mode is reported only from this part of its stride on.\n\n"
+        + md_table(["join fractions", "fit gate", "switch fit", "report from", "evidence (deg² s)", "SYN-NEW",
+                    "SYN-NEW-L", "LG2-AB",
                     "LG2-AB level", "LG2-AB phase error", "LG2-AB changes /min", "MS-LG2", "MS-LG2 phase error",
                     "false stairs", "false ramps (Multispeed)"], rows)
         + "\n"
