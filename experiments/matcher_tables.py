@@ -23,6 +23,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gait_estimator.analysis.bench import READER_EVIDENCE
+
 ROOT = Path(__file__).resolve().parents[1]
 DIR = ROOT / "experiments" / "results" / "matcher"
 PERIODS_US = {230: 1e6 / 230, 1000: 1000.0}
@@ -81,6 +83,11 @@ def two_cores(report: dict[str, Any]) -> str:
             notes.append(f"M = {m}: a whole `Estimator.update` (resampling, matcher, supervisor, calibration) takes "
                          f"{est['default']['step_us_median']:,.1f} µs with the default preset and "
                          f"{est['paper']['step_us_median']:,.1f} µs with the paper preset (median)")
+        reader = by.get((m, "estimator (numba) + stride-start reader", "default"))
+        if reader and est["default"]:
+            notes.append(f"M = {m}: with the stride-start reader (opt-in, {READER_EVIDENCE:g} deg² s) a default-preset "
+                         f"update takes {reader['step_us_median']:,.1f} µs, "
+                         f"{reader['step_us_median'] - est['default']['step_us_median']:+.1f} µs")
         fallback = by.get((m, "estimator (numpy)", "default"))
         if fallback and est["default"]:
             notes.append(f"M = {m}: without numba (the numpy fallback) a whole default-preset update takes "

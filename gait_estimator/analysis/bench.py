@@ -16,10 +16,13 @@ from typing import Any
 import numpy as np
 
 from ..core import compiled
-from ..core.estimator import Estimator, EstimatorConfig
+from ..core.estimator import Estimator, EstimatorConfig, config_from_values
 from ..core.kernels import KernelLibrary
 from ..core.matcher import IncrementalMatcher, NaiveMatcher
 from ..io.library_io import load_library, save_library
+
+READER_EVIDENCE = 40.0
+"""``switch_evidence_deg2s`` of the bench's stride-start reader row (the value docs/new_wearer.md suggests)."""
 
 
 def synthetic_walk(library: KernelLibrary, steps: int, seed: int = 0) -> np.ndarray:
@@ -137,7 +140,8 @@ def bench(
     (``numba``, ``numpy``; numba only if installed), the naive matcher (M <= naive_max_modes), and
     for M <= preset_max_modes the default preset's matcher (all its time-scaled rows) and the whole
     default-preset ``Estimator.update`` (and the paper preset's, for the ratio; at the smallest M
-    also the default preset's with the other backends), all in one run."""
+    also the default preset's with the stride-start reader at READER_EVIDENCE deg^2 s and with the
+    other backends), all in one run."""
     backends = backends or ["numba", "numpy"]
     backends = [b for b in backends if b != "numba" or compiled.AVAILABLE]
     if not backends:
@@ -176,7 +180,10 @@ def bench(
                 warmup = est.matcher.max_window
                 results.append({"modes": m, "impl": f"estimator ({backend})", "preset": preset,
                                 **time_updates(est, xd, lib.sample_rate_hz, warmup)})
-            if m == min(modes):  # the default preset without numba (the fallback), too
+            if m == min(modes):  # the default preset with the opt-in reader, and without numba (the fallback), too
+                est = Estimator(lib, config_from_values({"switch_evidence_deg2s": READER_EVIDENCE}), backend=backend)
+                results.append({"modes": m, "impl": f"estimator ({backend}) + stride-start reader", "preset": "default",
+                                **time_updates(est, xd, lib.sample_rate_hz, est.matcher.max_window)})
                 for other in backends[1:]:
                     est = Estimator(lib, EstimatorConfig.preset("default"), backend=other)
                     results.append({"modes": m, "impl": f"estimator ({other})", "preset": "default",
