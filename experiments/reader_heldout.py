@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -51,10 +52,9 @@ from bench_common import (
     write_report,
 )
 from cross_session import SPEEDS, lg2_raw_part
-from stride_reader import DEFAULT_EVIDENCE, parse_variant, reader_constants
+from stride_reader import DEFAULT_EVIDENCE, current_constants, format_variant, parse_variant, reader_constants
 from synthetic import generate, new_wearer, with_stops
 
-from gait_estimator.core import estimator, stride_reader
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
 from gait_estimator.core.kernels import KernelLibrary
 from gait_estimator.io.library_io import load_library
@@ -127,7 +127,7 @@ def run_wearer(job: tuple[int, float, tuple[str, ...]]) -> dict[str, Any]:
     abrupt = abrupt_stop(ab, wearer)
     out: dict[str, Any] = {"wearer": wearer}
     for name, e in (("off", 0.0), *((v, evidence) for v in variants)):
-        with reader_constants(parse_variant(variants[-1] if name == "off" else name)):
+        with nullcontext() if name == "off" else reader_constants(parse_variant(name)):
             cfg = EstimatorConfig(switch_evidence_deg2s=e)
             trace, _ = trace_modes(ab, route, cfg)
             st, modes = trace_modes(ab, stops, cfg)
@@ -160,8 +160,8 @@ def run_job(job: tuple) -> dict[str, Any]:
 
 
 def with_gate(variant: str, gate: float) -> str:
-    j, _, fit, start = variant.split("/")
-    return "/".join((j, "off" if math.isinf(gate) else f"{gate:g}", fit, start))
+    j, _, fit, start = parse_variant(variant)
+    return format_variant((j, gate, fit, start))
 
 
 def pooled(rows: Sequence[dict[str, Any]], key: str) -> tuple[str, str]:
@@ -181,8 +181,7 @@ def variant_name(variant: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    now = "/".join(("+".join(f"{v:g}" for v in stride_reader.JOIN_FRACTIONS), f"{estimator.READER_FIT_GATE:g}",
-                    f"{estimator.READER_SWITCH_FIT:g}", f"{stride_reader.REPORT_FROM:g}"))
+    now = format_variant(current_constants())
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--wearers", type=int, default=20, help="unseen synthetic wearers")
     ap.add_argument("--first-wearer", type=int, default=FIRST_WEARER, help="the first of them")

@@ -98,6 +98,13 @@ def parse_variant(text: str) -> Constants:
             math.inf if fit == "off" else float(fit), float(start))
 
 
+def format_variant(c: Constants) -> str:
+    """The text ``parse_variant`` reads."""
+    j, gate, fit, start = c
+    return "/".join(("+".join(f"{v:g}" for v in j), *("off" if math.isinf(v) else f"{v:g}" for v in (gate, fit)),
+                     f"{start:g}"))
+
+
 def current_constants() -> Constants:
     return (stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE, estimator.READER_SWITCH_FIT,
             stride_reader.REPORT_FROM)

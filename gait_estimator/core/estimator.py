@@ -462,8 +462,8 @@ class Estimator:
         if read is None or read[0] == est.mode_index:  # nothing to add where the matcher agrees
             return est
         m, phase, scale = read
-        if reader.mean_error(m) / self.matcher.active_channels > READER_SWITCH_FIT ** 2 * self.typical_fit2:
-            return est
+        if not reader.mean_error(m) / self.matcher.active_channels <= READER_SWITCH_FIT ** 2 * self.typical_fit2:
+            return est  # also while the usual fit is unknown (nan): the calibrations were just reset
         if abs((est.phase - phase + 0.5) % 1.0 - 0.5) < READER_PHASE_AGREEMENT:
             phase = est.phase  # the stride's phase clock goes on through the change (it is the steadier)
         sse = est.sse
