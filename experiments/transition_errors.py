@@ -1,13 +1,14 @@
 """Where the synthetic new wearers' wrong rows are: after which mode changes, and reported as what
 (docs/new_wearer.md, what 97 % would need).
 
-SYN-NEW's wearers (as in cross_session.py) read with the default options. For every truth mode
+SYN-NEW's wearers (as in cross_session.py) read with the default options (``--switch-evidence``: and
+the opt-in stride-start reader). For every truth mode
 change, the time from the change until the new mode is first reported, and the wrong time until
 the next change split by what was reported: the previous mode (still held), or a third mode (an
 intermediate: a mode that fits the window holding both modes better than either). Rows outside
 those spans (steady walking before the first change) are counted apart. Deterministic.
 
-    python experiments/transition_errors.py [--wearers 5] [--jobs 2] [--out experiments/results/transition_errors]
+    python experiments/transition_errors.py [--wearers 5] [--switch-evidence 40] [--jobs 2] [--out DIR]
 """
 
 from __future__ import annotations
@@ -28,11 +29,13 @@ from gait_estimator.io.library_io import load_library
 REPO = Path(__file__).resolve().parent.parent
 
 
-def run(seed: int) -> dict[str, Any]:
-    """Per truth change of wearer ``seed``: (from, to, first right s, as previous s, as a third mode s)."""
+def run(job: tuple[int, float]) -> dict[str, Any]:
+    """Per truth change of wearer ``seed`` read with the stride-start reader at ``evidence`` (0 = off, the
+    default): (from, to, first right s, as previous s, as a third mode s)."""
+    seed, evidence = job
     ab = load_library("able_bodied")
     rec = generate(ab, ROUTE, new_wearer(seed), seed=1000 + seed).recording
-    est = Estimator(ab, EstimatorConfig(), stamped=True)
+    est = Estimator(ab, EstimatorConfig(switch_evidence_deg2s=evidence), stamped=True)
     reported = np.array([est.update(float(t), x).mode for t, x in zip(rec.time_s, rec.angles_deg, strict=True)])
     ready = np.ones(len(rec), dtype=bool)
     ready[: np.searchsorted(rec.time_s, rec.time_s[0] + est.matcher.max_window / ab.sample_rate_hz)] = False
@@ -57,7 +60,7 @@ def run(seed: int) -> dict[str, Any]:
             "duration_s": float(t[-1] - t[0]), "wrong_s": float(dt[(reported != labels) & ready].sum())}
 
 
-def tables(results: list[dict[str, Any]], command: str, seconds: float) -> str:
+def tables(results: list[dict[str, Any]], command: str, seconds: float, evidence: float) -> str:
     by: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
     for r in results:
         for e in r["events"]:
@@ -78,7 +81,8 @@ def tables(results: list[dict[str, Any]], command: str, seconds: float) -> str:
     return (
         "### Transition errors: SYN-NEW's wrong time, per mode change\n\n"
         f"Measured by `{command}` in {seconds:.0f} s ({machine_text()}; deterministic). {len(results)} synthetic new "
-        "wearers, default options; "
+        "wearers, default options"
+        + (f" with the stride-start reader at {evidence:g} deg² s" if evidence else "") + "; "
         f"{changes} truth mode changes in {duration:.0f} s. Per change (mean over wearers): time until the new mode "
         "is first reported, and the wrong time until the next change, reported as the previous mode or as a third "
         "mode.\n\n"
@@ -93,11 +97,14 @@ def tables(results: list[dict[str, Any]], command: str, seconds: float) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--wearers", type=int, default=5, help="synthetic new wearers (seeds 0..N-1)")
+    ap.add_argument("--switch-evidence", type=float, default=0.0,
+                    help="switch_evidence_deg2s: the stride-start reader (default 0 = off, as the defaults)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")
     ap.add_argument("--out", type=Path, default=REPO / "experiments/results/transition_errors", help="output directory")
     args = ap.parse_args(argv)
-    results, command, seconds = run_script_jobs("transition_errors.py", argv, run, list(range(args.wearers)), args.jobs)
-    write_report(args.out, tables(results, command, seconds), results)
+    jobs = [(seed, args.switch_evidence) for seed in range(args.wearers)]
+    results, command, seconds = run_script_jobs("transition_errors.py", argv, run, jobs, args.jobs)
+    write_report(args.out, tables(results, command, seconds, args.switch_evidence), results)
     return 0
 
 
