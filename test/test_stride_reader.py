@@ -163,7 +163,7 @@ def test_reader_reads_only_after_strides_that_fitted_as_usual(able_bodied) -> No
     assert reader is not None
     starts = []
     original = reader.start
-    reader.start = lambda *a: (starts.append((est.fit_strides, est.last_time)), original(*a))  # type: ignore[method-assign]
+    reader.start = lambda *a, **k: (starts.append((est.fit_strides, est.last_time)), original(*a, **k))  # type: ignore[method-assign]
     for t, x in zip(rec.time_s, rec.angles_deg, strict=True):
         est.update(float(t), x)
     assert starts and min(n for n, _ in starts) >= 1 and est.fit_strides >= 1

@@ -452,9 +452,10 @@ class Estimator:
         assert reader is not None
         last, self._reader_phase = self._reader_phase, est.phase if est.ready else math.nan
         if est.phase < last - 0.5:
-            if self._fits_as_usual(est.fit_rms_deg ** 2, READER_FIT_GATE):
+            if est.fit_rms_deg ** 2 <= READER_FIT_GATE ** 2 * self.typical_fit2:  # False while nan
                 band = self.matcher.time_scales[self.matcher.scale_band]
-                reader.start(x, est.mode_index, self.sensor_offset_deg, band)
+                bound = READER_SWITCH_FIT ** 2 * self.typical_fit2 * self.matcher.active_channels
+                reader.start(x, est.mode_index, self.sensor_offset_deg, band, max_mean_error=bound)
             else:
                 reader.reset()
             return est
@@ -462,8 +463,6 @@ class Estimator:
         if read is None or read[0] == est.mode_index:  # nothing to add where the matcher agrees
             return est
         m, phase, scale = read
-        if not self._fits_as_usual(reader.mean_error(m) / self.matcher.active_channels, READER_SWITCH_FIT):
-            return est
         if abs((est.phase - phase + 0.5) % 1.0 - 0.5) < READER_PHASE_AGREEMENT:
             phase = est.phase  # the stride's phase clock goes on through the change (it is the steadier)
         sse = est.sse
@@ -476,11 +475,6 @@ class Estimator:
             phase_rate=est.phase_rate, cadence_ratio=1.0 / scale if self.matcher.n_scales > 1 else math.nan,
         )
 
-    def _fits_as_usual(self, fit2: float, factor: float) -> bool:
-        """A squared RMS fit (deg^2 per sample and channel) within ``factor`` (RMS) of how the
-        wearer's confident strides usually fit; False while that is unknown (nan)."""
-        return fit2 <= factor * factor * self.typical_fit2
-
     def _learn_typical_fit(self, fit_rms_deg: float) -> None:
         """Running mean of the squared RMS fit of confident strides (the mean of the first ten,
         then a tenth of the way per stride): how well this wearer's strides usually fit."""
@@ -491,7 +485,10 @@ class Estimator:
 
     def reset_calibration(self) -> None:
         """Forget the learnt sensor offsets and cadence (e.g. after the sensors were re-donned,
-        or for another wearer), and how well the wearer's strides usually fit."""
+        or for another wearer), and how well the wearer's strides usually fit; a stride-start
+        reading in progress (at the old offsets) stops."""
+        if self.reader is not None:
+            self.reader.reset()
         self.fit_strides = 0
         self.typical_fit2 = math.nan
         self.sensor_offset_deg = np.zeros(N_CHANNELS)

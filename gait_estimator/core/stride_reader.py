@@ -73,6 +73,7 @@ class StrideStartReader:
         self._bias = np.zeros(len(self.lengths))
         self._joins = np.asarray(JOIN_FRACTIONS, dtype=np.float64)
         self._report_from = REPORT_FROM
+        self._max_mean_error = math.inf
         self._error = np.zeros((len(self.lengths), 1))
         self._join = np.zeros((len(self.lengths), N_CHANNELS))
         self._offset = np.zeros(N_CHANNELS)
@@ -91,7 +92,7 @@ class StrideStartReader:
         self._active = False
 
     def start(self, sample_deg: Sequence[float] | np.ndarray, reported_mode: int, sensor_offset_deg: np.ndarray,
-              scales: np.ndarray) -> None:
+              scales: np.ndarray, max_mean_error: float = math.inf) -> None:
         """Begin reading at a heel strike.
 
         Args:
@@ -99,8 +100,12 @@ class StrideStartReader:
             reported_mode: The mode reported at the heel strike.
             sensor_offset_deg: The learnt sensor offsets (C,), degrees.
             scales: Stride-duration scales (S,) every mode is read at; its best one counts.
+            max_mean_error: No mode is reported while its weighted squared error per sample since
+                the heel strike (deg^2, summed over channels) is above this: one that fits this
+                badly is no new mode (a walk that stops, say).
         """
         self._active = True
+        self._max_mean_error = float(max_mean_error)
         self._steps = 0
         self.scales = np.asarray(scales, dtype=np.float64)
         self._reported = reported_mode
@@ -133,14 +138,9 @@ class StrideStartReader:
             return None
         s = int(self._error[best].argmin()) // self._joins.size
         phase = self._steps / (self.scales[s] * self.lengths[best])
-        if phase < self._report_from:
+        if phase < self._report_from or not self._error[best].min() / self._steps <= self._max_mean_error:
             return None
         return best, float(phase % 1.0), float(self.scales[s])
-
-    def mean_error(self, mode: int) -> float:
-        """Weighted squared error per sample (deg^2, summed over channels) of ``mode``'s best
-        (scale, join) row since the heel strike; nan before the first sample read."""
-        return float(self._error[mode].min() / self._steps) if self._active and self._steps else math.nan
 
     def _step_numpy(self, x: np.ndarray) -> int:
         """``compiled.reader_step`` in numpy: update the errors, return the winning mode."""
