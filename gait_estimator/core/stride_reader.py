@@ -13,7 +13,9 @@ kernel joined to the pose at the heel strike by a cosine fade over the first f o
 
 with w_f = 1 at the heel strike and 0 from phi = f on. A mode's error is that of its best (scale,
 join) row. Another mode than the one reported at the heel strike is reported once its error is
-``evidence`` below every other's, the reported one's included. Cost O(M * S * F * C) per step.
+``evidence`` below every other's, the reported one's included, from REPORT_FROM of its stride on
+and while it fits within the bound given at the heel strike (the estimator's READER_SWITCH_FIT of
+the wearer's usual fit). Cost O(M * S * F * C) per step.
 """
 
 from __future__ import annotations
