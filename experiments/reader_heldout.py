@@ -160,8 +160,8 @@ def run_job(job: tuple) -> dict[str, Any]:
 
 
 def with_gate(variant: str, gate: float) -> str:
-    j, _, fit, start = parse_variant(variant)
-    return format_variant((j, gate, fit, start))
+    j, _, fit, start, agree = parse_variant(variant)
+    return format_variant((j, gate, fit, start, agree))
 
 
 def pooled(rows: Sequence[dict[str, Any]], key: str) -> tuple[str, str]:

@@ -88,58 +88,68 @@ def run_joins(evidence: Sequence[float], jobs: int, out: Path) -> dict[str, Any]
     return {name: {**{key: res[key][name] for key in (*DATASETS, "SYN-NEW-L")}, "false": false[name]} for name in names}
 
 
-Constants = tuple[tuple[float, ...], float, float, float]
-"""JOIN_FRACTIONS, READER_FIT_GATE, READER_SWITCH_FIT, REPORT_FROM."""
+Constants = tuple[tuple[float, ...], float, float, float, float]
+"""JOIN_FRACTIONS, READER_FIT_GATE, READER_SWITCH_FIT, REPORT_FROM, READER_PHASE_AGREEMENT."""
+PHASE_AGREEMENT = estimator.READER_PHASE_AGREEMENT
+"""The estimator's own value: the phase agreement of a variant that does not give one."""
 
 
 def parse_variant(text: str) -> Constants:
-    j, gate, fit, start = text.split("/")
+    j, gate, fit, start, *agree = text.split("/")
     return (tuple(float(v) for v in j.split("+")), math.inf if gate == "off" else float(gate),
-            math.inf if fit == "off" else float(fit), float(start))
+            math.inf if fit == "off" else float(fit), float(start), float(agree[0]) if agree else PHASE_AGREEMENT)
 
 
 def format_variant(c: Constants) -> str:
-    """The text ``parse_variant`` reads."""
-    j, gate, fit, start = c
+    """The text ``parse_variant`` reads (the phase agreement only where it is not the estimator's)."""
+    j, gate, fit, start, agree = c
     return "/".join(("+".join(f"{v:g}" for v in j), *("off" if math.isinf(v) else f"{v:g}" for v in (gate, fit)),
-                     f"{start:g}"))
+                     f"{start:g}", *([] if agree == PHASE_AGREEMENT else [f"{agree:g}"])))
 
 
 def current_constants() -> Constants:
     return (stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE, estimator.READER_SWITCH_FIT,
-            stride_reader.REPORT_FROM)
+            stride_reader.REPORT_FROM, estimator.READER_PHASE_AGREEMENT)
 
 
 @contextmanager
 def reader_constants(c: Constants) -> Iterator[None]:
     """The reader's constants as ``c`` for estimators built inside (and workers forked inside)."""
     default = current_constants()
-    stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE, estimator.READER_SWITCH_FIT, stride_reader.REPORT_FROM = c
+    (stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE, estimator.READER_SWITCH_FIT, stride_reader.REPORT_FROM,
+     estimator.READER_PHASE_AGREEMENT) = c
     try:
         yield
     finally:
         (stride_reader.JOIN_FRACTIONS, estimator.READER_FIT_GATE, estimator.READER_SWITCH_FIT,
-         stride_reader.REPORT_FROM) = default
+         stride_reader.REPORT_FROM, estimator.READER_PHASE_AGREEMENT) = default
+
+
+def phase_cell(r: dict[str, Any]) -> str:
+    """Mean phase error (max) over the rows with the right mode, % of a stride."""
+    return f"{pct(r['phase_error_mean'], 2)} ({pct(r['phase_error_max'], 0)})"
 
 
 def row(name: str, r: dict[str, Any]) -> list[str]:
     lg2, f = r["LG2-AB"], r["false"]
-    return [name, pct(r["SYN-NEW"]["accuracy"]), pct(r["SYN-NEW-L"]["accuracy"]), pct(lg2["accuracy"]),
-            pct(lg2["per_mode_accuracy"].get("level")), pct(lg2["phase_error_mean"], 2),
-            f"{lg2['switches_per_min']:.0f}", pct(r["MS-LG2"]["accuracy"]), pct(r["MS-LG2"]["phase_error_mean"], 2),
+    return [name, pct(r["SYN-NEW"]["accuracy"]), phase_cell(r["SYN-NEW"]), pct(r["SYN-NEW-L"]["accuracy"]),
+            pct(lg2["accuracy"]), pct(lg2["per_mode_accuracy"].get("level")), phase_cell(lg2),
+            f"{lg2['switches_per_min']:.0f}", pct(r["MS-LG2"]["accuracy"]), phase_cell(r["MS-LG2"]),
             f"{f['stairs_s']:.2f} s ({f['stair_episodes']})", f"{f['multispeed_ramps_s']:.2f} s"]
 
 
-VARIANTS = ("0.25+0.65/off/off/0", "0.25+0.65/1/off/0", "0.25+0.65/1/1.25/0", "0.5/1/1.25/0.25",
-            "0.25+0.65/1/1.25/0.25")
-"""JOIN_FRACTIONS / READER_FIT_GATE / READER_SWITCH_FIT / REPORT_FROM: the reader without guards, with
-the fit gate (as first shipped), with the switch fit, with one join, and as now."""
+VARIANTS = ("0.25+0.65/off/off/0", "0.25+0.65/off/off/0/0", "0.25+0.65/1/off/0", "0.25+0.65/1/1.25/0",
+            "0.5/1/1.25/0.25", "0.25+0.65/1/1.25/0.25/0", "0.25+0.65/1/1.25/0.25")
+"""JOIN_FRACTIONS / READER_FIT_GATE / READER_SWITCH_FIT / REPORT_FROM [/ READER_PHASE_AGREEMENT]: the
+reader without guards, with the fit gate (as first shipped), with the switch fit, with one join, and
+as now; without guards and as now also with the reader's own phase wherever it reports (agreement 0)."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS),
-                    help="JOINS/GATE/SWITCH_FIT/REPORT_FROM, join fractions joined by +, off = no gate or switch fit")
+                    help="JOINS/GATE/SWITCH_FIT/REPORT_FROM[/PHASE_AGREEMENT], join fractions joined by +, off = no "
+                         "gate or switch fit; PHASE_AGREEMENT defaults to the estimator's")
     ap.add_argument("--evidence", default="10,20,40", help="comma-separated switch_evidence_deg2s values")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")
     ap.add_argument("--out", type=Path, default=REPO / "experiments/results/stride_reader", help="output directory")
@@ -153,13 +163,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             with reader_constants(parse_variant(variant)):
                 summary[variant] = run_joins(evidence, args.jobs, Path(tmp) / variant.replace("/", "_"))
     seconds = time.perf_counter() - t0
-    rows = [["–", "–", "–", "–", *row("off", next(iter(summary.values()))[OFF])]]
+    rows = [["–", "–", "–", "–", "–", *row("off", next(iter(summary.values()))[OFF])]]
     for variant, by in summary.items():
-        j, gate, fit, start = variant.split("/")
+        j, gate, fit, start, agree = parse_variant(variant)
         for name, r in by.items():
             if name != OFF:
                 now = parse_variant(variant) == default and float(name) == DEFAULT_EVIDENCE
-                rows.append([j.replace("+", " + "), gate, fit, start, *row(name + (" (suggested)" if now else ""), r)])
+                rows.append([" + ".join(f"{v:g}" for v in j), *("off" if math.isinf(v) else f"{v:g}" for v in (gate, fit)),
+                             f"{start:g}", f"{agree:g}", *row(name + (" (suggested)" if now else ""), r)])
     command = shlex.join(["python", "experiments/stride_reader.py", *(sys.argv[1:] if argv is None else argv)])
     text = (
         "### The stride-start reader: join fractions, fit gate and evidence\n\n"
@@ -173,11 +184,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "heel strikes after a stride the reported mode fitted within this factor (RMS) of the wearer's usual fit; off: "
         "at every heel strike once a confident stride has shown that fit. Switch fit: the reader's mode is reported only "
         "while it fits the stride since the heel strike within this factor (RMS) of that usual fit; off: always. Report "
-        "from: the reader's mode is reported only from this part of its stride on.\n\n"
-        + md_table(["join fractions", "fit gate", "switch fit", "report from", "evidence (deg² s)", "SYN-NEW",
-                    "SYN-NEW-L", "LG2-AB",
-                    "LG2-AB level", "LG2-AB phase error", "LG2-AB changes /min", "MS-LG2", "MS-LG2 phase error",
-                    "false stairs", "false ramps (Multispeed)"], rows)
+        "from: the reader's mode is reported only from this part of its stride on. Phase agreement: where the reader "
+        "reports another mode, the supervised phase is kept if it is within this of the reader's own (time since the "
+        "heel strike over the new mode's stride at its best scale); 0: the reader's own always. Phase error: mean "
+        "(max) over the rows with the right mode, % of a stride.\n\n"
+        + md_table(["join fractions", "fit gate", "switch fit", "report from", "phase agreement", "evidence (deg² s)",
+                    "SYN-NEW", "SYN-NEW phase error", "SYN-NEW-L", "LG2-AB", "LG2-AB level", "LG2-AB phase error",
+                    "LG2-AB changes /min", "MS-LG2", "MS-LG2 phase error", "false stairs", "false ramps (Multispeed)"],
+                   rows)
         + "\n"
     )
     write_report(args.out, text, summary)

@@ -75,7 +75,9 @@ no kernel fits the stride that starts, and the least bad one is no new mode
 READER_PHASE_AGREEMENT = 0.2
 """Where the stride-start reader reports another mode, the supervised phase (the previous mode's,
 over the whole window) is kept if it is within this of the reader's (time since the heel strike
-over the new mode's stride), the reader's taken otherwise."""
+over the new mode's stride), the reader's taken otherwise. The reader's own is the better on the
+synthetic wearers, the supervised one on the real recordings (experiments/stride_reader.py,
+docs/new_wearer.md)."""
 CADENCE_MIN_STRIDES = 3
 """Confident strides the cadence calibration reads before it narrows the time scales, and the
 calibrations read before recency weighting starts."""
