@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from gait_estimator.analysis.bench import READER_EVIDENCE
+from gait_estimator.core.stride_reader import SUGGESTED_EVIDENCE_DEG2S
 
 ROOT = Path(__file__).resolve().parents[1]
 DIR = ROOT / "experiments" / "results" / "matcher"
@@ -85,7 +85,7 @@ def two_cores(report: dict[str, Any]) -> str:
                          f"{est['paper']['step_us_median']:,.1f} µs with the paper preset (median)")
         reader = by.get((m, "estimator (numba) + stride-start reader", "default"))
         if reader and est["default"]:
-            notes.append(f"M = {m}: with the stride-start reader (opt-in, {READER_EVIDENCE:g} deg² s) a default-preset "
+            notes.append(f"M = {m}: with the stride-start reader (opt-in, {SUGGESTED_EVIDENCE_DEG2S:g} deg² s) a default-preset "
                          f"update takes {reader['step_us_median']:,.1f} µs, "
                          f"{reader['step_us_median'] - est['default']['step_us_median']:+.1f} µs")
         fallback = by.get((m, "estimator (numpy)", "default"))

@@ -52,11 +52,12 @@ from bench_common import (
     write_report,
 )
 from cross_session import SPEEDS, lg2_raw_part
-from stride_reader import DEFAULT_EVIDENCE, current_constants, format_variant, parse_variant, reader_constants
+from stride_reader import current_constants, format_variant, parse_variant, reader_constants
 from synthetic import generate, new_wearer, with_stops
 
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
 from gait_estimator.core.kernels import KernelLibrary
+from gait_estimator.core.stride_reader import SUGGESTED_EVIDENCE_DEG2S
 from gait_estimator.io.library_io import load_library
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import Recording
@@ -185,7 +186,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--wearers", type=int, default=20, help="unseen synthetic wearers")
     ap.add_argument("--first-wearer", type=int, default=FIRST_WEARER, help="the first of them")
-    ap.add_argument("--evidence", type=float, default=DEFAULT_EVIDENCE, help="switch_evidence_deg2s of the reader")
+    ap.add_argument("--evidence", type=float, default=SUGGESTED_EVIDENCE_DEG2S, help="switch_evidence_deg2s of the reader")
     ap.add_argument("--variants", nargs="+", default=[FIRST_SHIPPED, now],
                     help="reader constants as in stride_reader.py; the first and last are also run on the recordings")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")

@@ -50,7 +50,6 @@ REPO = Path(__file__).resolve().parent.parent
 DATASETS = ("SYN-NEW", "LG2-AB", "MS-LG2")
 OFF = "no reader"
 MULTISPEED = "data/swge/recordings/Multispeed_Walk_AB.csv"
-DEFAULT_EVIDENCE = 40.0  # the value docs/new_wearer.md suggests for those who opt in
 
 
 def false_switches(evidence: Sequence[float]) -> dict[str, dict[str, float]]:
@@ -168,7 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         j, gate, fit, start, agree = parse_variant(variant)
         for name, r in by.items():
             if name != OFF:
-                now = parse_variant(variant) == default and float(name) == DEFAULT_EVIDENCE
+                now = parse_variant(variant) == default and float(name) == stride_reader.SUGGESTED_EVIDENCE_DEG2S
                 rows.append([" + ".join(f"{v:g}" for v in j), *("off" if math.isinf(v) else f"{v:g}" for v in (gate, fit)),
                              f"{start:g}", f"{agree:g}", *row(name + (" (suggested)" if now else ""), r)])
     command = shlex.join(["python", "experiments/stride_reader.py", *(sys.argv[1:] if argv is None else argv)])

@@ -12,9 +12,9 @@ from synthetic import generate, new_wearer, with_stops
 from gait_estimator.core import compiled, estimator, stride_reader
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
 from gait_estimator.core.kernels import KernelLibrary, resample_stride
-from gait_estimator.core.stride_reader import JOIN_FRACTIONS, StrideStartReader
+from gait_estimator.core.stride_reader import JOIN_FRACTIONS, SUGGESTED_EVIDENCE_DEG2S, StrideStartReader
 
-EVIDENCE = 40.0  # deg^2 s: the value docs/new_wearer.md suggests (the reader is opt-in)
+EVIDENCE = SUGGESTED_EVIDENCE_DEG2S  # deg^2 s (the reader is opt-in)
 ROUTE = [("Med", 5), ("RA", 5), ("Med", 4), ("SA", 5), ("Slow", 5), ("SD", 5), ("Fast", 5), ("RD", 5), ("Med", 5)]
 
 

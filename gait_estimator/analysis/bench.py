@@ -16,13 +16,11 @@ from typing import Any
 import numpy as np
 
 from ..core import compiled
-from ..core.estimator import Estimator, EstimatorConfig, config_from_values
+from ..core.estimator import Estimator, EstimatorConfig
 from ..core.kernels import KernelLibrary
 from ..core.matcher import IncrementalMatcher, NaiveMatcher
+from ..core.stride_reader import SUGGESTED_EVIDENCE_DEG2S
 from ..io.library_io import load_library, save_library
-
-READER_EVIDENCE = 40.0
-"""``switch_evidence_deg2s`` of the bench's stride-start reader row (the value docs/new_wearer.md suggests)."""
 
 
 def synthetic_walk(library: KernelLibrary, steps: int, seed: int = 0) -> np.ndarray:
@@ -140,7 +138,7 @@ def bench(
     (``numba``, ``numpy``; numba only if installed), the naive matcher (M <= naive_max_modes), and
     for M <= preset_max_modes the default preset's matcher (all its time-scaled rows) and the whole
     default-preset ``Estimator.update`` (and the paper preset's, for the ratio; at the smallest M
-    also the default preset's with the stride-start reader at READER_EVIDENCE deg^2 s and with the
+    also the default preset's with the stride-start reader at SUGGESTED_EVIDENCE_DEG2S and with the
     other backends), all in one run."""
     backends = backends or ["numba", "numpy"]
     backends = [b for b in backends if b != "numba" or compiled.AVAILABLE]
@@ -181,7 +179,8 @@ def bench(
                 results.append({"modes": m, "impl": f"estimator ({backend})", "preset": preset,
                                 **time_updates(est, xd, lib.sample_rate_hz, warmup)})
             if m == min(modes):  # the default preset with the opt-in reader, and without numba (the fallback), too
-                est = Estimator(lib, config_from_values({"switch_evidence_deg2s": READER_EVIDENCE}), backend=backend)
+                cfg = EstimatorConfig.preset("default", switch_evidence_deg2s=SUGGESTED_EVIDENCE_DEG2S)
+                est = Estimator(lib, cfg, backend=backend)
                 results.append({"modes": m, "impl": f"estimator ({backend}) + stride-start reader", "preset": "default",
                                 **time_updates(est, xd, lib.sample_rate_hz, est.matcher.max_window)})
                 for other in backends[1:]:

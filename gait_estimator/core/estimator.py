@@ -32,7 +32,7 @@ from .matcher import (
     check_window_fraction,
 )
 from .resample import UniformResampler
-from .stride_reader import StrideStartReader
+from .stride_reader import SUGGESTED_EVIDENCE_DEG2S, StrideStartReader
 from .supervisor import Estimate, Supervisor, load_transitions, relative_margin
 
 RESAMPLE_MODES = ("auto", "on", "off")
@@ -142,7 +142,8 @@ OPTIONS: tuple[Option, ...] = (
     Option("adapt_min_confidence", 0.2, "personalisation: lowest confidence margin allowed during an adapted stride"),
     Option("adapt_max_step_deg", 5.0, "personalisation: per-sample clip (deg) of stride - kernel before weighting "
            "(one stride moves a kernel by at most adapt_rate x this)"),
-    Option("switch_evidence_deg2s", 0.0, "stride-start reader (opt-in, e.g. 40): from every heel strike after a stride "
+    Option("switch_evidence_deg2s", 0.0, f"stride-start reader (opt-in, e.g. {SUGGESTED_EVIDENCE_DEG2S:g}): from every "
+           "heel strike after a stride "
            "the reported mode fitted as well as the wearer's strides usually fit, compare the stride so far with "
            "the start of every kernel (joined to the pose at the heel strike) and report another mode once its "
            "squared error there is this much (deg^2 s) below every other's, from a quarter of its stride on and "

@@ -38,6 +38,9 @@ REPORT_FROM = 0.25
 """The reader reports a mode only from this part of that mode's stride (at its best scale) on:
 before it, every mode's prediction is still mostly the pose at the heel strike, and a walk that
 stops looks like the start of a stair ascent (experiments/reader_heldout.py)."""
+SUGGESTED_EVIDENCE_DEG2S = 40.0
+"""The ``switch_evidence_deg2s`` docs/new_wearer.md suggests to those who opt in (the reader is off by
+default): the value the guards were checked at (experiments/reader_heldout.py)."""
 READ_STRIDES = 1.5
 """A reading stops this many (longest, most stretched) kernel strides after its heel strike if no
 other heel strike came."""
