@@ -69,7 +69,7 @@ from ..core.estimator import GAP_OPTIONS, OPTIONS, PRESETS, Estimator, Estimator
 from ..core.kernels import KernelLibrary
 from ..core.supervisor import Estimate
 from ..io.cdr import CdrError, Stamp, read_joint_state
-from ..io.library_io import load_library, save_library
+from ..io.library_io import load_library
 from ..io.outputs import (
     ESTIMATE_TOPIC,
     INPUT_TOPIC,
@@ -93,6 +93,7 @@ from ..io.stream import (
 )
 from .priority import MAX_PRIORITY, process_priority, set_process_priority
 from .serialized import SerializedJointState
+from .teach import NodeTeacher, save_library_atomically
 
 NODE_NAME = "estimator_node"
 SAVE_LIBRARY_SERVICE = "~/save_library"
@@ -152,7 +153,8 @@ DEFAULTS: dict[str, Any] = {
 
 DESCRIPTIONS: dict[str, str] = {
     "kernels": "Kernel library: a file (.yaml, .npz, reference .csv or per-mode .yaml) or directory, or a "
-    "bundled name (able_bodied, prosthesis). Changing it at run time reloads it and restarts the window.",
+    "bundled name (able_bodied, prosthesis); '' = none: the node starts without one and publishes only diagnostics "
+    "until a mode is taught (teach_mode). Changing it at run time reloads it and restarts the window.",
     "joint_names": "JointState names of right_thigh, left_thigh, right_shank, left_shank, in that order "
     "(4 distinct names; other joints in the message are ignored, message order does not matter).",
     "input_units": "Units of the input angles: rad (REP 103) or deg.",
@@ -241,8 +243,10 @@ class EstimatorNode(Node):
                 if name == "preset":
                     self._config_preset = self.get_parameter("preset").value
                     self._config = EstimatorConfig.preset(self._config_preset)
-            assert self._library is not None
-            self._set_estimator(self._new_estimator(self._library, self._config))
+            self._estimator: Estimator | None = None  # None: no library yet (kernels: ''), only teaching
+            if self._library is not None:
+                self._set_estimator(self._new_estimator(self._library, self._config))
+            self._teacher = NodeTeacher(self)
         except ParameterException as exc:
             reason = self._last_rejection or ": " + _one_line(exc)
             self.destroy_node()
@@ -309,6 +313,7 @@ class EstimatorNode(Node):
         )
         lib = self._library
         self.get_logger().info(
+            "no kernel library (kernels: ''): diagnostics only until a mode is taught (teach_mode)" if lib is None else
             f"library '{lib.name}' ({len(lib)} modes: {', '.join(lib.mode_names)}; window "
             f"{self._estimator.matcher.max_window} samples at {lib.sample_rate_hz:g} Hz) from {lib.path or '?'}; "
             f"input {self._input_type} on {self._sub.topic_name} in {self._units}"
@@ -357,8 +362,10 @@ class EstimatorNode(Node):
 
     @staticmethod
     def _check_kernels(value: Any) -> tuple[str, KernelLibrary | None]:
-        if not isinstance(value, str) or not value.strip():
-            return "must be a library path or bundled name, got an empty value", None
+        if not isinstance(value, str):
+            return "must be a library path or bundled name, or '' (none: teach modes)", None
+        if not value.strip():
+            return "", None  # no library: the node starts with none (NodeTeacher refuses it later)
         try:
             return "", load_library(value)
         except (GaitEstimatorError, OSError, ValueError) as exc:
@@ -412,21 +419,24 @@ class EstimatorNode(Node):
         self._guard.restart_back_s = restart_threshold(config.max_gap_s)
         restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - GAP_OPTIONS)
         if restart and estimator is not None:
-            self._resets_before += self._estimator.resets
             kept = ""
-            if "kernels" not in names:  # same kernels, same sensors: keep what was learnt
+            if self._estimator is None:
+                pass
+            elif "kernels" not in names:  # same kernels, same sensors: keep what was learnt
                 estimator.adopt_calibration(self._estimator)
                 strides = estimator.adopt_adaptation(self._estimator)
                 if strides:
                     kept = (f"; personalised kernels ({strides} strides) kept" if estimator.adapter is not None
                             else f"; personalised kernels ({strides} strides) dropped: adapt_rate is 0")
+            if self._estimator is not None:
+                self._resets_before += self._estimator.resets
             self._set_estimator(estimator)
             lib = self._library
             self.get_logger().info(
                 f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: {self._options_summary()}: "
                 "window restarted" + kept
             )
-        elif names & GAP_OPTIONS:
+        elif names & GAP_OPTIONS and self._estimator is not None:
             self._estimator.config = config  # only gap thresholds changed: keep the window
 
     def _set_priority(self, priority: int) -> None:
@@ -447,24 +457,28 @@ class EstimatorNode(Node):
     # Services
 
     def _save_library(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        """``~/save_library``: write the personalised kernels to ``adapted_library_path``."""
+        """``~/save_library``: write the library in use, with its taught modes and personalised
+        kernels, to ``adapted_library_path``."""
         est = self._estimator
-        if est.adapter is None:
+        if est is None or (est.adapter is None and not self._teacher.taught):
             response.success = False
-            response.message = "personalisation is off (adapt_rate is 0): no adapted kernels to save"
+            response.message = ("no library yet: teach a mode first (teach_mode)" if est is None else
+                                "no taught modes, and personalisation is off (adapt_rate is 0): nothing to save")
             return response
         path = self.get_parameter("adapted_library_path").value or str(
             Path.home() / ".ros" / "gait_estimator" / f"{self.library.name}_adapted.yaml")
         try:
             Path(path).expanduser().parent.mkdir(parents=True, exist_ok=True)
             lib = est.adapted_library()
-            out = save_library(lib, Path(path).expanduser())
+            out = save_library_atomically(lib, Path(path).expanduser())
         except (GaitEstimatorError, OSError, ValueError) as exc:
             response.success, response.message = False, f"{path}: {_one_line(exc)}"
             return response
-        strides = lib.provenance["adaptation"]["accepted_strides"]
+        strides = lib.provenance.get("adaptation", {}).get("accepted_strides", {})
         response.success = True
-        response.message = f"wrote {out} (strides adopted: " + ", ".join(f"{m} {n}" for m, n in strides.items()) + ")"
+        response.message = f"wrote {out} ({len(lib)} modes: {', '.join(lib.mode_names)}" + (
+            f"; taught: {', '.join(self._teacher.taught)}" if self._teacher.taught else "") + (
+            "; strides adopted: " + ", ".join(f"{m} {n}" for m, n in strides.items()) if est.adapter else "") + ")"
         self.get_logger().info(response.message)
         return response
 
@@ -472,6 +486,9 @@ class EstimatorNode(Node):
         """``~/reset_calibration``: forget the learnt sensor offsets and cadence (after
         re-donning, or for another wearer)."""
         est = self._estimator
+        if est is None:
+            response.success, response.message = False, "no library yet: nothing calibrated"
+            return response
         before, scale = est.sensor_offset_deg.copy(), est.cadence_scale
         est.reset_calibration()
         response.success = True
@@ -573,6 +590,9 @@ class EstimatorNode(Node):
             self._reject(exc)
             return
         est = self._estimator
+        if est is None:  # no library yet (kernels: ''): the samples only teach
+            self._teacher.on_sample(t, angles_deg)
+            return
         if restart:  # stamps jumped back by more than restart_back_s: a restarted stream
             est.reset()
             self._log_restart("back", f"input stamps jumped back by {(prev or t) - t:.3f} s (> {guard.restart_back_s:g} s)")
@@ -592,6 +612,7 @@ class EstimatorNode(Node):
             )
         t1 = time.perf_counter()
         self._publish(estimate, stamp)
+        self._teacher.on_sample(t, angles_deg)  # may change the library and the estimator
 
         if self._period_first_stamp is None:
             self._period_first_stamp = t
@@ -684,7 +705,7 @@ class EstimatorNode(Node):
     @property
     def ready(self) -> bool:
         """True while the matcher window is full (mode/phase/sse are being published)."""
-        return self._estimator.matcher.ready
+        return self._estimator is not None and self._estimator.matcher.ready
 
     @property
     def samples_received(self) -> int:
@@ -704,11 +725,16 @@ class EstimatorNode(Node):
     @property
     def window_resets(self) -> int:
         """Window restarts caused by the input stream: gaps > max_gap_s and jumps back."""
-        return self._resets_before + self._estimator.resets + self._guard.restarts
+        resets = self._estimator.resets if self._estimator is not None else 0
+        return self._resets_before + resets + self._guard.restarts
 
     def diagnostics_status(self) -> DiagnosticStatus:
         """The node's status; rates and processing times cover the time since the previous call."""
         now = time.monotonic()
+        if self._estimator is None:
+            self._period_start, self._period_received = now, 0
+            return self._teacher.status_without_library(f"{self.get_fully_qualified_name()}: gait estimator",
+                                                        self._received, self._guard.accepted)
         elapsed = max(now - self._period_start, 1e-9)
         lib = self.library
         m = self._estimator.matcher
@@ -752,6 +778,7 @@ class EstimatorNode(Node):
             "sensor_offset_deg": ",".join(f"{v:.2f}" for v in self._estimator.sensor_offset_deg),
             "cadence_scale": f"{self._estimator.cadence_scale:.3f}" if math.isfinite(self._estimator.cadence_scale) else "",
             "adapted_strides": str(int(self._estimator.adapter.accepted.sum())) if self._estimator.adapter else "",
+            **self._teacher.diagnostic_values(),
         }
         problems = []
         if self._period_received == 0:
@@ -773,6 +800,7 @@ class EstimatorNode(Node):
             level, message = DiagnosticStatus.OK, f"ready: {e.mode} phase {e.phase:.2f}"
         else:
             level, message = DiagnosticStatus.OK, f"filling window {values['window']}"
+        message += self._teacher.message_suffix()
         self._period_start = now
         self._period_received = self._period_rejected = self._period_accepted = 0
         self._period_first_stamp = self._period_last_stamp = None
