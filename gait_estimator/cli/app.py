@@ -23,6 +23,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.node_commands",
     "gait_estimator.cli.bag_commands",
     "gait_estimator.cli.analysis_commands",
+    "gait_estimator.cli.teach_command",
 )
 """Further modules contributing subcommands (kept ROS-free at import time)."""
 
