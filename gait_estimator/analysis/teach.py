@@ -274,6 +274,7 @@ class StrideCollector:
         kernel, infos = train_mode(self.mode, [(LIVE_SOURCE, uni, bounds)], rate, train)
         info = dict(kernel.info)
         info["heel_strikes"] = f"{opts.channel} maxima, taught live"
+        info["candidate_strides_s"] = [[round(float(a), 6), round(float(b), 6)] for a, b in bounds]
         self.result = TaughtMode(replace(kernel, info=info), infos, len(self.heel_strikes))
 
     def _trim(self) -> None:
