@@ -223,7 +223,8 @@ class StrideCollector:
                     events.append(f"{self.mode}: {h - a:.2f} s from the heel strike at {a:.2f} s to the next at "
                                   f"{h:.2f} s: not a stride (> {det.max_stride_s:g} s: a stop or a turn), not used")
             self.heel_strikes.append(h)
-            self._silence_reported = False
+            if end - h <= det.max_stride_s:  # walking again (not a heel strike confirmed late, e.g. before a stop)
+                self._silence_reported = False
         since = self.heel_strikes[-1] if self.heel_strikes else float(uni.time_s[0])
         if end - since > det.max_stride_s + det.min_stride_s and not self._silence_reported:
             self._silence_reported = True
