@@ -40,7 +40,7 @@ def cmd_teach(args: argparse.Namespace) -> int:
     with TeachClient(args.node, args.domain_id, args.timeout) as client:
         code = 0
         if args.mode:
-            client.on_log = lambda line: print(line, flush=True)
+            client.on_log = lambda line: None if ": kernel built from " in line else print(line, flush=True)
             print(f"teaching {args.mode} on {client.target}: walk steadily in that mode "
                   f"({args.strides} good strides); Ctrl-C cancels", flush=True)
             try:
@@ -49,7 +49,7 @@ def cmd_teach(args: argparse.Namespace) -> int:
                 client.cancel()
                 print(f"cancelled: teach_mode of {client.target} set back to ''", flush=True)
                 return 130
-            print(("taught " if done else "not taught: ") + text, flush=True)
+            print(("done: " if done else "not taught: ") + text, flush=True)
             code = 0 if done else 1
         if args.save and code == 0:
             print(client.save(args.save), flush=True)

@@ -419,17 +419,14 @@ class EstimatorNode(Node):
         self._guard.restart_back_s = restart_threshold(config.max_gap_s)
         restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - GAP_OPTIONS)
         if restart and estimator is not None:
+            self._resets_before += self._estimator.resets if self._estimator is not None else 0
             kept = ""
-            if self._estimator is None:
-                pass
-            elif "kernels" not in names:  # same kernels, same sensors: keep what was learnt
+            if "kernels" not in names and self._estimator is not None:  # same kernels, same sensors: keep what was learnt
                 estimator.adopt_calibration(self._estimator)
                 strides = estimator.adopt_adaptation(self._estimator)
                 if strides:
                     kept = (f"; personalised kernels ({strides} strides) kept" if estimator.adapter is not None
                             else f"; personalised kernels ({strides} strides) dropped: adapt_rate is 0")
-            if self._estimator is not None:
-                self._resets_before += self._estimator.resets
             self._set_estimator(estimator)
             lib = self._library
             self.get_logger().info(

@@ -135,6 +135,8 @@ class NodeTeacher:
                     self.session = None
                 if p.value:
                     self._start(p.value)
+            elif p.name == "kernels":
+                self.taught = []  # another library: nothing of it was taught here
             elif p.name == "teach_strides" and self.session is not None:
                 self.session.set_target(p.value)
                 self._log(self.session.progress())
