@@ -87,6 +87,8 @@ class NodeTeacher:
         self.last_taught: TaughtMode | None = None
         self.taught: list[str] = []
         self._recent: deque[tuple[float, Sample]] = deque()
+        self._replay_for: tuple[Any, Any] = (None, None)  # (library, config) _replay_s was computed for
+        self._replay_s = self.replay_s()
         self._clearing = False
         node.add_on_set_parameters_callback(self._validate)
         for name, (default, text) in PARAMETERS.items():
@@ -156,7 +158,10 @@ class NodeTeacher:
         """One accepted input sample (node seconds, degrees)."""
         recent = self._recent
         recent.append((time_s, sample))
-        keep_from = time_s - self.replay_s()
+        node = self.node
+        if node._library is not self._replay_for[0] or node._config is not self._replay_for[1]:
+            self._replay_for, self._replay_s = (node._library, node._config), self.replay_s()
+        keep_from = time_s - self._replay_s
         while recent[0][0] < keep_from:
             recent.popleft()
         session = self.session
