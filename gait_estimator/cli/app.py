@@ -72,10 +72,10 @@ def cmd_kernels_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_process(args: argparse.Namespace) -> int:
-    from ..core.estimator import config_from_args
     from ..io.process import format_summary, predict, write_predictions_csv
     from ..io.readers import read_recording
     from .bag_commands import finish_process
+    from .estimator_args import config_from_args
 
     lib = load_library(args.kernels)
     options = {"rate_hz": lib.sample_rate_hz}
@@ -204,8 +204,8 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--quiet", "-q", action="store_true", help="no summary on stdout")
     proc.add_argument("--save-adapted", metavar="LIB", help="with --adapt-rate > 0: write the personalised kernel "
                       "library (.yaml or .npz) at the end")
-    from ..core.estimator import add_estimator_arguments
     from .bag_commands import add_process_options
+    from .estimator_args import add_estimator_arguments
 
     add_process_options(proc)
     add_estimator_arguments(proc)
