@@ -14,7 +14,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..core.errors import GaitEstimatorError
+from ..core.errors import GaitEstimatorError, missing_extra
 from ..io.library_io import load_library, save_library
 from ..io.resources import DEFAULT_LIBRARY
 from .args import choice_list, int_list, positive_int, prepare_output
@@ -240,6 +240,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except GaitEstimatorError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except ImportError as exc:  # an optional dependency: name the extra that installs it
+        extra = missing_extra(exc)
+        if extra is None:
+            raise
+        print(f"{PROG} {args.command} {extra}", file=sys.stderr)
         return 2
     except BrokenPipeError:
         return 0
