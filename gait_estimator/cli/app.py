@@ -21,6 +21,7 @@ from .args import choice_list, int_list, positive_int, prepare_output
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.node_commands",
+    "gait_estimator.cli.bench_node",
     "gait_estimator.cli.bag_commands",
     "gait_estimator.cli.analysis_commands",
 )
