@@ -4,7 +4,7 @@ docs/new_wearer.md).
 
     python experiments/cross_session.py                     # -> experiments/results/cross_session/
     python experiments/cross_session.py --settings "default,paper + resample" --datasets SYN-NEW,LG2-AB --seeds 3
-    python experiments/cross_session.py --add 'mine={"offset_tolerance_deg": 4.0, "window_fraction": 0.75}'
+    python experiments/cross_session.py --add 'mine={"offset_tolerance_deg": 4.0, "min_dwell_s": 0.1}'
 
 Every data set is fed to ``Estimator.update`` sample by sample (``run_estimator``, the code behind
 ``gait-estimator process``) under every *setting*: a named dict of options, applied on top of the
@@ -106,7 +106,6 @@ from gait_estimator.analysis.strides import heel_strikes, stride_bounds
 from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.core.estimator import (
     DEFAULT_TIME_SCALES,
-    OFFSET_CALIBRATION_RATE,
     Estimator,
     EstimatorConfig,
     config_from_values,
@@ -134,7 +133,7 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "paper + resample + time scales": {**P, "resample": "auto", "time_scales": list(DEFAULT_TIME_SCALES),
                                        "normalize_error": True},
     "paper + resample + offset calibration": {**P, "resample": "auto", "offset_tolerance_deg": 2.0,
-                                              "offset_calibration_rate": OFFSET_CALIBRATION_RATE},
+                                              "offset_calibration_rate": EstimatorConfig().offset_calibration_rate},
     "default: one time scale": {"time_scales": [1.0]},
     "default: 3 time scales ±8 %": {"time_scales": [0.92, 1.0, 1.08]},
     "default: 5 time scales ±12 %": {"time_scales": [0.88, 0.94, 1.0, 1.06, 1.12]},
@@ -153,13 +152,6 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "default: uniform weights": {"recency_half_life": 0.0},
     "default: recency half-life 0.2": {"recency_half_life": 0.2},
     "default: recency half-life 0.5": {"recency_half_life": 0.5},
-    "default + stride-start reader 10": {"switch_evidence_deg2s": 10.0},
-    "default + stride-start reader 20": {"switch_evidence_deg2s": 20.0},
-    "default + stride-start reader 40": {"switch_evidence_deg2s": 40.0},
-    "default + window 0.75": {"window_fraction": 0.75},
-    "default + window 0.75, no calibration": {"window_fraction": 0.75, "offset_calibration_rate": 0.0},
-    "default + window 0.5": {"window_fraction": 0.5},
-    "default + subsample phase": {"subsample_phase": True},
     "default + min_dwell_s 0.1": {"min_dwell_s": 0.1},
     "default + transitions table": {"transitions": TABLE_VALUE},
     "default + personalisation 0.1": {"adapt_rate": 0.1},
@@ -171,7 +163,7 @@ picks the preset the other options apply to (default: ``default``)."""
 RATE_SETTINGS = ("default", "paper", "paper + resample")
 """Settings run on the RATES variants (each variant is a whole recording: keep this short)."""
 
-SELF_SETTINGS = ("default", "paper", "default: uniform weights", "default + stride-start reader 40")
+SELF_SETTINGS = ("default", "paper", "default: uniform weights")
 """Settings run on SYN-SELF (the in-sample reference for SYN-NEW)."""
 
 WEARER_SETTINGS = ("default", "paper", "paper + resample")

@@ -23,8 +23,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from gait_estimator.core.stride_reader import SUGGESTED_EVIDENCE_DEG2S
-
 ROOT = Path(__file__).resolve().parents[1]
 DIR = ROOT / "experiments" / "results" / "matcher"
 PERIODS_US = {230: 1e6 / 230, 1000: 1000.0}
@@ -85,7 +83,7 @@ def two_cores(report: dict[str, Any]) -> str:
                          f"{est['paper']['step_us_median']:,.1f} µs with the paper preset (median)")
         reader = by.get((m, "estimator (numba) + stride-start reader", "default"))
         if reader and est["default"]:
-            notes.append(f"M = {m}: with the stride-start reader (opt-in, {SUGGESTED_EVIDENCE_DEG2S:g} deg² s) a default-preset "
+            notes.append(f"M = {m}: with the stride-start reader (opt-in, 40 deg² s) a default-preset "
                          f"update takes {reader['step_us_median']:,.1f} µs, "
                          f"{reader['step_us_median'] - est['default']['step_us_median']:+.1f} µs")
         fallback = by.get((m, "estimator (numpy)", "default"))

@@ -5,7 +5,7 @@ libraries: able_bodied; able_bodied with every mode twice (``KernelLibrary.repli
 copies 0.001 deg apart, as the benchmarks build large libraries); and five near copies of every
 mode (``synthetic.near_copies``: a fraction of a degree and of a percent apart, as one kernel per
 ramp angle or speed step would be). Each with near copies counted as one mode by the walking
-calibrations (the default, ``NEAR_COPY_RMS_DEG`` 1.0) and counted apart (0). A reported copy
+calibrations (the default, ``CalibrationParams.near_copy_rms_deg`` 1.0) and counted apart (0). A reported copy
 counts as its mode. Deterministic apart from the per-update times (two workers on two cores).
 
     python experiments/near_copies.py [--wearers 5] [--jobs 2] [--out experiments/results/near_copies]
@@ -23,14 +23,15 @@ import numpy as np
 from bench_common import ROUTE, machine_text, md_table, pct, pool, recording_stats, run_script_jobs, sec, write_report
 from synthetic import generate, near_copies, new_wearer
 
-from gait_estimator.core import estimator as estimator_module
+from gait_estimator.core.calibration import CalibrationParams
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, trace_from_estimates
 from gait_estimator.core.kernels import KernelLibrary
+from gait_estimator.core.pipeline import PipelineParams
 from gait_estimator.io.library_io import load_library
 
 REPO = Path(__file__).resolve().parent.parent
 COPIES = 5
-RULES = {"as one mode (default)": estimator_module.NEAR_COPY_RMS_DEG, "apart": 0.0}
+RULES = {"as one mode (default)": CalibrationParams().near_copy_rms_deg, "apart": 0.0}
 
 
 def libraries() -> dict[str, KernelLibrary]:
@@ -55,8 +56,8 @@ def run(job: tuple[str, str, int]) -> dict[str, Any]:
     wearer = new_wearer(seed)
     syn = generate(ab, ROUTE, wearer, seed=1000 + seed, source=f"wearer {seed}")
     rec = syn.recording
-    estimator_module.NEAR_COPY_RMS_DEG = RULES[rule]
-    est = Estimator(lib, EstimatorConfig(), stamped=True)
+    params = PipelineParams.from_config(EstimatorConfig(), calibration={"near_copy_rms_deg": RULES[rule]})
+    est = Estimator(lib, EstimatorConfig(), stamped=True, params=params)
     rows, times = [], []
     for i in range(len(rec)):
         t0 = time.perf_counter()
@@ -69,9 +70,9 @@ def run(job: tuple[str, str, int]) -> dict[str, Any]:
     truth_offset = np.asarray(wearer.channel_offset_deg)
     return {
         "library": lib_name, "rule": rule, "seed": seed, "stats": stats,
-        "calibration_strides": est.calibration_strides,
+        "calibration_strides": est.calibration.strides,
         "offset_error_deg": float(np.sqrt(np.mean((est.sensor_offset_deg - truth_offset) ** 2))),
-        "cadence_error": abs(est.cadence_scale * wearer.cadence - 1.0) if est.cadence_strides else None,
+        "cadence_error": abs(est.cadence_scale * wearer.cadence - 1.0) if est.calibration.cadence_strides else None,
         "recency_started": est.matcher.recency_half_life > 0,
         "update_us_median": float(np.median(times[len(times) // 2:]) * 1e6),
     }

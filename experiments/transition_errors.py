@@ -35,7 +35,8 @@ def run(job: tuple[int, float]) -> dict[str, Any]:
     seed, evidence = job
     ab = load_library("able_bodied")
     rec = generate(ab, ROUTE, new_wearer(seed), seed=1000 + seed).recording
-    est = Estimator(ab, EstimatorConfig(switch_evidence_deg2s=evidence), stamped=True)
+    assert not evidence, "the stride-start reader was removed (docs/options.md)"
+    est = Estimator(ab, EstimatorConfig(), stamped=True)
     reported = np.array([est.update(float(t), x).mode for t, x in zip(rec.time_s, rec.angles_deg, strict=True)])
     ready = np.ones(len(rec), dtype=bool)
     ready[: np.searchsorted(rec.time_s, rec.time_s[0] + est.matcher.max_window / ab.sample_rate_hz)] = False
@@ -102,6 +103,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")
     ap.add_argument("--out", type=Path, default=REPO / "experiments/results/transition_errors", help="output directory")
     args = ap.parse_args(argv)
+    if args.switch_evidence:
+        ap.error("--switch-evidence: the stride-start reader was removed after commit 1e434ed (docs/options.md)")
     jobs = [(seed, args.switch_evidence) for seed in range(args.wearers)]
     results, command, seconds = run_script_jobs("transition_errors.py", argv, run, jobs, args.jobs)
     write_report(args.out, tables(results, command, seconds, args.switch_evidence), results)
