@@ -148,8 +148,8 @@ class WalkingCalibration:
             self.matcher.set_recency_half_life(self.half_life)
 
     def observe(self, est: Estimate, result: StepResult) -> None:
-        """Read the stride that ``est`` ends, if it ends a confident one."""
-        if not self.active or not self._confident_stride_end(est):
+        """Read the stride that ``est`` ends, if it ends a confident one (only while ``active``)."""
+        if not self._confident_stride_end(est):
             return
         if self.learns_offsets:
             self._calibrate_offset(est, result)

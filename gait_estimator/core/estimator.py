@@ -127,7 +127,8 @@ class Estimator:
         """One sample on the library's clock through matcher, supervisor and the learning stages."""
         result = self.matcher.step(x)
         est = self.supervisor.decide(time_s, result)
-        self.calibration.observe(est, result)
+        if self.calibration.active:
+            self.calibration.observe(est, result)
         if self.personaliser is not None:
             self.personaliser.observe(x, est, result)
         return est
