@@ -22,7 +22,7 @@ from rosbags.rosbag2 import Reader
 
 from gait_estimator.cli.app import main
 from gait_estimator.core.errors import RecordingError
-from gait_estimator.io.bag import BagRecording, read_bag
+from gait_estimator.io.bag import BagRecording, bag_records, read_bag
 from gait_estimator.io.bag_recover import damage, open_recovered
 from gait_estimator.io.bag_write import write_input_bag
 from gait_estimator.io.mcap_scan import MAGIC
@@ -354,3 +354,16 @@ def test_repair_of_a_bag_without_messages_is_an_error(tmp_path, ms_mcap, capsys)
     assert "no complete message could be read" in capsys.readouterr().err
     assert not (tmp_path / "cut_repaired").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cut"]
+
+
+def test_bag_records_gives_raw_messages_of_intact_and_cut_bags(tmp_path, ms_mcap, message_ends, capsys):
+    """The layer below topic decoding (for other readers, e.g. IMU topics): raw CDR records."""
+    full = list(bag_records(ms_mcap))
+    assert len(full) == 14170 and capsys.readouterr().err == ""
+    bag = _cut_copy(ms_mcap, tmp_path / "cut", int(message_ends[999]))
+    part = list(bag_records(bag, ["segment_angles"]))
+    assert part == full[:1000]
+    assert part[0].topic == "/segment_angles" and part[0].msgtype == "sensor_msgs/msg/JointState"
+    _warning(capsys)
+    with pytest.raises(RecordingError, match="no topic /imu"):
+        list(bag_records(bag, ["/imu"]))

@@ -17,6 +17,8 @@ samples exactly as the live node turns them into samples (``stream.py``):
 
 A bag path is a rosbag2 directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3``
 storage file, which is read on its own (its own schema/topic tables; no metadata.yaml needed).
+A cut or damaged bag is read as far as it goes (``bag_recover.py``, through ``open_bag``);
+``bag_records`` gives any topic's raw CDR records, for readers of other message types.
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ import numpy as np
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
+from . import bag_recover
+from .bag_recover import RawRecord
 from .recording import Recording
 from .stream import UNITS, SampleRejected, StreamGuard, angles_from_array, angles_from_named
 
@@ -171,8 +175,6 @@ def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = Fals
     ``all_topics``: errors name the bag only (for readers of every topic, e.g. ``repair``)."""
     from rosbags.rosbag2 import Reader
 
-    from . import bag_recover
-
     p = Path(path)
     where = str(p) if all_topics else f"{p} (topic {topic or DEFAULT_TOPIC + ' by default'})"
     reader: Any = None
@@ -200,6 +202,24 @@ def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = Fals
     finally:
         with suppress(Exception):  # closing a damaged bag may fail again; reported above
             reader.close()
+
+
+def bag_records(path: str | Path, topics: Sequence[str] | None = None) -> Iterator[RawRecord]:
+    """Every message on ``topics`` (default: all topics) of an intact or damaged bag as
+    ``RawRecord(topic, msgtype, log_time_ns, data)``, CDR bytes undecoded, in the bag's order
+    (a damaged bag: file order, after the one warning line of ``open_bag``).
+
+    Raises:
+        RecordingError: one line (a topic missing, nothing readable, a corrupt bag).
+    """
+    wanted = [normalize_topic(t) for t in topics] if topics else []
+    with open_bag(path, ", ".join(wanted) or None, all_topics=not wanted) as reader:
+        conns = [c for c in reader.connections if not wanted or c.topic in wanted]
+        missing = sorted(set(wanted) - {c.topic for c in conns})
+        if missing:
+            raise RecordingError(f"{path}: no topic {', '.join(missing)}; {format_topics(bag_topics(reader))}")
+        for conn, log_ns, data in reader.messages(connections=conns):
+            yield RawRecord(conn.topic, conn.msgtype, int(log_ns), bytes(data))
 
 
 def _one_line(exc: BaseException) -> str:

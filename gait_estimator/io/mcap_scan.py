@@ -15,6 +15,7 @@ Pure Python; no ROS, no rosbags.
 
 from __future__ import annotations
 
+import mmap
 import struct
 import sys
 import zlib
@@ -120,16 +121,18 @@ def iter_mcap(scan: McapScan, with_data: bool = True) -> Iterator[tuple[int, int
     """Yield ``(channel id, log time ns, CDR bytes)`` of every complete message of
     ``scan.path`` in file order, updating ``scan`` as it goes; stops at the cut (or the end of
     the data section). ``with_data=False`` yields empty data (for counting)."""
-    buf = scan.path.read_bytes()
-    scan.size = len(buf)
-    if not buf:
-        scan.problem = "the file is empty"
-        return
-    if buf[: min(8, len(buf))] != MAGIC[: min(8, len(buf))]:
+    with scan.path.open("rb") as f:
+        scan.size = f.seek(0, 2)
+        if scan.size == 0:
+            scan.problem = "the file is empty"
+            return
+        # mapped, not read: the OS pages the file in as the walk goes; unmapped when the last
+        # view of it is gone
+        buf = memoryview(mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ))
+    if buf[: min(8, scan.size)] != MAGIC[: min(8, scan.size)]:
         scan.problem = "not an mcap file (no magic at the start)"
         return
-    view = memoryview(buf)
-    yield from _walk(view, 8, len(buf), 0, scan, with_data, top=True)
+    yield from _walk(buf, 8, scan.size, 0, scan, with_data, top=True)
 
 
 def _walk(
