@@ -36,7 +36,7 @@ import numpy as np
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
 from . import bag_recover
-from .bag_recover import RawRecord
+from .bag_recover import STORAGE_SUFFIXES, RawRecord
 from .recording import Recording
 from .stream import UNITS, SampleRejected, StreamGuard, angles_from_array, angles_from_named
 
@@ -47,7 +47,6 @@ INPUT_MSGTYPES = {"joint_state": JOINT_STATE, "float64_multi_array": FLOAT64_MUL
 
 DEFAULT_TOPIC = "/segment_angles"
 DEFAULT_MAX_GAP_S = 0.5
-STORAGE_SUFFIXES = (".mcap", ".db3")
 
 UNDECODABLE = "undecodable"
 """Skip reason for a message whose serialized data cannot be decoded as its declared type."""
