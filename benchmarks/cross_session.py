@@ -576,6 +576,38 @@ def delay_cells(m: dict[str, Any]) -> str:
     return f"{sec(m['mean_delay_s'])} / {sec(m['median_delay_s'])}{miss}"
 
 
+SUMMARY_DATASETS = ("SYN-NEW", "SYN-NEW-L", "SYN-SELF", "LG2-AB", "MS-LG2", "LG2-MS")
+"""Data sets of the compact settings table (columns)."""
+
+
+def summary_tables(res: dict[str, Any]) -> str:
+    """The two compact tables docs/results.md shows: presets per data set, settings per data set."""
+    R, D = res["results"], res["datasets"]
+    keys = [k for k in R if not k.startswith("RATES-")]
+    rows = []
+    for key in keys:
+        cells = [f"{key}: {D[key]['title']}"]
+        for name in ("default", "paper"):
+            m = R[key].get(name)
+            cells.append("–" if m is None else f"{pct(m['accuracy'])} ({pct(m['steady_accuracy'])}); "
+                         f"{pct(m['phase_error_mean'], 2)}; {delay_cells(m)}")
+        rows.append(cells)
+    presets = ("### Summary: the two presets on every data set\n\nAccuracy (steady accuracy); phase error mean; "
+               "transition delay mean / median.\n\n" + md_table(["data set", "default preset", "paper preset"], rows))
+    cols = [k for k in SUMMARY_DATASETS if k in R]
+    names = list(dict.fromkeys(n for k in cols for n in R[k]))
+    rows = []
+    for name in names:
+        cells = [name]
+        for key in cols:
+            m = R[key].get(name)
+            cells.append("–" if m is None else f"{pct(m['accuracy'])}; {pct(m['phase_error_mean'], 2)}")
+        rows.append(cells)
+    settings = ("### Settings: accuracy; phase error mean\n\nEach setting's options are in the Run section of "
+                "benchmarks/results/cross_session/tables.md.\n\n" + md_table(["setting", *cols], rows))
+    return presets + "\n\n" + settings
+
+
 def write_tables(res: dict[str, Any], out: Path) -> str:
     R, D = res["results"], res["datasets"]
     mach = res["machine"]
@@ -613,6 +645,8 @@ def write_tables(res: dict[str, Any], out: Path) -> str:
         rows.append([t["dataset"], t["target"], limit, fmt(t["paper"], 2), fmt(t["default"], 2), pass_cell])
     parts.append("### Targets: issue 10 targets with the default options\n\n"
                  + md_table(["data", "metric", "target", "paper options", "defaults", "defaults pass?"], rows))
+
+    parts.append(summary_tables(res))
 
     for key in [k for k in R if not k.startswith("RATES-")]:
         ds = D[key]
