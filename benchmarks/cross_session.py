@@ -576,7 +576,7 @@ def delay_cells(m: dict[str, Any]) -> str:
     return f"{sec(m['mean_delay_s'])} / {sec(m['median_delay_s'])}{miss}"
 
 
-SUMMARY_DATASETS = ("SYN-NEW", "SYN-NEW-L", "SYN-SELF", "LG2-AB", "MS-LG2", "LG2-MS")
+SUMMARY_DATASETS = ("SYN-NEW", "SYN-NEW-L", "LG2-AB", "MS-LG2")
 """Data sets of the compact settings table (columns)."""
 
 

@@ -102,7 +102,7 @@ def two_cores(report: dict[str, Any]) -> str:
     return ("## Two cores\n\n"
             f"`gait-estimator bench --modes 7,70,700 --drift-steps 1000000 --json benchmarks/results/performance/bench.json` "
             f"on the quiet development machine ({machine(report)}).\n\n"
-            + results_table(report) + "\n\n" + "\n".join(f"* {n}." for n in notes) + "\n")
+            + "\n".join(f"* {n}." for n in notes) + "\n\n## Two cores: every row\n\n" + results_table(report) + "\n")
 
 
 def one_core(report: dict[str, Any]) -> str:
@@ -119,7 +119,8 @@ def one_core(report: dict[str, Any]) -> str:
     return ("## One core (`taskset -c 0`)\n\n"
             "`taskset -c 0 gait-estimator bench --modes 7,70,700 --json benchmarks/results/performance/bench_one_core.json` "
             f"on the quiet development machine ({machine(report)}), a stand-in for a Raspberry Pi-class "
-            "computer.\n\n" + results_table(report) + "\n\n" + "\n".join(f"* {n}." for n in lines) + "\n")
+            "computer.\n\n" + "\n".join(f"* {n}." for n in lines) + "\n\n## One core: every row\n\n"
+            + results_table(report) + "\n")
 
 
 def run_bench() -> None:
