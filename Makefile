@@ -57,7 +57,7 @@ soak: venv
 # The measured tables in README.md and docs/: rebuild every benchmarks/results/*/tables.md from the
 # results there (no benchmark is rerun; the reference agreement runs `process` on 3,000 samples),
 # then copy each section into its <!-- BEGIN name --> block. Rerunning the benchmarks themselves:
-# benchmarks/README.md.
+# docs/performance.md, "Regenerating the numbers".
 docs: venv
 	$(BIN)/python benchmarks/performance.py
 	$(BIN)/python benchmarks/node.py
