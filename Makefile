@@ -54,17 +54,19 @@ SOAK_SAMPLES ?= 1800000
 soak: venv
 	ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST GAIT_SOAK_SAMPLES=$(SOAK_SAMPLES) $(BIN)/pytest -q -s test/test_faults.py -k soak
 
-# The measured tables in README.md and docs/: rebuild the evaluation, headline and node tables from
-# the results in experiments/results/, then copy every experiments/results/**/tables.md section into
-# its <!-- BEGIN name --> block (docs/performance.md, "Regenerating the numbers").
+# The measured tables in README.md and docs/: rebuild every benchmarks/results/*/tables.md from the
+# results there (no benchmark is rerun; the reference agreement runs `process` on 3,000 samples),
+# then copy each section into its <!-- BEGIN name --> block. Rerunning the benchmarks themselves:
+# docs/performance.md, "Regenerating the numbers".
 docs: venv
-	$(BIN)/python experiments/summary_tables.py
-	$(BIN)/python experiments/matcher_tables.py
-	$(BIN)/python experiments/node_tables.py
-	$(BIN)/python experiments/update_docs.py
+	$(BIN)/python benchmarks/performance.py
+	$(BIN)/python benchmarks/node.py
+	$(BIN)/python benchmarks/cross_session.py --tables-only
+	$(BIN)/python benchmarks/accuracy.py --tables-only
+	$(BIN)/python -m benchmarks.common --update-docs
 
 docs-check: venv
-	$(BIN)/python experiments/update_docs.py --check
+	$(BIN)/python -m benchmarks.common --check-docs
 
 clean:
 	rm -rf $(VENV) $(OLD_VENV) build install log out *.egg-info

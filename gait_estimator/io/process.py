@@ -11,6 +11,7 @@ import numpy as np
 from ..core.errors import missing_extra
 from ..core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator
 from ..core.kernels import KernelLibrary
+from .atomic import atomic_open
 from .library_io import load_library
 from .readers import read_recording
 from .recording import Recording
@@ -75,11 +76,12 @@ EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", 
 def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
     """Write ``time_s, sample, mode, phase, ready, sse_<mode>..., confidence, fit_rms_deg, held,
     phase_rate, raw_mode, cadence_ratio`` (match error in deg^2, or deg^2 per sample with
-    ``normalize_error``; fit in deg; phase rate in strides/s; cadence ratio nan with one time scale)."""
+    ``normalize_error``; fit in deg; phase rate in strides/s; cadence ratio nan with one time scale),
+    atomically (the old file or the new one, never a part)."""
     p = Path(path)
     tr = pred.trace
     names = np.asarray(tr.mode_names, dtype=object)
-    with p.open("w", encoding="utf-8", newline="") as f:
+    with atomic_open(p, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow([*PREDICTION_COLUMNS, *(f"sse_{m}" for m in tr.mode_names), *EXTRA_COLUMNS])
         for i in range(len(pred.time_s)):
