@@ -54,7 +54,7 @@ setup(
     entry_points={
         "console_scripts": [
             "gait-estimator = gait_estimator.cli:main",
-            "estimator_node = gait_estimator.ros.node:main",
+            "estimator_node = gait_estimator.ros:node_main",
         ],
     },
 )

@@ -76,27 +76,30 @@ from gait_estimator.cli.app import main
 
 def test_process_needs_no_optional_package(tmp_path: Path) -> None:
     """With scipy, matplotlib, rosbags, numba and rclpy unimportable, `process` on a CSV gives the
-    same predictions as with them (numpy step instead of numba's); `evaluate` and a bag say in one
-    line which extra they need, exit 2."""
+    same predictions as with them (numpy step instead of numba's); `evaluate`, a bag and
+    estimator_node say in one line which extra they need, exit 2."""
     out = tmp_path / "lean.csv"
     code = BLOCKER + (
         f"assert main(['process', {str(LG2)!r}, '--out', {str(out)!r}, '-q']) == 0\n"
         f"print('evaluate', main(['evaluate', '--predictions', {str(out)!r}, '--truth', {str(LG2)!r}, "
         f"'--mode', 'RA', '--out-dir', {str(tmp_path / 'ev')!r}]))\n"
         f"print('bag', main(['process', {str(tmp_path / 'x.mcap')!r}, '-q']))\n"
+        "import gait_estimator.ros as ros\n"
+        "print('node', ros.node_main())\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in BLOCKED))\n"
     )
     (tmp_path / "x.mcap").write_bytes(b"\x89MCAP0\r\n")
     run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=_env(), capture_output=True, text=True,
                          timeout=600, check=False)
     assert run.returncode == 0, run.stderr
-    assert run.stdout.splitlines() == ["evaluate 2", "bag 2", "[]"], run.stdout
+    assert run.stdout.splitlines() == ["evaluate 2", "bag 2", "node 2", "[]"], run.stdout
     errors = run.stderr.strip().splitlines()
-    assert errors == [
+    assert errors[:2] == [
         "gait-estimator evaluate needs the 'analysis' extra (matplotlib is not installed): "
         "pip install 'gait_estimator[analysis]'",
         "gait-estimator process needs the 'bags' extra (rosbags is not installed): pip install 'gait_estimator[bags]'",
-    ], run.stderr
+    ] and errors[2].startswith("estimator_node: error: ROS 2 Python packages not available") and errors[2].endswith(
+        "pip install 'gait_estimator[ros]'") and len(errors) == 3, run.stderr
     full = tmp_path / "full.csv"
     assert subprocess.run([sys.executable, "-m", "gait_estimator.cli", "process", str(LG2), "--out", str(full), "-q"],
                           cwd=tmp_path, env=_env(), check=False).returncode == 0
