@@ -11,7 +11,7 @@ OLD_VENV ?= .venv-numpy126
 $(BIN)/.installed: setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[ros,test,colcon]'
+	$(BIN)/python -m pip install -q -e '.[all]'
 	touch $@
 
 venv: $(BIN)/.installed
@@ -25,7 +25,7 @@ test: venv lint test-core-old-numpy
 $(OLD_VENV)/bin/.installed: setup.py
 	$(PYTHON) -m venv $(OLD_VENV)
 	$(OLD_VENV)/bin/python -m pip install -q --upgrade pip
-	$(OLD_VENV)/bin/python -m pip install -q "numpy==$(OLD_NUMPY)" -e '.[test]'
+	$(OLD_VENV)/bin/python -m pip install -q "numpy==$(OLD_NUMPY)" -e '.[test,fast,analysis,bags]'
 	touch $@
 
 test-core-old-numpy: $(OLD_VENV)/bin/.installed

@@ -8,10 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.errors import missing_extra
 from ..core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator
 from ..core.kernels import KernelLibrary
 from .atomic import atomic_open
+from .library_io import load_library
+from .readers import read_recording
 from .recording import Recording
+from .resources import DEFAULT_LIBRARY
 
 
 @dataclass(frozen=True)
@@ -41,6 +45,27 @@ def predict(recording: Recording, library: KernelLibrary, config: EstimatorConfi
     est = Estimator(library, config, stamped=not recording.time_from_rate)
     trace = run_estimator(est, recording.time_s, recording.angles_deg, recording.index)
     return Predictions(trace.time_s, trace.sample, trace, est.adapted_library() if est.adapter else None)
+
+
+def run_recording(source: str | Path | Recording, kernels: str | Path | KernelLibrary = DEFAULT_LIBRARY,
+                  config: EstimatorConfig | None = None) -> EstimateTrace:
+    """Run a fresh Estimator over a whole recording: one estimate per input sample.
+
+    Args:
+        source: A recording (project or reference CSV, rosbag2 directory/.mcap/.db3) or a
+            ``Recording``; sources without time stamps are timed at the library's rate.
+        kernels: Kernel library: a file, a directory, a bundled name or a ``KernelLibrary``.
+        config: Estimator options; None = the ``default`` preset.
+
+    Raises:
+        GaitEstimatorError: an unreadable recording or library (one line naming it).
+    """
+    lib = kernels if isinstance(kernels, KernelLibrary) else load_library(kernels)
+    try:
+        rec = source if isinstance(source, Recording) else read_recording(source, rate_hz=lib.sample_rate_hz)
+    except ImportError as exc:  # a bag without the 'bags' extra
+        raise missing_extra(exc) or exc from None
+    return predict(rec, lib, config).trace
 
 
 PREDICTION_COLUMNS = ("time_s", "sample", "mode", "phase", "ready")
