@@ -10,9 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gait_estimator import IncrementalMatcher, KernelLibrary, NaiveMatcher
+from gait_estimator import IncrementalMatcher, KernelLibrary
 from gait_estimator.core import compiled
 from gait_estimator.core.kernels import make_mode, resample_stride
+from gait_estimator.core.matcher import NaiveMatcher
 from gait_estimator.io.readers import read_recording
 
 

@@ -166,7 +166,7 @@ def test_summary_lists_mode_segments(multispeed_csv: Path, capsys) -> None:
 def test_bench_command_times_every_implementation(tmp_path: Path) -> None:
     """`gait-estimator bench` (short run, no naive matcher): the paper matcher with each backend,
     the default preset's matcher and whole updates, and at the smallest M the default preset's
-    update with the stride-start reader and without numba too; every median and p99 positive."""
+    update without numba too; every median and p99 positive."""
     from gait_estimator.core import compiled
 
     report = tmp_path / "bench.json"
@@ -174,7 +174,7 @@ def test_bench_command_times_every_implementation(tmp_path: Path) -> None:
     rows = {(r["modes"], r["impl"], r["preset"]): r for r in json.loads(report.read_text())["results"]}
     first = "numba" if compiled.AVAILABLE else "numpy"
     expected = {(7, f"estimator ({first})", "default"), (14, f"estimator ({first})", "paper"),
-                (14, f"incremental ({first})", "default"), (7, f"estimator ({first}) + stride-start reader", "default")}
+                (14, f"incremental ({first})", "default")}
     if compiled.AVAILABLE:
         expected |= {(7, "estimator (numpy)", "default"), (7, "incremental (numpy)", "paper")}
         assert (14, "estimator (numpy)", "default") not in rows

@@ -19,7 +19,6 @@ from ..core import compiled
 from ..core.estimator import Estimator, EstimatorConfig
 from ..core.kernels import KernelLibrary
 from ..core.matcher import IncrementalMatcher, NaiveMatcher
-from ..core.stride_reader import SUGGESTED_EVIDENCE_DEG2S
 from ..io.library_io import load_library, save_library
 
 
@@ -102,9 +101,9 @@ def time_steps(matcher: IncrementalMatcher | NaiveMatcher, samples: np.ndarray, 
 def matcher_options(preset: str) -> dict[str, Any]:
     """IncrementalMatcher keyword arguments of an estimator preset (its matching options)."""
     c = EstimatorConfig.preset(preset)
-    return {"window_fraction": c.window_fraction, "channel_weights": c.effective_weights(), "subsample": c.subsample_phase,
-            "time_scales": c.time_scales, "offset_tolerance_deg": c.offset_tolerance_deg, "normalize": c.normalize_error,
-            "recency_half_life": c.effective_recency_half_life}
+    return {"channel_weights": c.effective_weights(), "time_scales": c.time_scales,
+            "offset_tolerance_deg": c.offset_tolerance_deg, "normalize": c.normalize_error,
+            "recency_half_life": c.recency_half_life}
 
 
 def time_updates(estimator: Estimator, samples: np.ndarray, rate_hz: float, warmup: int) -> dict[str, float]:
@@ -138,8 +137,7 @@ def bench(
     (``numba``, ``numpy``; numba only if installed), the naive matcher (M <= naive_max_modes), and
     for M <= preset_max_modes the default preset's matcher (all its time-scaled rows) and the whole
     default-preset ``Estimator.update`` (and the paper preset's, for the ratio; at the smallest M
-    also the default preset's with the stride-start reader at SUGGESTED_EVIDENCE_DEG2S and with the
-    other backends), all in one run."""
+    also the default preset's with the other backends), all in one run."""
     backends = backends or ["numba", "numpy"]
     backends = [b for b in backends if b != "numba" or compiled.AVAILABLE]
     if not backends:
@@ -178,11 +176,7 @@ def bench(
                 warmup = est.matcher.max_window
                 results.append({"modes": m, "impl": f"estimator ({backend})", "preset": preset,
                                 **time_updates(est, xd, lib.sample_rate_hz, warmup)})
-            if m == min(modes):  # the default preset with the opt-in reader, and without numba (the fallback), too
-                cfg = EstimatorConfig.preset("default", switch_evidence_deg2s=SUGGESTED_EVIDENCE_DEG2S)
-                est = Estimator(lib, cfg, backend=backend)
-                results.append({"modes": m, "impl": f"estimator ({backend}) + stride-start reader", "preset": "default",
-                                **time_updates(est, xd, lib.sample_rate_hz, est.matcher.max_window)})
+            if m == min(modes):  # the default preset without numba (the fallback), too
                 for other in backends[1:]:
                     est = Estimator(lib, EstimatorConfig.preset("default"), backend=other)
                     results.append({"modes": m, "impl": f"estimator ({other})", "preset": "default",

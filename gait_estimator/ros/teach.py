@@ -19,7 +19,6 @@ library change.
 from __future__ import annotations
 
 from collections import deque
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -42,8 +41,6 @@ from ..analysis.teach import (
 from ..core.channels import CHANNELS, Sample
 from ..core.errors import GaitEstimatorError
 from ..core.kernels import KernelLibrary, make_mode
-from ..io.atomic import atomic_write_bytes
-from ..io.library_io import save_library
 
 LOG_PREFIX = "teach: "
 PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -56,18 +53,6 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                       + ", ".join(CHANNELS) + "."),
 }
 REPLAY_MARGIN_S = 0.5
-
-
-def save_library_atomically(lib: KernelLibrary, path: Path) -> Path:
-    """``save_library`` to a temporary file beside ``path``, then put it in place atomically
-    (``io.atomic``): an interrupted save never leaves a broken library where the last one was."""
-    tmp = path.with_name(f".{path.stem}.saving{path.suffix}")
-    try:
-        save_library(lib, tmp)
-        atomic_write_bytes(path, tmp.read_bytes())
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
 
 
 class NodeTeacher:
