@@ -52,6 +52,9 @@ NEAR_COPY_LENGTH_RATIO = 0.02
 """A taught kernel this close to another mode (shape RMS, degrees; |ln| of the length ratio) is
 reported as a near copy: the estimator's rule for near copies (core/estimator.py)."""
 LIVE_SOURCE = "taught live"
+RATE_DIGITS = 6
+"""Significant digits of a rate taken from the samples' stamps (nanosecond stamps of a 230 Hz
+stream give 230.0000046 Hz; the sensor's rate is 230 Hz)."""
 RATE_SAMPLES = 50
 """Samples needed before the median rate is taken (without a library) and strides are looked for."""
 
@@ -187,7 +190,7 @@ class StrideCollector:
         if t.size < RATE_SAMPLES or self._anchor is None:
             return None
         if self.rate_hz is None:  # train's default: the median rate; fixed once known, so the grid stays
-            rate = float(1.0 / np.median(np.diff(t)))
+            rate = float(f"{1.0 / np.median(np.diff(t)):.{RATE_DIGITS}g}")
             if not (math.isfinite(rate) and rate > 0):
                 return None
             self.rate_hz = rate
