@@ -11,7 +11,7 @@ OLD_VENV ?= .venv-numpy126
 $(BIN)/.installed: setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[ros,test,colcon]'
+	$(BIN)/python -m pip install -q -e '.[ros,test,colcon,imu]'
 	touch $@
 
 venv: $(BIN)/.installed

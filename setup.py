@@ -52,6 +52,9 @@ setup(
             "ruff>=0.5",
             "wheel",
         ],
+        "imu": [
+            "imufusion>=1.3",  # gyro + accelerometer fusion for raw IMUs (input_type imu; docs/imu.md)
+        ],
         "colcon": [
             "colcon-common-extensions",
             "ros-jazzy-ament-package",
