@@ -219,10 +219,19 @@ def _imufusion() -> Any:
 
 FUSION_GAIN = 0.5
 """imufusion AHRS gain (its default): weight of the accelerometer's tilt correction."""
-FUSION_ACCELERATION_REJECTION_DEG = 10.0
-"""imufusion acceleration rejection: accelerometer ignored while it disagrees with the estimate by
-more than this (deg), i.e. during strong segment accelerations."""
+FUSION_ACCELERATION_REJECTION_DEG = 0.0
+"""imufusion acceleration rejection (deg; 0 = off). Off: on the camargo walking trials its
+recoveries (jumps back to the accelerometer's tilt) cost more than the accelerations it ignores
+(benchmarks/imu.py)."""
 FUSION_REJECTION_TIMEOUT_S = 1.0
+STILL_GAIN = 5.0
+"""imufusion gain while the sensor is still (the accelerometer then reads gravity alone): the tilt
+settles on it within a fraction of a second instead of keeping the error of the last movement."""
+STILL_RATE_DPS = 10.0
+STILL_ACC_G = 0.05
+STILL_AFTER_S = 0.1
+"""A sensor is still after STILL_AFTER_S with |gyro - bias| < STILL_RATE_DPS and
+||acc| - 1 g| < STILL_ACC_G."""
 
 
 def _tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
@@ -249,15 +258,18 @@ class RawFusion:
     def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)) -> None:
         fusion = _imufusion()
         self._ahrs = fusion.Ahrs()
-        self._ahrs.set_settings(fusion.AhrsSettings(
+        self._settings = [fusion.AhrsSettings(
             sample_rate=float(rate_hz),
             convention=fusion.CONVENTION_NWU,
-            gain=FUSION_GAIN,
+            gain=gain,
             gyroscope_range=2000.0,
             acceleration_rejection=FUSION_ACCELERATION_REJECTION_DEG,
             magnetic_rejection=0.0,
-            rejection_timeout=int(FUSION_REJECTION_TIMEOUT_S * rate_hz),
-        ))
+            rejection_timeout=FUSION_REJECTION_TIMEOUT_S,
+        ) for gain in (FUSION_GAIN, STILL_GAIN)]
+        self._ahrs.set_settings(self._settings[0])
+        self._still_needed = max(1, round(STILL_AFTER_S * rate_hz))
+        self._still = 0
         self._period = 1.0 / rate_hz
         self.gyro_bias_dps = gyro_bias_dps
         self._gyro = np.zeros(3)
@@ -276,6 +288,16 @@ class RawFusion:
             self._first = False
             self._ahrs.set_quaternion(_tilt_quaternion_wxyz(a))
             self._ahrs.skip_startup()
+        rate2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
+        acc2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+        if rate2 < STILL_RATE_DPS * STILL_RATE_DPS and abs(acc2 - 1.0) < 2.0 * STILL_ACC_G:
+            self._still += 1
+            if self._still == self._still_needed:
+                self._ahrs.set_settings(self._settings[1]).set_sample_period(self._period)
+        elif self._still:
+            if self._still >= self._still_needed:
+                self._ahrs.set_settings(self._settings[0]).set_sample_period(self._period)
+            self._still = 0
         self._ahrs.update_no_magnetometer(g, a)
         u = self._ahrs.get_gravity()
         return float(u[0]), float(u[1]), float(u[2])

@@ -28,9 +28,9 @@ from .imu import CalibrationError, ImuCalibration, SegmentMount, Vec3
 
 STILL_S = 1.0
 """Length (s) of the still stretch that makes a standing pose."""
-STILL_MAX_TILT_DEG = 2.0
+STILL_MAX_TILT_DEG = 3.0
 """Most any sensor's up direction may move within the still stretch (deg)."""
-STILL_MAX_RATE_DPS = 15.0
+STILL_MAX_RATE_DPS = 25.0
 """Largest gyro magnitude in a still stretch (deg/s; raw input)."""
 STILL_ACC_TOLERANCE = 0.1
 """Accelerometer magnitude in a still stretch within 1 +- this (g; raw input)."""
@@ -63,6 +63,15 @@ def _norm_rows(v: np.ndarray) -> np.ndarray:
         return v / n
 
 
+def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """Trailing mean over ``n`` samples along axis 1 (the first samples: over what there is)."""
+    c = np.cumsum(x, axis=1)
+    out = c.copy()
+    out[:, n:] = c[:, n:] - c[:, :-n]
+    count = np.minimum(np.arange(1, x.shape[1] + 1), n)
+    return out / count[None, :, None]
+
+
 def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | None = None,
                   acc_g: np.ndarray | None = None, start_s: float | None = None,
                   still_s: float = STILL_S) -> Standing | None:
@@ -70,25 +79,35 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
 
     Args:
         time_s: (T,) sample times, s.
-        ups: (4, T, 3) up directions per sensor (sensor frames; from orientation or accelerometer).
-        gyro_dps: (4, T, 3) gyro, deg/s, or None (orientation input without rates).
-        acc_g: (4, T, 3) accelerometer, g, or None.
+        ups: (4, T, 3) up directions per sensor (sensor frames; from orientation or fusion).
+        gyro_dps: (4, T, 3) gyro, deg/s, or None (nan for a sensor without rates).
+        acc_g: (4, T, 3) accelerometer, g, or None (nan for a sensor with an orientation): a raw
+            sensor's stillness and up direction come from its accelerometer (the fused direction
+            may still be settling), with twice the tilt tolerance (accelerometer noise).
         start_s: Only stretches that start at or after this time.
     """
     t = np.asarray(time_s, dtype=np.float64)
     if len(t) < 2:
         return None
-    u = _norm_rows(np.asarray(ups, dtype=np.float64))
+    ups_a = np.asarray(ups, dtype=np.float64)
+    acc_a = None if acc_g is None else np.asarray(acc_g, dtype=np.float64)
+    raw = np.zeros(len(ups_a), dtype=bool) if acc_a is None else np.isfinite(acc_a).all(axis=(1, 2))
     dt = float(np.median(np.diff(t)))
+    if acc_a is not None and raw.any():  # accelerometer noise: its 0.1 s means
+        acc_a = acc_a.copy()
+        acc_a[raw] = _moving_mean(acc_a[raw], max(1, round(0.1 / dt)))
+    u = _norm_rows(np.where(raw[:, None, None], acc_a if acc_a is not None else ups_a, ups_a))
+    tilt_limit = np.where(raw, 2.0 * STILL_MAX_TILT_DEG, STILL_MAX_TILT_DEG)
     lag = max(1, round(0.2 / dt))
     ok = np.isfinite(u).all(axis=(0, 2))
     moved = np.zeros(len(t), dtype=bool)
-    cos_lim = np.cos(np.radians(STILL_MAX_TILT_DEG))
+    cos_lim = np.cos(np.radians(tilt_limit))[:, None]
     moved[lag:] = (np.einsum("stk,stk->st", u[:, lag:], u[:, :-lag]) < cos_lim).any(axis=0)
     if gyro_dps is not None:
-        moved |= (np.linalg.norm(gyro_dps, axis=2) > STILL_MAX_RATE_DPS).any(axis=0)
-    if acc_g is not None:
-        moved |= (np.abs(np.linalg.norm(acc_g, axis=2) - 1.0) > STILL_ACC_TOLERANCE).any(axis=0)
+        with np.errstate(invalid="ignore"):
+            moved |= (np.linalg.norm(gyro_dps, axis=2) > STILL_MAX_RATE_DPS).any(axis=0)
+    if acc_a is not None and raw.any():
+        moved |= (np.abs(np.linalg.norm(acc_a[raw], axis=2) - 1.0) > STILL_ACC_TOLERANCE).any(axis=0)
     still = ok & ~moved
     if start_s is not None:
         still &= t >= start_s
@@ -104,13 +123,11 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
         if t[j - 1] - t[i] >= still_s - dt / 2:
             stop = int(np.searchsorted(t, t[i] + still_s - dt / 2, side="right"))
             win = u[:, i:stop]
-            mean = _norm_rows(win.mean(axis=1))
-            if acc_g is not None:  # at rest the accelerometer reads up, unaffected by gyro bias
-                mean = _norm_rows(np.asarray(acc_g, dtype=np.float64)[:, i:stop].mean(axis=1))
-            spread = np.degrees(np.arccos(np.clip(np.einsum("stk,sk->st", win, _norm_rows(win.mean(axis=1))), -1, 1))).max()
-            if spread <= STILL_MAX_TILT_DEG:
+            mean = _norm_rows(win.mean(axis=1))  # at rest the accelerometer reads up, unaffected by gyro bias
+            spread = np.degrees(np.arccos(np.clip(np.einsum("stk,sk->st", win, mean), -1, 1))).max(axis=1)
+            if (spread <= tilt_limit).all():
                 bias = (np.zeros((N_CHANNELS, 3)) if gyro_dps is None
-                        else np.asarray(gyro_dps, dtype=np.float64)[:, i:stop].mean(axis=1))
+                        else np.nan_to_num(np.asarray(gyro_dps, dtype=np.float64)[:, i:stop].mean(axis=1)))
                 return Standing(i, stop, tuple(tuple(map(float, m)) for m in mean),
                                 tuple(tuple(map(float, b)) for b in bias))
             i += 1  # slow drift in this stretch: try from the next sample
@@ -119,24 +136,30 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
     return None
 
 
-def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3) -> tuple[Vec3 | None, str]:
-    """Sagittal axis (sign undecided) of one sensor from its up directions (T, 3) while walking:
-    the principal axis of the up direction's rotations, perpendicular to ``proximal``; or None and
-    why not."""
+def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3,
+               gyro_dps: np.ndarray | None = None) -> tuple[Vec3 | None, str]:
+    """Sagittal axis (sign undecided) of one sensor while walking: the principal axis of its
+    rotation perpendicular to ``proximal`` (which removes turning about the vertical), from the
+    gyro (T, 3) when there is one, else from the rotation of its up directions (T, 3); or None
+    and why not."""
     t = np.asarray(time_s, dtype=np.float64)
     if len(t) < 10:
         return None, "too few samples"
-    lag = max(1, round(ROTATION_LAG_S / float(np.median(np.diff(t)))))
-    u = _norm_rows(np.asarray(ups, dtype=np.float64))
-    d = np.cross(u[:-lag], u[lag:])
-    d = d[np.isfinite(d).all(axis=1)]
+    p = np.asarray(proximal)
+    if gyro_dps is not None and np.isfinite(gyro_dps).all():
+        d = np.asarray(gyro_dps, dtype=np.float64)
+    else:
+        lag = max(1, round(ROTATION_LAG_S / float(np.median(np.diff(t)))))
+        u = _norm_rows(np.asarray(ups, dtype=np.float64))
+        d = np.cross(u[:-lag], u[lag:])
+        d = d[np.isfinite(d).all(axis=1)]
     if len(d) < 10:
         return None, "too few samples"
+    d = d - np.outer(d @ p, p)
     m = d.T @ d
     w, v = np.linalg.eigh(m)
     if w[-1] <= 0 or w[-1] / w.sum() < MIN_PLANARITY:
         return None, f"no clear sagittal swing (planarity {w[-1] / max(w.sum(), 1e-300):.2f} < {MIN_PLANARITY})"
-    p = np.asarray(proximal)
     a = v[:, -1] - float(v[:, -1] @ p) * p
     if np.linalg.norm(a) < 0.5:
         return None, "swing axis along the segment"
@@ -171,6 +194,7 @@ def learn_calibration(
     gyro_dps: np.ndarray | None = None,
     acc_g: np.ndarray | None = None,
     walk_s: float = WALK_S,
+    still_s: float = STILL_S,
 ) -> tuple[ImuCalibration | None, Standing | None, str]:
     """Complete the configured axes into a calibration from a stream.
 
@@ -182,6 +206,7 @@ def learn_calibration(
         standing: A standing pose already found (else the first in the stream, if needed).
         gyro_dps, acc_g: (4, T, 3) raw rates and accelerations for the still test and the bias.
         walk_s: Seconds of stream after the standing pose needed before learning axes.
+        still_s: Length of the still stretch taken as the standing pose (s).
 
     Returns:
         (calibration or None, the standing pose used or None, what is missing: '' when done).
@@ -190,9 +215,9 @@ def learn_calibration(
     ups = np.asarray(ups, dtype=np.float64)
     need_stand = any(p is None for p in proximal)
     if need_stand and standing is None:
-        standing = find_standing(t, ups, gyro_dps, acc_g)
+        standing = find_standing(t, ups, gyro_dps, acc_g, still_s=still_s)
         if standing is None:
-            return None, None, f"stand still for {STILL_S:g} s"
+            return None, None, f"stand still for {still_s:g} s"
     prox = [p if p is not None else standing.proximal[i] for i, p in enumerate(proximal)]  # type: ignore[union-attr]
     bias = standing.gyro_bias_dps if standing is not None else ((0.0, 0.0, 0.0),) * N_CHANNELS
     tags = ["configured" if (lateral[i] is not None and proximal[i] is not None) else "learnt" for i in range(N_CHANNELS)]
@@ -208,7 +233,7 @@ def learn_calibration(
         if lateral[i] is not None:
             cands[i] = [SegmentMount(lateral[i], prox[i], standing_deg[i], bias[i], tags[i])]  # type: ignore[arg-type]
             continue
-        axis, why = swing_axis(t[walk], ups[i, walk], prox[i])
+        axis, why = swing_axis(t[walk], ups[i, walk], prox[i], None if gyro_dps is None else gyro_dps[i, walk])
         if axis is None:
             return None, standing, f"{CHANNELS[i]}: {why}; walk a few more strides"
         both = [SegmentMount(s, prox[i], standing_deg[i], bias[i], "learnt") for s in (axis, tuple(-x for x in axis))]

@@ -22,12 +22,14 @@ import numpy as np
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
 from ..core.imu import CalibrationError, ImuCalibration
-from ..core.imu_learn import check_configured, learn_calibration
+from ..core.imu_learn import STILL_S, check_configured, learn_calibration
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
 from .imu_stream import DEFAULT_TOLERANCE_S, UNPAIRED, ImuPairer, SensorInput, load_calibration
 from .stream import SampleRejected
 
 IMU = "sensor_msgs/msg/Imu"
+SHORT_STILL_S = 0.5
+"""Still stretch (s) taken as the standing pose when a file has none of STILL_S."""
 DEFAULT_IMU_TOPICS = tuple(f"imu/{c}" for c in CHANNELS)
 """Relative topic names of the four IMUs (the node's default ``imu_topics``)."""
 
@@ -148,11 +150,11 @@ def read_imu_bag(
                 messages.append((index[conn.topic], int(log_ns), deserialize(raw, IMU)))
             except Exception:
                 undecodable += 1
-    stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for _, _, m in messages[:400]]
+    stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for s, _, m in messages[:800] if s == 0]
     rate = 200.0
     if len(stamps) > 8:
-        d = np.diff(np.sort(np.array(stamps, dtype=np.int64))) * 1e-9 * N_CHANNELS
-        rate = float(1.0 / np.median(d)) if np.median(d) > 0 else rate
+        d = float(np.median(np.diff(np.array(stamps, dtype=np.int64)))) * 1e-9
+        rate = 1.0 / d if d > 0 else rate
     paired, rejected = _front_end(messages, rate, None, imu_tolerance_s)
     if undecodable:
         rejected["undecodable"] += undecodable
@@ -196,10 +198,13 @@ def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: l
     gyro = np.asarray([s[3] for s in paired], dtype=np.float64).transpose(1, 0, 2)
     acc = np.asarray([s[4] for s in paired], dtype=np.float64).transpose(1, 0, 2)
     try:
-        cal, standing, missing = learn_calibration(
-            time_s, ups, lateral=lateral, proximal=proximal, standing_deg=standing_deg,
-            gyro_dps=gyro if np.isfinite(gyro).all() else None, acc_g=acc if np.isfinite(acc).all() else None,
-            walk_s=min(30.0, float(time_s[-1]) / 2))
+        for still_s in (STILL_S, SHORT_STILL_S):  # a short still stretch if the file has no longer one
+            cal, standing, missing = learn_calibration(
+                time_s, ups, lateral=lateral, proximal=proximal, standing_deg=standing_deg,
+                gyro_dps=gyro if np.isfinite(gyro).any() else None, acc_g=acc if np.isfinite(acc).any() else None,
+                still_s=still_s)
+            if cal is not None:
+                break
     except CalibrationError as exc:
         raise RecordingError(f"{p}: IMU calibration: {exc}") from None
     if cal is None:
@@ -237,7 +242,8 @@ def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray,
     Args:
         stamps_ns: (4, T) or (T,) header stamps (int ns); the log time is the stamp.
         gyro_rps, acc_mps2: (4, T, 3) rates (rad/s) and accelerations (m/s^2), sensor frames.
-        quat_xyzw: (4, T, 4) orientations (world <- sensor), or None for raw IMUs.
+        quat_xyzw: (4, T, 4) orientations (world <- sensor), or None for raw IMUs (also per
+            sensor: a list of four (T, 4) arrays or None).
         topics: Four topic names (default ``/imu/<channel>``).
     """
     from .bag_write import _writer, offered_qos
@@ -250,7 +256,8 @@ def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray,
         conns = [writer.add_connection(n, IMU, typestore=ts, offered_qos_profiles=offered_qos(100)) for n in names]
         for k in range(stamps.shape[1]):
             for c in range(N_CHANNELS):
-                msg = imu_msg(ts, int(stamps[c, k]), CHANNELS[c], None if quat_xyzw is None else quat_xyzw[c, k],
+                q = None if quat_xyzw is None or quat_xyzw[c] is None else quat_xyzw[c][k]
+                msg = imu_msg(ts, int(stamps[c, k]), CHANNELS[c], q,
                               gyro_rps[c, k], acc_mps2[c, k])
                 writer.write(conns[c], int(stamps[c, k]), ts.serialize_cdr(msg, IMU))
     return Path(path)

@@ -197,8 +197,8 @@ class ImuCalibrator:
         ups_a = np.asarray(self._ups, dtype=np.float64).transpose(1, 0, 2)
         gyro_a = np.asarray(self._gyro, dtype=np.float64).transpose(1, 0, 2)
         acc_a = np.asarray(self._acc, dtype=np.float64).transpose(1, 0, 2)
-        have_rates = bool(np.isfinite(gyro_a).all())
-        have_acc = bool(np.isfinite(acc_a).all())
+        have_rates = bool(np.isfinite(gyro_a).any())
+        have_acc = bool(np.isfinite(acc_a).any())
         lateral = self.lateral
         if self._keep_lateral is not None:
             lateral = [a if a is not None else k for a, k in zip(self.lateral, self._keep_lateral, strict=False)]
