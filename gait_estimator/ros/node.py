@@ -157,7 +157,8 @@ DESCRIPTIONS: dict[str, str] = {
     "(4 distinct names; other joints in the message are ignored, message order does not matter).",
     "input_units": "Units of the input angles: rad (REP 103) or deg.",
     "input_type": "Input message type on segment_angles (read-only): joint_state (sensor_msgs/JointState) or "
-    "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]).",
+    "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]); or imu: "
+    "four sensor_msgs/Imu topics instead (imu_* parameters, docs/imu.md).",
     "executor": "Executor of the estimator_node process (read-only): events (rclpy's EventsExecutor, lower "
     "latency) or single_threaded (rclpy's SingleThreadedExecutor).",
     "thread_priority": "Real-time priority of the node: 1-99 runs every thread of its process under SCHED_FIFO at "
@@ -287,18 +288,29 @@ class EstimatorNode(Node):
         self._profile_pub = self.create_publisher(Float64MultiArray, PROFILE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
         self._mode_msg = String()
         self._phase_msg = Float64()
-        if self._input_type == "joint_state":
+        self._imu = None
+        if self._input_type == "imu":  # four sensor_msgs/Imu topics (ros/imu_input.py)
+            from .imu_input import ImuInput
+
+            try:
+                self._imu = ImuInput(self, INPUT_QOS)
+            except (GaitEstimatorError, ParameterException) as exc:
+                self.destroy_node()
+                raise StartupError(_one_line(exc)) from None
+            self._sub = self._imu.subscriptions[0]
+        elif self._input_type == "joint_state":
             msg_type, self._handle = JointState, self._handle_joint_state
         else:
             msg_type, self._handle = Float64MultiArray, self._handle_array
-        self._sub = self.create_subscription(
-            msg_type,
-            INPUT_TOPIC,
-            self._on_input,
-            INPUT_QOS,
-            qos_overriding_options=QoSOverridingOptions.with_default_policies(),
-            raw=msg_type is JointState,  # read from the CDR bytes (io/cdr.py): no message objects
-        )
+        if self._imu is None:
+            self._sub = self.create_subscription(
+                msg_type,
+                INPUT_TOPIC,
+                self._on_input,
+                INPUT_QOS,
+                qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+                raw=msg_type is JointState,  # read from the CDR bytes (io/cdr.py): no message objects
+            )
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._save_srv = self.create_service(Trigger, SAVE_LIBRARY_SERVICE, self._save_library)
         self._calib_srv = self.create_service(Trigger, RESET_CALIBRATION_SERVICE, self._reset_calibration)
@@ -441,7 +453,7 @@ class EstimatorNode(Node):
         """An estimator for this node's input: JointState carries stamps (``resample: auto``
         resamples it), Float64MultiArray is timed on arrival (not resampled unless ``on``)."""
         input_type = self.get_parameter("input_type").value if self.has_parameter("input_type") else "joint_state"
-        return Estimator(library, config, stamped=input_type == "joint_state")
+        return Estimator(library, config, stamped=input_type in ("joint_state", "imu"))
 
     # -----------------------------------------------------------------------------------------
     # Services
@@ -476,7 +488,8 @@ class EstimatorNode(Node):
         est.reset_calibration()
         response.success = True
         response.message = ("sensor offsets reset to 0 (were " + ", ".join(f"{v:.2f}" for v in before) + " deg)"
-                            + (f", learnt time scale {scale:.3f} forgotten" if math.isfinite(scale) else ""))
+                            + (f", learnt time scale {scale:.3f} forgotten" if math.isfinite(scale) else "")
+                            + (self._imu.reset_calibration() if self._imu is not None else ""))
         self.get_logger().info(response.message)
         return response
 
@@ -767,6 +780,10 @@ class EstimatorNode(Node):
                 f"input stamp rate {stamp_rate:.0f} Hz differs from the library's {lib.sample_rate_hz:g} Hz "
                 "(set resample: on)"
             )
+        if self._imu is not None:
+            imu_values, imu_problems = self._imu.diagnostics()
+            values.update(imu_values)
+            problems += imu_problems
         if problems:
             level, message = DiagnosticStatus.WARN, "; ".join(problems)
         elif shown and e is not None:
