@@ -152,12 +152,16 @@ class ImuCalibration:
     def __post_init__(self) -> None:
         if len(self.mounts) != N_CHANNELS or not all(isinstance(m, SegmentMount) for m in self.mounts):
             raise CalibrationError(f"an IMU calibration needs {N_CHANNELS} segment mounts ({', '.join(CHANNELS)})")
+        object.__setattr__(self, "_rows", tuple((*m.forward, *m.proximal, m.standing_deg) for m in self.mounts))
 
     def angles_deg(self, ups: Any) -> tuple[float, float, float, float]:
-        """Four segment angles (deg) from four up vectors (sensor frames), CHANNELS order."""
-        m0, m1, m2, m3 = self.mounts
-        u0, u1, u2, u3 = ups
-        return m0.angle_deg(u0), m1.angle_deg(u1), m2.angle_deg(u2), m3.angle_deg(u3)
+        """Four segment angles (deg) from four up vectors (sensor frames), CHANNELS order; the
+        same values as each mount's ``angle_deg``."""
+        out = []
+        for (f0, f1, f2, p0, p1, p2, stand), (x, y, z) in zip(self._rows, ups, strict=True):  # type: ignore[attr-defined]
+            out.append(stand + math.degrees(math.atan2(f0 * x + f1 * y + f2 * z, p0 * x + p1 * y + p2 * z)))
+        a, b, c, d = out
+        return a, b, c, d
 
     def summary(self) -> str:
         """One line: each segment's lateral and proximal axes and standing angle."""
@@ -232,6 +236,8 @@ STILL_ACC_G = 0.05
 STILL_AFTER_S = 0.1
 """A sensor is still after STILL_AFTER_S with |gyro - bias| < STILL_RATE_DPS and
 ||acc| - 1 g| < STILL_ACC_G."""
+_STILL_RATE2 = STILL_RATE_DPS * STILL_RATE_DPS
+_STILL_ACC2 = 2.0 * STILL_ACC_G  # |acc|^2 - 1 ~ 2 (|acc| - 1)
 
 
 def _tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
@@ -279,8 +285,10 @@ class RawFusion:
     def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> Vec3:
         """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up``."""
         g, a, b = self._gyro, self._acc, self.gyro_bias_dps
-        g[0], g[1], g[2] = gyro_dps[0] - b[0], gyro_dps[1] - b[1], gyro_dps[2] - b[2]
-        a[0], a[1], a[2] = acc_g
+        gx, gy, gz = gyro_dps[0] - b[0], gyro_dps[1] - b[1], gyro_dps[2] - b[2]  # Python floats: numpy
+        ax, ay, az = acc_g  # scalars would make the arithmetic below several times slower
+        g[0], g[1], g[2] = gx, gy, gz
+        a[0], a[1], a[2] = ax, ay, az
         if dt_s is not None and dt_s > 0 and abs(dt_s - self._period) > 1e-6:
             self._period = dt_s
             self._ahrs.set_sample_period(dt_s)
@@ -288,9 +296,7 @@ class RawFusion:
             self._first = False
             self._ahrs.set_quaternion(_tilt_quaternion_wxyz(a))
             self._ahrs.skip_startup()
-        rate2 = g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
-        acc2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
-        if rate2 < STILL_RATE_DPS * STILL_RATE_DPS and abs(acc2 - 1.0) < 2.0 * STILL_ACC_G:
+        if gx * gx + gy * gy + gz * gz < _STILL_RATE2 and -_STILL_ACC2 < ax * ax + ay * ay + az * az - 1.0 < _STILL_ACC2:
             self._still += 1
             if self._still == self._still_needed:
                 self._ahrs.set_settings(self._settings[1]).set_sample_period(self._period)
@@ -299,8 +305,8 @@ class RawFusion:
                 self._ahrs.set_settings(self._settings[0]).set_sample_period(self._period)
             self._still = 0
         self._ahrs.update_no_magnetometer(g, a)
-        u = self._ahrs.get_gravity()
-        return float(u[0]), float(u[1]), float(u[2])
+        x, y, z = self._ahrs.get_gravity().tolist()
+        return x, y, z
 
 
 def fuse_raw(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,

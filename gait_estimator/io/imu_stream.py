@@ -23,7 +23,7 @@ import numpy as np
 import yaml
 
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.imu import STANDARD_GRAVITY, CalibrationError, ImuCalibration, RawFusion, Vec3, up_from_quaternion
+from ..core.imu import STANDARD_GRAVITY, CalibrationError, ImuCalibration, RawFusion, Vec3
 from ..core.imu_learn import Standing, find_standing, learn_calibration
 from .atomic import atomic_write_text
 from .stream import NON_FINITE, NON_INCREASING_STAMP, SampleRejected
@@ -36,6 +36,7 @@ DEFAULT_TOLERANCE_S = 0.004
 MAX_QUEUE = 50
 """Messages kept per sensor while waiting for partners; older ones are dropped (unpaired)."""
 _RAD2DEG = 180.0 / math.pi
+_INF = math.inf
 NO_RATES: Vec3 = (math.nan, math.nan, math.nan)
 
 
@@ -60,19 +61,23 @@ class SensorInput:
             raise SampleRejected(NON_INCREASING_STAMP,
                                  f"stamp {stamp_ns * 1e-9:.6f} s is not after the previous {last * 1e-9:.6f} s")
         gx, gy, gz = gyro_rps
-        ax, ay, az = acc_mps2
         if orientation_cov0 != -1.0:
             x, y, z, w = orientation
-            up = up_from_quaternion(x, y, z, w)
-            if up is None:
+            n = x * x + y * y + z * z + w * w
+            if not 1e-12 < n < _INF:  # (up_from_quaternion, inlined: this runs for every message)
                 raise SampleRejected(ZERO_NORM if x == x and y == y and z == z and w == w else NON_FINITE,
                                      f"unusable orientation quaternion ({x}, {y}, {z}, {w})")
+            s = 2.0 / n
+            up = (s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y))
             gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG)
-            if not all(math.isfinite(v) for v in gyro):
+            if not (-_INF < gyro[0] < _INF and -_INF < gyro[1] < _INF and -_INF < gyro[2] < _INF):
                 gyro = NO_RATES
             self.last_ns = stamp_ns
             return up, gyro, NO_RATES  # the accelerometer is the orientation filter's business
-        if not all(math.isfinite(v) for v in (gx, gy, gz, ax, ay, az)):
+        ax, ay, az = acc_mps2
+        inf = _INF
+        if not (-inf < gx < inf and -inf < gy < inf and -inf < gz < inf and -inf < ax < inf and -inf < ay < inf
+                and -inf < az < inf):
             raise SampleRejected(NON_FINITE, f"non-finite rate or acceleration ({gx}, {gy}, {gz}; {ax}, {ay}, {az})")
         if ax * ax + ay * ay + az * az < 1e-6:
             raise SampleRejected(ZERO_NORM, "zero acceleration (no gravity in the accelerometer)")
@@ -107,18 +112,22 @@ class ImuPairer:
     def push(self, sensor: int, stamp_ns: int, item: Any) -> list[tuple[int, list[Any]]]:
         """Add one accepted message; returns the samples it completes: (stamp_ns = the latest
         of the four, [item per sensor])."""
-        q = self.queues[sensor]
+        queues = self.queues
+        q = queues[sensor]
         q.append((stamp_ns, item))
         if len(q) > MAX_QUEUE:
             q.popleft()
             self.dropped[CHANNELS[sensor]] += 1
+        q0, q1, q2, q3 = queues
+        if not (q0 and q1 and q2 and q3):
+            return []
         out = []
-        queues = self.queues
-        while all(queues):
-            heads = [qq[0][0] for qq in queues]
+        tol = self.tolerance_ns
+        while q0 and q1 and q2 and q3:
+            heads = (q0[0][0], q1[0][0], q2[0][0], q3[0][0])
             lo, hi = min(heads), max(heads)
-            if hi - lo <= self.tolerance_ns:
-                out.append((hi, [qq.popleft()[1] for qq in queues]))
+            if hi - lo <= tol:
+                out.append((hi, [q0.popleft()[1], q1.popleft()[1], q2.popleft()[1], q3.popleft()[1]]))
                 continue
             oldest = heads.index(lo)
             queues[oldest].popleft()

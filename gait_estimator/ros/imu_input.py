@@ -20,7 +20,7 @@ import math
 import time
 from collections import Counter
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.qos import QoSProfile
@@ -44,9 +44,6 @@ from ..io.imu_stream import (
 )
 from ..io.stream import SampleRejected
 
-if TYPE_CHECKING:
-    from .node import EstimatorNode
-
 CALIBRATE_STANDING_SERVICE = "~/calibrate_standing"
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "imu_topics": (list(DEFAULT_IMU_TOPICS), "sensor_msgs/Imu topics of right_thigh, left_thigh, right_shank, left_shank."),
@@ -67,7 +64,8 @@ class ImuInput:
     """The node's IMU input; see the module docstring. Raises CalibrationError (one line) for
     invalid axes or an unreadable calibration file."""
 
-    def __init__(self, node: EstimatorNode, qos: QoSProfile) -> None:
+    def __init__(self, node: Any, qos: QoSProfile) -> None:
+        """``node``: the EstimatorNode (its ``_process``, ``_reject`` and counters are used)."""
         self.node = node
         values = {}
         for name, (default, text) in PARAMETERS.items():
