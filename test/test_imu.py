@@ -271,3 +271,34 @@ def test_a_bag_without_the_four_imus_says_which_topics_it_has(synthetic_bags, tm
                   topics=["/a", "/b", "/c", "/d"])
     with pytest.raises(RecordingError, match=r"needs four sensor_msgs/msg/Imu topics.*topics in the bag: /a"):
         read_recording(tmp_path / "b")
+
+
+def test_standing_pose_on_request_keeps_the_learnt_axes(angles):
+    rng = np.random.default_rng(8)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4)
+    nan3 = (math.nan,) * 3
+
+    def feed(ks, t_offset=0.0):
+        for k in ks:
+            got = calib.add(float(s.time_s[k] + t_offset), [tuple(ups[c, k]) for c in range(4)],
+                            [tuple(s.gyro_dps[c, k]) for c in range(4)], [nan3] * 4)
+            if got is not None:
+                return got
+        return None
+
+    first = feed(range(len(s.time_s)))
+    assert first is not None
+    calib.request_standing()
+    assert calib.calibration is None and calib.status == "stand still"
+    again = feed(range(400), t_offset=100.0)  # standing again: no strides needed this time
+    assert again is not None
+    for a, b in zip(first.mounts, again.mounts, strict=True):
+        assert np.allclose(a.lateral, b.lateral) and np.allclose(a.proximal, b.proximal, atol=1e-6)
+
+
+def test_raw_input_without_imufusion_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "imufusion", None)
+    with pytest.raises(CalibrationError, match=r"pip install 'gait_estimator\[imu\]'"):
+        SensorInput().convert(1, (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
