@@ -288,29 +288,19 @@ class EstimatorNode(Node):
         self._profile_pub = self.create_publisher(Float64MultiArray, PROFILE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
         self._mode_msg = String()
         self._phase_msg = Float64()
-        self._imu = None
-        if self._input_type == "imu":  # four sensor_msgs/Imu topics (ros/imu_input.py)
-            from .imu_input import ImuInput
-
-            try:
-                self._imu = ImuInput(self, INPUT_QOS)
-            except (GaitEstimatorError, ParameterException) as exc:
-                self.destroy_node()
-                raise StartupError(_one_line(exc)) from None
-            self._sub = self._imu.subscriptions[0]
-        elif self._input_type == "joint_state":
+        if self._input_type == "joint_state":
             msg_type, self._handle = JointState, self._handle_joint_state
         else:
             msg_type, self._handle = Float64MultiArray, self._handle_array
-        if self._imu is None:
-            self._sub = self.create_subscription(
-                msg_type,
-                INPUT_TOPIC,
-                self._on_input,
-                INPUT_QOS,
-                qos_overriding_options=QoSOverridingOptions.with_default_policies(),
-                raw=msg_type is JointState,  # read from the CDR bytes (io/cdr.py): no message objects
-            )
+        self._imu = self._start_imu_input() if self._input_type == "imu" else None
+        self._sub = self._imu.subscriptions[0] if self._imu is not None else self.create_subscription(
+            msg_type,
+            INPUT_TOPIC,
+            self._on_input,
+            INPUT_QOS,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+            raw=msg_type is JointState,  # read from the CDR bytes (io/cdr.py): no message objects
+        )
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._save_srv = self.create_service(Trigger, SAVE_LIBRARY_SERVICE, self._save_library)
         self._calib_srv = self.create_service(Trigger, RESET_CALIBRATION_SERVICE, self._reset_calibration)
@@ -330,6 +320,16 @@ class EstimatorNode(Node):
         priority = self.get_parameter("thread_priority").value
         if priority:
             self._set_priority(priority)
+
+    def _start_imu_input(self) -> Any:
+        """``input_type: imu``: four sensor_msgs/Imu subscriptions (ros/imu_input.py)."""
+        from .imu_input import ImuInput
+
+        try:
+            return ImuInput(self, INPUT_QOS)
+        except (GaitEstimatorError, ParameterException) as exc:
+            self.destroy_node()
+            raise StartupError(_one_line(exc)) from None
 
     # -----------------------------------------------------------------------------------------
     # Parameters
