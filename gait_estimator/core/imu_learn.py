@@ -111,17 +111,15 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
     still = ok & ~moved
     if start_s is not None:
         still &= t >= start_s
-    i = 0
-    n = len(t)
-    while i < n:
-        if not still[i]:
-            i += 1
+    length = still_s - dt / 2
+    edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
+    step = max(1, round(0.1 / dt))  # a stretch that drifts: try again 0.1 s later
+    for first, end in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
+        if t[end - 1] - t[first] < length:
             continue
-        j = i
-        while j < n and still[j]:
-            j += 1
-        if t[j - 1] - t[i] >= still_s - dt / 2:
-            stop = int(np.searchsorted(t, t[i] + still_s - dt / 2, side="right"))
+        last = int(np.searchsorted(t, t[end - 1] - length, side="right")) - 1
+        for i in range(int(first), last + 1, step):
+            stop = int(np.searchsorted(t, t[i] + length, side="right"))
             win = u[:, i:stop]
             mean = _norm_rows(win.mean(axis=1))  # at rest the accelerometer reads up, unaffected by gyro bias
             spread = np.degrees(np.arccos(np.clip(np.einsum("stk,sk->st", win, mean), -1, 1))).max(axis=1)
@@ -130,9 +128,6 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
                         else np.nan_to_num(np.asarray(gyro_dps, dtype=np.float64)[:, i:stop].mean(axis=1)))
                 return Standing(i, stop, tuple(tuple(map(float, m)) for m in mean),
                                 tuple(tuple(map(float, b)) for b in bias))
-            i += 1  # slow drift in this stretch: try from the next sample
-            continue
-        i = j
     return None
 
 

@@ -166,10 +166,9 @@ class ImuCalibrator:
         self._clear()
 
     def _clear(self) -> None:
-        self._t: list[float] = []
-        self._ups: list[Any] = []
-        self._gyro: list[Any] = []
-        self._acc: list[Any] = []
+        self._t = np.empty(1024)
+        self._rows = np.empty((1024, N_CHANNELS, 9))  # per sensor: up, gyro, acc
+        self._n = 0
         self._next_try = -math.inf
 
     def request_standing(self) -> None:
@@ -191,21 +190,27 @@ class ImuCalibrator:
 
     def add(self, t: float, ups: list[Vec3], gyro: list[Vec3], acc: list[Vec3]) -> ImuCalibration | None:
         """One paired sample (t in s); returns the calibration when it has just been learnt."""
-        self._t.append(t)
-        self._ups.append(ups)
-        self._gyro.append(gyro)
-        self._acc.append(acc)
+        n = self._n
+        if n == len(self._t):
+            if t - self._t[0] > MAX_LEARN_BUFFER_S:  # bounded: drop the oldest half (no standing found)
+                half = n // 2
+                self._t[:n - half], self._rows[:n - half] = self._t[half:n], self._rows[half:n]
+                n -= half
+                self._standing = None
+            else:
+                self._t = np.concatenate([self._t, np.empty_like(self._t)])
+                self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
+        self._t[n] = t
+        row = self._rows[n]
+        row[:, 0:3], row[:, 3:6], row[:, 6:9] = ups, gyro, acc
+        self._n = n = n + 1
         if t < self._next_try:
             return None
         self._next_try = t + LEARN_EVERY_S
-        if t - self._t[0] > MAX_LEARN_BUFFER_S:  # bounded: drop the oldest half (no standing found)
-            half = len(self._t) // 2
-            del self._t[:half], self._ups[:half], self._gyro[:half], self._acc[:half]
-            self._standing = None
-        time_s = np.asarray(self._t)
-        ups_a = np.asarray(self._ups, dtype=np.float64).transpose(1, 0, 2)
-        gyro_a = np.asarray(self._gyro, dtype=np.float64).transpose(1, 0, 2)
-        acc_a = np.asarray(self._acc, dtype=np.float64).transpose(1, 0, 2)
+        time_s = self._t[:n]
+        ups_a = self._rows[:n, :, 0:3].transpose(1, 0, 2)
+        gyro_a = self._rows[:n, :, 3:6].transpose(1, 0, 2)
+        acc_a = self._rows[:n, :, 6:9].transpose(1, 0, 2)
         have_rates = bool(np.isfinite(gyro_a).any())
         have_acc = bool(np.isfinite(acc_a).any())
         lateral = self.lateral
