@@ -20,7 +20,8 @@ synthetic checks and the per-sample conversion cost. One command:
   raw-input IMU angles or with the mocap angles.
 * Synthetic (test/imu_synth.py): random mountings, exact quaternions; raw input with noise and
   gyro bias.
-* Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample.
+* Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
+  (best of 3 rounds by median).
 """
 
 from __future__ import annotations
@@ -215,15 +216,16 @@ def synthetic(seeds: int = 6) -> dict:
     return {"mountings": seeds, "orientation_worst_rms_deg": worst_q, "raw_worst_rms_after_10s_deg": worst_r}
 
 
-def conversion_cost(n: int = 20000) -> dict:
-    """ns per four-sensor sample: convert x4 + pair + angles (median, p99), both inputs."""
+def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
+    """us per four-sensor sample: convert x4 + pair + angles (median, p99), both inputs; of
+    ``rounds`` rounds of ``n`` samples, the one with the lowest median (the machine is shared)."""
     rng = np.random.default_rng(0)
     cal = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4)))
     q = rng.normal(size=(n, 4, 4))
     w = rng.normal(0, 1, size=(n, 4, 3))
     a = rng.normal(0, 1, size=(n, 4, 3)) + np.array([0.0, 0.0, 9.8])
     out = {}
-    for kind, cov0 in (("orientation", 0.0), ("raw", -1.0)):
+    for kind, cov0 in [(k, c) for _ in range(rounds) for k, c in (("orientation", 0.0), ("raw", -1.0))]:
         inputs = [SensorInput() for _ in range(4)]
         pairer = ImuPairer()
         rows = [[(tuple(q[k, c]), tuple(w[k, c]), tuple(a[k, c])) for c in range(4)] for k in range(n)]
@@ -239,7 +241,10 @@ def conversion_cost(n: int = 20000) -> dict:
                     cal.angles_deg(items)
             times[k] = clock() - t0
         times = times[n // 10:]
-        out[kind] = {"median_us": float(np.median(times)) / 1e3, "p99_us": float(np.percentile(times, 99)) / 1e3}
+        this = {"median_us": float(np.median(times)) / 1e3, "p99_us": float(np.percentile(times, 99)) / 1e3,
+                "rounds": rounds}
+        if kind not in out or this["median_us"] < out[kind]["median_us"]:
+            out[kind] = this
     return out
 
 

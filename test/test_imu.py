@@ -28,6 +28,7 @@ from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
     NON_INCREASING_STAMP,
+    WRONG_FRAME,
     ZERO_NORM,
     ImuCalibrator,
     ImuPairer,
@@ -194,6 +195,11 @@ def test_bad_messages_are_rejected_with_a_reason():
             raw.convert(30, (0.0, 0.0, 0.0, 1.0), -1.0, w, a)
         assert err.value.reason == reason
     assert up_from_quaternion(0.0, 0.0, 0.0, 0.0) is None
+    framed = SensorInput(frame_id="thigh_r_imu")
+    with pytest.raises(SampleRejected) as err:
+        framed.convert(40, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G), "shank_r_imu")
+    assert err.value.reason == WRONG_FRAME
+    assert framed.convert(40, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G), "thigh_r_imu")
 
 
 def test_pairer_waits_for_a_silent_sensor_and_drops_unpaired_messages():

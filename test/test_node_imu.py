@@ -46,9 +46,10 @@ def ros(monkeypatch):
         h.close()
 
 
-def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray) -> Imu:
+def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray, frame: str = "") -> Imu:
     m = Imu()
     m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    m.header.frame_id = frame
     if q is None:
         m.orientation_covariance[0] = -1.0
     else:
@@ -75,7 +76,7 @@ def stream(client, pubs, msgs: list[list[Imu]], skip=lambda k, c: False) -> None
 
 def make_messages(s, n: int, raw: bool = False) -> list[list[Imu]]:
     return [[imu_msg(BASE_NS + round(s.time_s[k] * 1e9) + OFFSETS_NS[c], None if raw else s.quat_xyzw[c, k],
-                     s.gyro_dps[c, k], s.acc_g[c, k]) for c in range(4)] for k in range(n)]
+                     s.gyro_dps[c, k], s.acc_g[c, k], CHANNELS[c]) for c in range(4)] for k in range(n)]
 
 
 def node_angles(msgs: list[list[Imu]], cal) -> tuple[np.ndarray, np.ndarray]:
@@ -132,18 +133,20 @@ def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_inp
                    gyro_noise_dps=0.3, gyro_bias_dps=1.0)
     path = tmp_path / "learnt.imu.yaml"
     h = ros(62)
-    node = h.estimator(input_type="imu", imu_calibration_path=str(path))
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path), imu_frame_ids=list(CHANNELS))
     client = h.client(node)
     pubs = publishers(client)
     assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
     client.spin_for(1.0)  # the node's best-effort subscriptions and our output subscriptions match too
     msgs = make_messages(s, len(s.time_s), raw=True)
     # bad messages on top: NaN and zero quaternions, an out-of-order stamp, and a silent right shank
-    bad = imu_msg(BASE_NS + 10_000_000, [math.nan, 0, 0, 1], s.gyro_dps[0, 0], s.acc_g[0, 0])
-    zero = imu_msg(BASE_NS + 20_000_000, [0, 0, 0, 0], s.gyro_dps[0, 0], s.acc_g[0, 0])
-    late = imu_msg(BASE_NS, None, s.gyro_dps[1, 0], s.acc_g[1, 0])
+    bad = imu_msg(BASE_NS + 10_000_000, [math.nan, 0, 0, 1], s.gyro_dps[0, 0], s.acc_g[0, 0], "right_thigh")
+    zero = imu_msg(BASE_NS + 20_000_000, [0, 0, 0, 0], s.gyro_dps[0, 0], s.acc_g[0, 0], "right_thigh")
+    late = imu_msg(BASE_NS, None, s.gyro_dps[1, 0], s.acc_g[1, 0], "left_thigh")
+    wrong = imu_msg(BASE_NS + 30_000_000, None, s.gyro_dps[3, 0], s.acc_g[3, 0], "right_thigh")
     for m in (bad, zero):
         pubs[0].publish(m)
+    pubs[3].publish(wrong)
     stream(client, pubs, msgs[:600])
     pubs[1].publish(late)
     silent = (1000, 1400)  # 2 s without the right shank
@@ -154,6 +157,7 @@ def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_inp
     assert diag["imu_calibration_status"] == "calibrated" and "[learnt]" in diag["imu_calibration"]
     assert int(diag["rejected_non_finite"]) >= 1 and int(diag["imu_rejected_zero_norm"]) >= 1
     assert int(diag["rejected_non_increasing_stamp"]) >= 1 and int(diag["imu_rejected_unpaired"]) >= 1
+    assert int(diag["imu_rejected_wrong_frame"]) >= 1
     assert any(d.get("imu_silent", "").startswith("right_shank (") and "thigh" not in d["imu_silent"]
                for d in client.received.diagnostics), "the silent sensor is named in the diagnostics"
     assert client.received.estimate_stamp_ns, "estimates once calibrated"

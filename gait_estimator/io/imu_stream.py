@@ -30,7 +30,8 @@ from .stream import NON_FINITE, NON_INCREASING_STAMP, SampleRejected
 
 ZERO_NORM = "zero_norm"
 UNPAIRED = "unpaired"
-IMU_REASONS = (NON_FINITE, ZERO_NORM, NON_INCREASING_STAMP, UNPAIRED)
+WRONG_FRAME = "wrong_frame"
+IMU_REASONS = (NON_FINITE, ZERO_NORM, NON_INCREASING_STAMP, UNPAIRED, WRONG_FRAME)
 DEFAULT_TOLERANCE_S = 0.004
 """Largest stamp spread (s) of four messages that make one sample (a 200 Hz period is 0.005 s)."""
 MAX_QUEUE = 50
@@ -45,17 +46,21 @@ class SensorInput:
 
     Args:
         rate_hz: Nominal rate for the raw-input fusion.
+        frame_id: The ``header.frame_id`` this sensor's messages must carry ('' = any).
     """
 
-    def __init__(self, rate_hz: float = 200.0) -> None:
+    def __init__(self, rate_hz: float = 200.0, frame_id: str = "") -> None:
         self._rate_hz = rate_hz
+        self.frame_id = frame_id
         self.fusion: RawFusion | None = None
         self.gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
         self.last_ns: int | None = None
 
     def convert(self, stamp_ns: int, orientation: Any, orientation_cov0: float, gyro_rps: Any,
-                acc_mps2: Any) -> tuple[Vec3, Vec3, Vec3]:
+                acc_mps2: Any, frame_id: str = "") -> tuple[Vec3, Vec3, Vec3]:
         """Fields of one Imu message (quaternion x, y, z, w; rad/s; m/s^2) -> (up, gyro, acc)."""
+        if self.frame_id and frame_id != self.frame_id:
+            raise SampleRejected(WRONG_FRAME, f"frame_id {frame_id!r}, expected {self.frame_id!r}")
         last = self.last_ns
         if last is not None and stamp_ns <= last:
             raise SampleRejected(NON_INCREASING_STAMP,

@@ -49,6 +49,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "imu_topics": (list(DEFAULT_IMU_TOPICS), "sensor_msgs/Imu topics of right_thigh, left_thigh, right_shank, left_shank."),
     "imu_pairing_tolerance_s": (DEFAULT_TOLERANCE_S, "Largest stamp spread (s) of the four messages of one sample."),
     "imu_timeout_s": (0.5, "A sensor without messages for this long (s) is reported silent in the diagnostics."),
+    "imu_frame_ids": ([""] * N_CHANNELS, "Per sensor, the header.frame_id its messages must carry ('' = any); "
+                      "messages with another frame are dropped (wrong_frame)."),
     "imu_lateral_axes": ([""] * N_CHANNELS, "Per segment, the sensor axis pointing to the wearer's right (+x, -y, ...; "
                          "forward swing is a positive rotation about it); '' = learn from strides."),
     "imu_proximal_axes": ([""] * N_CHANNELS, "Per segment, the sensor axis pointing along the segment towards the "
@@ -83,7 +85,10 @@ class ImuInput:
             calibration_path_for(lib.path, lib.name)
         saved = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
         self.timeout_s = float(values["imu_timeout_s"])
-        self.inputs = [SensorInput() for _ in range(N_CHANNELS)]
+        frames = list(values["imu_frame_ids"])
+        if len(frames) != N_CHANNELS:
+            raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
+        self.inputs = [SensorInput(frame_id=f.strip()) for f in frames]
         self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
         self.calibrator = ImuCalibrator(lateral, proximal, standing, saved)
         if saved is not None:
@@ -118,7 +123,7 @@ class ImuInput:
         o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
         try:
             item = self.inputs[sensor].convert(stamp_ns, (o.x, o.y, o.z, o.w), msg.orientation_covariance[0],
-                                               (w.x, w.y, w.z), (a.x, a.y, a.z))
+                                               (w.x, w.y, w.z), (a.x, a.y, a.z), msg.header.frame_id)
         except SampleRejected as exc:
             self.rejected[exc.reason] += 1
             node._received += 1
