@@ -28,7 +28,7 @@ from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.imu import CalibrationError, ImuCalibration
+from ..core.imu import CalibrationError, ImuCalibration, SegmentMount
 from ..core.imu_learn import STILL_S, WALK_S, check_configured
 from ..io.cdr import Stamp
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
@@ -84,6 +84,10 @@ class ImuInput:
         self.path = Path(values["imu_calibration_path"]).expanduser() if values["imu_calibration_path"] else \
             calibration_path_for(lib.path, lib.name)
         saved = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
+        self.configured = all(a is not None for a in lateral) and all(p is not None for p in proximal)
+        from_file = saved is not None
+        if saved is None and self.configured:  # nothing to learn (and nothing to save)
+            saved = ImuCalibration(tuple(SegmentMount(a, p, d) for a, p, d in zip(lateral, proximal, standing, strict=True)))
         self.timeout_s = float(values["imu_timeout_s"])
         frames = list(values["imu_frame_ids"])
         if len(frames) != N_CHANNELS:
@@ -104,7 +108,10 @@ class ImuInput:
         self._srv = node.create_service(Trigger, CALIBRATE_STANDING_SERVICE, self._calibrate_standing)
         log = node.get_logger()
         if saved is not None:
-            log.info(f"IMU calibration from {self.path}: {saved.summary()}")
+            log.info(f"IMU calibration from {self.path if from_file else 'the configured axes'}: {saved.summary()}")
+            if from_file and self.configured:
+                log.warn(f"imu_lateral_axes/imu_proximal_axes are configured, but {self.path} is used; "
+                         "~/reset_calibration deletes it")
         else:
             log.info(f"no IMU calibration at {self.path}: {self.calibrator.status or 'learning'} "
                      f"(stand still {STILL_S:g} s, then walk {WALK_S:g} s); the estimate waits until then")
@@ -154,6 +161,9 @@ class ImuInput:
     def _learnt(self, cal: ImuCalibration) -> None:
         self._apply_biases(cal)
         log = self.node.get_logger()
+        if self.configured:
+            log.info(f"IMU calibration from the configured axes: {cal.summary()}")
+            return
         try:
             save_calibration(cal, self.path)
             where = f"saved to {self.path}"
