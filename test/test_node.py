@@ -284,7 +284,7 @@ def test_invalid_values_at_startup_raise_one_line_errors(ros, tmp_path: Path) ->
     for params, text in [
         ({"kernels": str(tmp_path / "nope.yaml")}, "nope.yaml: no such file or directory"),
         ({"input_units": "furlong"}, "input_units"),
-        ({"input_type": "imu"}, "input_type"),
+        ({"input_type": "pose"}, "input_type"),
         ({"executor": "multi_threaded"}, "executor: must be one of events, single_threaded"),
         ({"max_gap_s": "soon"}, "max_gap_s"),
     ]:

@@ -26,6 +26,7 @@ from ..io.bag import (
     is_bag_path,
     read_bag,
 )
+from ..io.imu_bag import is_imu_bag
 from ..io.process import Predictions, predict
 from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
@@ -65,6 +66,10 @@ def _bag_reading_options(p: Any, action: type[argparse.Action] | str = "store", 
         "--max-gap", dest="max_gap_s", type=seconds, action=action, metavar="SECONDS",
         help=f"a gap between sample times longer than this restarts the window, as in the node (default "
         f"{DEFAULT_MAX_GAP_S:g}; 0 disables; any recording)",
+    )
+    p.add_argument(
+        "--imu-calibration", dest="imu_calibration", action=action, metavar="YAML",
+        help="bag of four sensor_msgs/Imu topics: the IMU mounting to use (default: learnt from the bag; docs/imu.md)",
     )
 
 
@@ -136,12 +141,12 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 def _read_source(args: argparse.Namespace) -> Recording:
     p = Path(args.source)
-    if is_bag_path(p):
+    if is_bag_path(p) and not is_imu_bag(p):
         return read_bag(
             p, topic=args.topic, joint_names=args.joint_names, input_units=args.units,
             max_gap_s=DEFAULT_MAX_GAP_S if args.max_gap_s is None else args.max_gap_s,
         )
-    return read_recording(p, rate_hz=args.sample_rate)
+    return read_recording(p, rate_hz=args.sample_rate, imu_calibration=args.imu_calibration)
 
 
 def _print_reading_notes(rec: Recording) -> None:

@@ -30,8 +30,16 @@ from .bag import (
     ns_to_stamp,
     typestore,
 )
-from .outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_array, estimate_names, sse_label
-from .process import Predictions
+from .outputs import (
+    ESTIMATE_TOPIC,
+    MODE_TOPIC,
+    PHASE_TOPIC,
+    SSE_TOPIC,
+    Predictions,
+    estimate_array,
+    estimate_names,
+    sse_label,
+)
 from .recording import Recording
 
 STORAGES = ("mcap", "sqlite3")

@@ -21,11 +21,24 @@ estimate (with ``ready`` = 0 while the window fills):
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..core.estimator import EstimateTrace
+from ..core.kernels import KernelLibrary
 from ..core.supervisor import Estimate
+
+
+@dataclass(frozen=True)
+class Predictions:
+    """Estimator output aligned with the recording samples it came from."""
+
+    time_s: np.ndarray  # (T,) seconds: the input samples' times
+    sample: np.ndarray  # (T,) index in the source recording of the (latest) input sample
+    trace: EstimateTrace
+    adapted: KernelLibrary | None = None  # the personalised library (adapt_rate > 0)
+
 
 INPUT_TOPIC = "segment_angles"
 MODE_TOPIC = "mode"

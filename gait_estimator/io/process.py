@@ -13,19 +13,10 @@ from ..core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_esti
 from ..core.kernels import KernelLibrary
 from .atomic import atomic_open
 from .library_io import load_library
+from .outputs import Predictions
 from .readers import read_recording
 from .recording import Recording
 from .resources import DEFAULT_LIBRARY
-
-
-@dataclass(frozen=True)
-class Predictions:
-    """Estimator output aligned with the recording samples it came from."""
-
-    time_s: np.ndarray  # (T,) seconds: the input samples' times
-    sample: np.ndarray  # (T,) index in the source recording of the (latest) input sample
-    trace: EstimateTrace
-    adapted: KernelLibrary | None = None  # the personalised library (adapt_rate > 0)
 
 
 @dataclass(frozen=True)

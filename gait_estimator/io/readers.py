@@ -8,9 +8,11 @@ from typing import Any
 
 from ..core.errors import RecordingError
 from .bag import is_bag_path, read_bag
+from .imu_bag import is_imu_bag, read_imu_bag
 from .recording import Recording, is_project_csv, is_reference_csv, read_project_csv, read_reference_csv
 
 READERS: tuple[tuple[Callable[[Path], bool], Callable[..., Recording]], ...] = (
+    (is_imu_bag, read_imu_bag),  # four sensor_msgs/Imu topics -> angles (io/imu_bag.py)
     (is_bag_path, read_bag),
     (is_reference_csv, read_reference_csv),
     (is_project_csv, read_project_csv),

@@ -24,7 +24,7 @@ import numpy as np
 from ..core.channels import CHANNELS, N_CHANNELS, Sample, sample_values
 
 UNITS = ("rad", "deg")
-INPUT_TYPES = ("joint_state", "float64_multi_array")
+INPUT_TYPES = ("joint_state", "float64_multi_array", "imu")  # imu: four sensor_msgs/Imu (io/imu_stream.py)
 
 # Reason codes, as counted in diagnostics and summaries.
 NON_FINITE = "non_finite"

@@ -106,6 +106,10 @@ class NodeDiagnostics:
                 f"input stamp rate {stamp_rate:.0f} Hz differs from the library's {lib.sample_rate_hz:g} Hz "
                 "(set resample: on)"
             )
+        if self._imu is not None:
+            imu_values, imu_problems = self._imu.diagnostics()
+            values.update(imu_values)
+            problems += imu_problems
         if problems:
             level, message = DiagnosticStatus.WARN, "; ".join(problems)
         elif shown and e is not None:

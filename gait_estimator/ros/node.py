@@ -48,7 +48,7 @@ from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.exceptions import InvalidHandle
+from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -167,7 +167,8 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             msg_type, self._handle = JointState, self._handle_joint_state
         else:
             msg_type, self._handle = Float64MultiArray, self._handle_array
-        self._sub = self.create_subscription(
+        self._imu = self._start_imu_input() if self._input_type == "imu" else None
+        self._sub = self._imu.subscriptions[0] if self._imu is not None else self.create_subscription(
             msg_type,
             INPUT_TOPIC,
             self._on_input,
@@ -195,6 +196,16 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         priority = self.get_parameter("thread_priority").value
         if priority:
             self._set_priority(priority)
+
+    def _start_imu_input(self) -> Any:
+        """``input_type: imu``: four sensor_msgs/Imu subscriptions (ros/imu_input.py)."""
+        from .imu_input import ImuInput
+
+        try:
+            return ImuInput(self, INPUT_QOS)
+        except (GaitEstimatorError, ParameterException) as exc:
+            self.destroy_node()
+            raise StartupError(one_line(exc)) from None
 
     # -----------------------------------------------------------------------------------------
     # Services
@@ -236,7 +247,8 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         est.reset_calibration()
         response.success = True
         response.message = ("sensor offsets reset to 0 (were " + ", ".join(f"{v:.2f}" for v in before) + " deg)"
-                            + (f", learnt time scale {scale:.3f} forgotten" if math.isfinite(scale) else ""))
+                            + (f", learnt time scale {scale:.3f} forgotten" if math.isfinite(scale) else "")
+                            + (self._imu.reset_calibration() if self._imu is not None else ""))
         self.get_logger().info(response.message)
         return response
 

@@ -58,7 +58,8 @@ DESCRIPTIONS: dict[str, str] = {
     "(4 distinct names; other joints in the message are ignored, message order does not matter).",
     "input_units": "Units of the input angles: rad (REP 103) or deg.",
     "input_type": "Input message type on segment_angles (read-only): joint_state (sensor_msgs/JointState) or "
-    "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]).",
+    "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]); or imu: "
+    "four sensor_msgs/Imu topics instead (imu_* parameters, docs/imu.md).",
     "executor": "Executor of the estimator_node process (read-only): events (rclpy's EventsExecutor, lower "
     "latency) or single_threaded (rclpy's SingleThreadedExecutor).",
     "thread_priority": "Real-time priority of the node: 1-99 runs every thread of its process under SCHED_FIFO at "
@@ -281,7 +282,7 @@ class NodeParameters:
         """An estimator for this node's input: JointState carries stamps (``resample: auto``
         resamples it), Float64MultiArray is timed on arrival (not resampled unless ``on``)."""
         input_type = self.get_parameter("input_type").value if self.has_parameter("input_type") else "joint_state"
-        return Estimator(library, config, stamped=input_type == "joint_state")
+        return Estimator(library, config, stamped=input_type in ("joint_state", "imu"))
 
     def _options_summary(self) -> str:
         changed = self._config.changed_from(self._config_preset)

@@ -1,0 +1,316 @@
+"""IMU input (issue 27, docs/imu.md): real IMUs vs motion capture, the estimator fed with either,
+synthetic checks and the per-sample conversion cost. One command:
+
+    python benchmarks/imu.py            # writes benchmarks/results/imu/imu.{json,md}
+
+* camargo_ab06 (data/camargo_ab06, 5 level-walking trials, raw right thigh/shank IMUs at 200 Hz):
+  each trial is written as a rosbag2 bag of four sensor_msgs/Imu topics and read back with
+  ``read_imu_bag`` (the code of ``gait-estimator convert``); the mounting is learnt from the bag.
+  The dataset has no left-leg IMUs: the left thigh/shank "IMUs" are virtual sensors that carry
+  the motion-capture left angles as exact orientations (configured axes), so the left channels
+  are the mocap angles and every figure below is about the right thigh and shank.
+  - **orientation** input: each right IMU's orientation computed with imufusion (its defaults, as
+    a driver running Fusion would publish it), sent as the quaternion;
+  - **raw** input: gyro + accelerometer only (orientation_covariance[0] = -1): the project's
+    fusion (imufusion, gyro bias from the standing pose).
+  RMS of IMU - mocap over the walking samples after the standing tare (IMU - mocap mean over the
+  first standing bout removed), per segment.
+* Estimator: kernels (walk_slow, walk_normal, walk_fast; heel strikes from the data set) trained
+  on the first half of every trial, tested on the second half (default options), fed with the
+  raw-input IMU angles or with the mocap angles.
+* Synthetic (test/imu_synth.py): random mountings, exact quaternions; raw input with noise and
+  gyro bias.
+* Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
+  (best of 3 rounds by median).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "test"))
+
+from gait_estimator.analysis.evaluate import PredictionTable, evaluate  # noqa: E402
+from gait_estimator.analysis.strides import heel_strikes  # noqa: E402
+from gait_estimator.analysis.train import TrainOptions, train_library  # noqa: E402
+from gait_estimator.core.imu import STANDARD_GRAVITY, ImuCalibration, SegmentMount, fuse_raw  # noqa: E402
+from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag  # noqa: E402
+from gait_estimator.io.imu_stream import ImuPairer, SensorInput  # noqa: E402
+from gait_estimator.io.process import predict  # noqa: E402
+from gait_estimator.io.recording import Recording, read_project_csv  # noqa: E402
+
+DATA = REPO / "data" / "camargo_ab06"
+OUT = REPO / "benchmarks" / "results" / "imu"
+BASE_NS = 1_700_000_000 * 1_000_000_000
+RIGHT = {"thigh": 0, "shank": 2}
+S0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # sensor = segment axes (fwd, prox, right)
+
+
+def virtual_quaternions(theta_deg: np.ndarray) -> np.ndarray:
+    """Exact orientations (x, y, z, w) of a sensor whose axes are the segment's (x forward,
+    y proximal, z right) at sagittal angle theta."""
+    from scipy.spatial.transform import Rotation
+
+    return (Rotation.from_euler("y", -np.radians(theta_deg)[:, None]) * Rotation.from_matrix(S0)).as_quat()
+
+
+def fusion_quaternions(t: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray) -> np.ndarray:
+    """imufusion with its default settings (what a driver running Fusion publishes), x, y, z, w."""
+    import imufusion
+
+    ahrs = imufusion.Ahrs()
+    ahrs.set_settings(imufusion.AhrsSettings(sample_rate=1.0 / float(np.median(np.diff(t)))))
+    out = np.empty((len(t), 4))
+    for i in range(len(t)):
+        ahrs.update_no_magnetometer(gyro_dps[i], acc_g[i])
+        w, x, y, z = ahrs.get_quaternion()
+        out[i] = (x, y, z, w)
+    return out
+
+
+def first_stand(rec: Recording) -> np.ndarray:
+    stand = rec.labels == "stand"
+    keep = np.zeros(len(rec), dtype=bool)
+    i = int(np.argmax(stand))
+    j = i
+    while j < len(rec) and stand[j]:
+        j += 1
+    keep[i:j] = True
+    return keep
+
+
+def shank_faults(rec: Recording, trial: str) -> np.ndarray:
+    """Samples whose right-shank IMU data the data set's README lists as faulty ("Known issues":
+    gyro sign flips, motion-capture-like patches, the first-row spike of ccw_fast), from each
+    fault to the next standing bout, where the fusion settles on the accelerometer again."""
+    stats = json.loads((DATA / "stats.json").read_text())["trials"][trial + ".csv"]
+    starts = [f[0] for f in stats["gyro_sign_flips"]["shank_Gyro_Y"]]
+    starts += [iv[0] for iv in stats["shank_gyro_y_ik_like"]["intervals"]]
+    if trial == "levelground_ccw_fast":
+        starts.append(14.425)
+    stand = rec.labels == "stand"
+    bad = np.zeros(len(rec), dtype=bool)
+    for s in starts:
+        after = (rec.time_s >= s) & stand
+        end = rec.time_s[np.argmax(after)] if after.any() else np.inf
+        bad |= (rec.time_s >= s) & (rec.time_s < end)
+    return bad
+
+
+def trial_imu(path: Path, tmp: Path) -> dict:
+    """Per trial: angles from the orientation and the raw bags, tared; RMS vs mocap."""
+    rec = read_project_csv(path)
+    t, ex, mocap = rec.time_s, rec.extra, rec.angles_deg
+    stamps = BASE_NS + np.round(t * 1e9).astype(np.int64)
+    gyro = np.zeros((4, len(t), 3))
+    acc = np.zeros((4, len(t), 3))
+    for seg, c in RIGHT.items():
+        gyro[c] = np.stack([ex[f"right_{seg}_gyro_{k}_dps"] for k in "xyz"], axis=1)
+        acc[c] = np.stack([ex[f"right_{seg}_acc_{k}_mps2"] for k in "xyz"], axis=1)
+    left = {c: virtual_quaternions(mocap[:, c]) for c in (1, 3)}
+    configured = {"imu_lateral_axes": ["", "+z", "", "+z"], "imu_proximal_axes": ["", "+y", "", "+y"]}
+    out: dict = {"trial": path.stem, "samples": len(t)}
+    angles = {}
+    for kind in ("orientation", "raw"):
+        if kind == "orientation":
+            q = [fusion_quaternions(t, gyro[c], acc[c] / STANDARD_GRAVITY) if c in (0, 2) else left[c] for c in range(4)]
+        else:
+            q = [None, left[1], None, left[3]]
+        bag = write_imu_bag(tmp / f"{path.stem}_{kind}", stamps, np.radians(gyro), acc, q)
+        got = read_imu_bag(bag, **configured)
+        assert len(got) == len(t), (path, kind, len(got), got.skipped)
+        a = got.angles_deg.copy()
+        stand = first_stand(rec)
+        for c in (0, 2):
+            a[:, c] -= (a[stand, c] - mocap[stand, c]).mean()  # the standing tare
+        walk = rec.labels != "stand"
+        out[kind] = {seg: float(np.sqrt(np.mean((a[walk, c] - mocap[walk, c]) ** 2))) for seg, c in RIGHT.items()}
+        clean = walk & ~shank_faults(rec, path.stem)
+        out[kind]["shank_clean"] = float(np.sqrt(np.mean((a[clean, 2] - mocap[clean, 2]) ** 2)))
+        out[kind]["shank_clean_share"] = float(clean.sum() / walk.sum())
+        out[kind + "_r"] = {seg: float(np.corrcoef(a[walk, c], mocap[walk, c])[0, 1]) for seg, c in RIGHT.items()}
+        out[kind + "_calibration"] = got.calibration.summary().split("; left_thigh")[0] + "; " + \
+            got.calibration.summary().split("; ")[2]
+        angles[kind] = a
+    return {"stats": out, "angles": angles, "rec": rec}
+
+
+def halves(rec: Recording, angles: np.ndarray, unscored: np.ndarray | None = None) -> tuple[Recording, Recording]:
+    """First and second half (by walking time); samples in ``unscored`` lose their label (not
+    evaluated, and not trained on)."""
+    walk_t = rec.time_s[rec.labels != "stand"]
+    mid = 0.5 * (walk_t[0] + walk_t[-1])
+    labels = np.where(rec.labels == "stand", "", rec.labels).astype(object)
+    if unscored is not None:
+        labels[unscored] = ""
+    full = Recording(rec.time_s, angles, labels, rec.heel_strike, {}, rec.source)
+    return full.select(rec.time_s < mid), full.select(rec.time_s >= mid)
+
+
+def estimator_runs(trials: list[dict], skip_faults: bool = False) -> dict:
+    """Accuracy and phase error, kernels from first halves, tested on second halves; with
+    ``skip_faults``, the samples of the data set's shank IMU faults are neither trained on nor
+    scored (for both inputs)."""
+    out = {}
+    sets = {"mocap": lambda tr: tr["rec"].angles_deg, "imu_raw": lambda tr: tr["angles"]["raw"]}
+    faults = [shank_faults(tr["rec"], tr["stats"]["trial"]) if skip_faults else None for tr in trials]
+    parts = {name: [halves(tr["rec"], get(tr), f) for tr, f in zip(trials, faults, strict=True)]
+             for name, get in sets.items()}
+    for train_on, test_on in (("mocap", "mocap"), ("imu_raw", "imu_raw"), ("mocap", "imu_raw")):
+        options = TrainOptions(heel_strikes="column", min_strides=2)  # walk_slow: one trial, 2-3 strides per half
+        lib = train_library([p[0] for p in parts[train_on]], f"camargo_{train_on}", options).library
+        n = correct = 0
+        err_sum = err_n = 0.0
+        for _, test in parts[test_on]:
+            pred = predict(test, lib)
+            tr = pred.trace
+            modes = np.asarray(tr.mode_names, dtype=object)[tr.mode_index]
+            table = PredictionTable(tr.time_s, tr.sample, modes, tr.phase, tr.ready, tr.sse, list(tr.mode_names), test.source)
+            m = evaluate(table, test, heel_strikes(test, "column")).metrics
+            ev = m["samples"]["evaluated"]
+            n += ev
+            correct += (m["accuracy"] or 0.0) * ev
+            k = m["phase_error_samples"]
+            if k:
+                err_sum += m["phase_error_mean"] * k
+                err_n += k
+        out[f"{train_on}->{test_on}"] = {"accuracy": correct / n, "phase_error_mean": err_sum / err_n, "samples": n,
+                                         "modes": lib.mode_names}
+    return out
+
+
+def synthetic(seeds: int = 6) -> dict:
+    from imu_synth import gait_angles, random_mounts, synthesize
+
+    from gait_estimator.core.imu import ups_from_quaternions
+    from gait_estimator.core.imu_learn import learn_calibration
+
+    ang = gait_angles(200.0, walk_s=18.0)
+    worst_q = worst_r = 0.0
+    for seed in range(seeds):
+        rng = np.random.default_rng(seed)
+        s = synthesize(ang, 200.0, random_mounts(rng), rng, acc_noise_g=0.02, gyro_noise_dps=0.5, gyro_bias_dps=2.0)
+        ups = np.stack([ups_from_quaternions(s.quat_xyzw[c]) for c in range(4)])
+        cal, _, _ = learn_calibration(s.time_s, ups)
+        got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
+        worst_q = max(worst_q, float(np.sqrt(np.mean((got - s.angles_deg) ** 2, axis=0)).max()))
+        first = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c]) for c in range(4)])
+        _, st, _ = learn_calibration(s.time_s, first, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
+        ups = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], st.gyro_bias_dps[c]) for c in range(4)])
+        cal, _, _ = learn_calibration(s.time_s, ups, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
+        got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
+        late = s.time_s >= 10.0
+        worst_r = max(worst_r, float(np.sqrt(np.mean((got - s.angles_deg)[late] ** 2, axis=0)).max()))
+    return {"mountings": seeds, "orientation_worst_rms_deg": worst_q, "raw_worst_rms_after_10s_deg": worst_r}
+
+
+def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
+    """us per four-sensor sample: convert x4 + pair + angles (median, p99), both inputs; of
+    ``rounds`` rounds of ``n`` samples, the one with the lowest median (the machine is shared)."""
+    rng = np.random.default_rng(0)
+    cal = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4)))
+    q = rng.normal(size=(n, 4, 4))
+    w = rng.normal(0, 1, size=(n, 4, 3))
+    a = rng.normal(0, 1, size=(n, 4, 3)) + np.array([0.0, 0.0, 9.8])
+    out = {}
+    for kind, cov0 in [(k, c) for _ in range(rounds) for k, c in (("orientation", 0.0), ("raw", -1.0))]:
+        inputs = [SensorInput() for _ in range(4)]
+        pairer = ImuPairer()
+        rows = [[(tuple(q[k, c]), tuple(w[k, c]), tuple(a[k, c])) for c in range(4)] for k in range(n)]
+        times = np.empty(n)
+        clock = time.perf_counter_ns
+        for k in range(n):
+            stamp = BASE_NS + k * 5_000_000
+            t0 = clock()
+            for c in range(4):
+                qq, ww, aa = rows[k][c]
+                up, _, _ = inputs[c].convert(stamp, qq, cov0, ww, aa)
+                for _, items in pairer.push(c, stamp, up):
+                    cal.angles_deg(items)
+            times[k] = clock() - t0
+        times = times[n // 10:]
+        this = {"median_us": float(np.median(times)) / 1e3, "p99_us": float(np.percentile(times, 99)) / 1e3,
+                "rounds": rounds}
+        if kind not in out or this["median_us"] < out[kind]["median_us"]:
+            out[kind] = this
+    return out
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, default=OUT)
+    args = ap.parse_args()
+    started = time.time()
+    with tempfile.TemporaryDirectory() as tmp:
+        trials = [trial_imu(p, Path(tmp)) for p in sorted(DATA.glob("levelground_*.csv"))]
+    result = {
+        "command": "python benchmarks/imu.py",
+        "date": datetime.now(timezone.utc).strftime("%Y-%m-%d"),
+        "machine": machine(),
+        "trials": [tr["stats"] for tr in trials],
+        "estimator": estimator_runs(trials),
+        "estimator_without_faults": estimator_runs(trials, skip_faults=True),
+        "synthetic": synthetic(),
+        "cost": conversion_cost(),
+    }
+    for kind in ("orientation", "raw"):
+        result[f"mean_rms_{kind}"] = {seg: float(np.mean([tr["stats"][kind][seg] for tr in trials]))
+                                      for seg in (*RIGHT, "shank_clean")}
+    result["seconds"] = round(time.time() - started, 1)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "imu.json").write_text(json.dumps(result, indent=1) + "\n")
+    md = markdown(result)
+    (args.out / "imu.md").write_text(md)
+    print(md)
+    return 0
+
+
+def markdown(r: dict) -> str:
+    lines = [f"Measured {r['date']} on {r['machine']} with `{r['command']}` ({r['seconds']} s).", "",
+             "| camargo_ab06 trial | input | right thigh RMS deg (r) | right shank RMS deg (r) | shank without the data "
+             "set's IMU faults (share of walking kept) |", "|---|---|---|---|---|"]
+    for tr in r["trials"]:
+        for kind in ("orientation", "raw"):
+            lines.append(f"| {tr['trial']} | {kind} | {tr[kind]['thigh']:.1f} ({tr[kind + '_r']['thigh']:.3f}) | "
+                         f"{tr[kind]['shank']:.1f} ({tr[kind + '_r']['shank']:.3f}) | {tr[kind]['shank_clean']:.1f} "
+                         f"({100 * tr[kind]['shank_clean_share']:.0f} %) |")
+    for kind in ("orientation", "raw"):
+        m = r[f"mean_rms_{kind}"]
+        lines.append(f"| **mean of 5** | {kind} | **{m['thigh']:.1f}** | **{m['shank']:.1f}** | **{m['shank_clean']:.1f}** |")
+    lines += ["", "| kernels from -> tested with | accuracy | phase error (mean, % of stride) | samples |", "|---|---|---|---|"]
+    for key, note in (("estimator", ""), ("estimator_without_faults", ", shank IMU faults not used")):
+        for k, v in r[key].items():
+            lines.append(f"| {k}{note} | {100 * v['accuracy']:.1f} % | {100 * v['phase_error_mean']:.2f} | {v['samples']} |")
+    s = r["synthetic"]
+    lines += ["", f"Synthetic, {s['mountings']} random mountings: orientation input worst RMS "
+              f"{s['orientation_worst_rms_deg']:.2g} deg; raw input (noise, 2 deg/s gyro bias) worst RMS after 10 s "
+              f"{s['raw_worst_rms_after_10s_deg']:.2f} deg.", "",
+              "| conversion per four-sensor sample | median us | p99 us |", "|---|---|---|"]
+    for k, v in r["cost"].items():
+        lines.append(f"| {k} | {v['median_us']:.1f} | {v['p99_us']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,324 @@
+"""IMU -> global sagittal segment angle, ROS-free.
+
+Frames and sign (the project's convention, as the recordings): a segment's angle is its
+inclination from vertical in its own sagittal plane, degrees, + = distal end in front of the
+proximal one (thigh flexed, ankle in front of the knee), 0 = segment vertical.
+
+A sensor on the segment sees gravity; ``up`` is the world's up direction expressed in the sensor
+frame (unit vector). From an orientation quaternion (world <- sensor, world z up as in REP 103 /
+REP 145, ENU or NWU) ``up`` is the quaternion's rotation matrix' third row, so the heading (yaw,
+drifting without a magnetometer) never enters. Without an orientation, ``up`` is the gravity
+direction of a gyro + accelerometer fusion (``RawFusion``: the ``imufusion`` library, extra
+``imu``).
+
+The mounting (``SegmentMount``) is three orthonormal sensor-frame axes: ``lateral`` (the sagittal
+rotation axis, pointing to the wearer's right, so that a forward swing is a positive rotation by
+the right-hand rule), ``proximal`` (along the segment towards the proximal joint) and ``forward``
+(= proximal x lateral, anterior). Then::
+
+    angle = standing_deg + atan2(forward . up, proximal . up)
+
+``standing_deg`` is the angle the segment is taken to have in the standing pose (0 unless
+configured). Mounts are configured (sensor axes such as ``+z``) or learnt (``core/imu_learn.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .channels import CHANNELS, N_CHANNELS
+from .errors import GaitEstimatorError
+
+Vec3 = tuple[float, float, float]
+STANDARD_GRAVITY = 9.80665
+"""m/s^2 per g (sensor_msgs/Imu linear_acceleration is m/s^2)."""
+
+AXES: dict[str, Vec3] = {
+    "+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0),
+    "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0),
+    "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0),
+}
+"""Sensor axis names accepted in configured mounts."""
+
+
+class CalibrationError(GaitEstimatorError):
+    """A missing, malformed or unusable IMU mounting calibration (one line)."""
+
+
+def parse_axis(text: str, what: str = "axis") -> Vec3:
+    """``'+y'`` / ``'-x'`` / ``'z'`` -> unit vector in the sensor frame."""
+    key = text.strip().lower()
+    if key in ("x", "y", "z"):
+        key = "+" + key
+    if key not in AXES:
+        raise CalibrationError(f"{what}: {text!r} is not a sensor axis (one of {', '.join(AXES)})")
+    return AXES[key]
+
+
+def _unit(v: Any, what: str) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    n = float(np.linalg.norm(a)) if a.shape == (3,) else math.nan
+    if not (math.isfinite(n) and n > 1e-9):
+        raise CalibrationError(f"{what}: {list(np.ravel(v))} is not a non-zero 3-vector")
+    return a / n
+
+
+@dataclass(frozen=True)
+class SegmentMount:
+    """How one IMU sits on its segment: sensor-frame unit axes (see the module docstring).
+
+    Attributes:
+        lateral: The sagittal rotation axis (wearer's right), sensor frame.
+        proximal: Along the segment towards the proximal joint, sensor frame.
+        standing_deg: Segment angle (deg) in the pose ``proximal`` was taken from.
+        gyro_bias_dps: Gyro bias (deg/s, sensor frame) measured while standing; raw input only.
+        source: ``configured`` or ``learnt``.
+    """
+
+    lateral: Vec3
+    proximal: Vec3
+    standing_deg: float = 0.0
+    gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
+    source: str = "configured"
+    forward: Vec3 = field(init=False)
+
+    def __post_init__(self) -> None:
+        lat = _unit(self.lateral, "lateral axis")
+        prox = _unit(self.proximal, "proximal axis")
+        prox = prox - float(prox @ lat) * lat
+        if np.linalg.norm(prox) < 0.5:
+            raise CalibrationError("proximal axis is (nearly) parallel to the lateral axis")
+        prox /= np.linalg.norm(prox)
+        if not (math.isfinite(self.standing_deg) and abs(self.standing_deg) <= 90):
+            raise CalibrationError(f"standing angle {self.standing_deg!r} deg is not within +-90")
+        bias = np.asarray(self.gyro_bias_dps, dtype=np.float64)
+        if bias.shape != (3,) or not np.isfinite(bias).all():
+            raise CalibrationError(f"gyro bias {self.gyro_bias_dps!r} is not a finite 3-vector")
+        object.__setattr__(self, "lateral", tuple(float(v) for v in lat))
+        object.__setattr__(self, "proximal", tuple(float(v) for v in prox))
+        object.__setattr__(self, "forward", tuple(float(v) for v in np.cross(prox, lat)))
+        object.__setattr__(self, "gyro_bias_dps", tuple(float(v) for v in bias))
+        object.__setattr__(self, "standing_deg", float(self.standing_deg))
+
+    @classmethod
+    def from_axes(cls, lateral: str, proximal: str, standing_deg: float = 0.0) -> SegmentMount:
+        """A configured mount from sensor axis names, e.g. ``from_axes('+z', '-x')``."""
+        return cls(parse_axis(lateral, "lateral axis"), parse_axis(proximal, "proximal axis"), standing_deg)
+
+    def angle_deg(self, up: Vec3) -> float:
+        """Segment angle (deg) for the world up direction ``up`` in the sensor frame (any norm)."""
+        f, p = self.forward, self.proximal
+        return self.standing_deg + math.degrees(math.atan2(
+            f[0] * up[0] + f[1] * up[1] + f[2] * up[2], p[0] * up[0] + p[1] * up[1] + p[2] * up[2]))
+
+    def angles_deg(self, up: np.ndarray) -> np.ndarray:
+        """Vectorised ``angle_deg``: ``up`` (T, 3) -> (T,) degrees."""
+        return self.standing_deg + np.degrees(np.arctan2(up @ np.asarray(self.forward), up @ np.asarray(self.proximal)))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "lateral": [round(v, 6) for v in self.lateral],
+            "proximal": [round(v, 6) for v in self.proximal],
+            "standing_deg": round(self.standing_deg, 4),
+            "gyro_bias_dps": [round(v, 5) for v in self.gyro_bias_dps],
+            "source": self.source,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any, what: str = "mount") -> SegmentMount:
+        if not isinstance(d, dict) or not {"lateral", "proximal"} <= set(d):
+            raise CalibrationError(f"{what}: needs 'lateral' and 'proximal' (3-vectors)")
+        try:
+            return cls(
+                tuple(d["lateral"]), tuple(d["proximal"]), float(d.get("standing_deg", 0.0)),
+                tuple(d.get("gyro_bias_dps", (0.0, 0.0, 0.0))), str(d.get("source", "configured")),
+            )
+        except (TypeError, ValueError) as exc:
+            raise CalibrationError(f"{what}: {exc}") from None
+        except CalibrationError as exc:
+            raise CalibrationError(f"{what}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class ImuCalibration:
+    """The four mounts, CHANNELS order (right_thigh, left_thigh, right_shank, left_shank)."""
+
+    mounts: tuple[SegmentMount, SegmentMount, SegmentMount, SegmentMount]
+
+    def __post_init__(self) -> None:
+        if len(self.mounts) != N_CHANNELS or not all(isinstance(m, SegmentMount) for m in self.mounts):
+            raise CalibrationError(f"an IMU calibration needs {N_CHANNELS} segment mounts ({', '.join(CHANNELS)})")
+        object.__setattr__(self, "_rows", tuple((*m.forward, *m.proximal, m.standing_deg) for m in self.mounts))
+
+    def angles_deg(self, ups: Any) -> tuple[float, float, float, float]:
+        """Four segment angles (deg) from four up vectors (sensor frames), CHANNELS order; the
+        same values as each mount's ``angle_deg``."""
+        out = []
+        for (f0, f1, f2, p0, p1, p2, stand), (x, y, z) in zip(self._rows, ups, strict=True):  # type: ignore[attr-defined]
+            out.append(stand + math.degrees(math.atan2(f0 * x + f1 * y + f2 * z, p0 * x + p1 * y + p2 * z)))
+        a, b, c, d = out
+        return a, b, c, d
+
+    def summary(self) -> str:
+        """One line: each segment's lateral and proximal axes and standing angle."""
+        def fmt(v: Vec3) -> str:
+            return "(" + ",".join(f"{x:+.2f}" for x in v) + ")"
+        return "; ".join(
+            f"{name}: lateral {fmt(m.lateral)} proximal {fmt(m.proximal)} standing {m.standing_deg:+.1f} deg [{m.source}]"
+            for name, m in zip(CHANNELS, self.mounts, strict=False)
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"format": "gait_estimator imu calibration", "version": 1,
+                "segments": {name: m.as_dict() for name, m in zip(CHANNELS, self.mounts, strict=False)}}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> ImuCalibration:
+        if not isinstance(d, dict) or not isinstance(d.get("segments"), dict):
+            raise CalibrationError("not an IMU calibration (no 'segments' mapping)")
+        segs = d["segments"]
+        missing = [c for c in CHANNELS if c not in segs]
+        if missing:
+            raise CalibrationError(f"no mount for {', '.join(missing)}")
+        return cls(tuple(SegmentMount.from_dict(segs[c], c) for c in CHANNELS))  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------------------------------------
+# Up vectors
+
+
+def up_from_quaternion(x: float, y: float, z: float, w: float) -> Vec3 | None:
+    """World up (z) in the sensor frame from an orientation quaternion (world <- sensor, any
+    norm); None for a non-finite or (near) zero quaternion."""
+    n = x * x + y * y + z * z + w * w
+    if not (1e-12 < n < math.inf):  # False for nan
+        return None
+    s = 2.0 / n
+    return s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y)
+
+
+def ups_from_quaternions(q_xyzw: np.ndarray) -> np.ndarray:
+    """Vectorised ``up_from_quaternion``: (T, 4) [x, y, z, w] -> (T, 3); bad rows are nan."""
+    q = np.asarray(q_xyzw, dtype=np.float64)
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    n = np.einsum("ij,ij->i", q, q)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where((n > 1e-12) & np.isfinite(n), 2.0 / n, np.nan)
+    return np.stack([s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y)], axis=1)
+
+
+def _imufusion() -> Any:
+    try:
+        import imufusion
+    except ImportError:
+        raise CalibrationError(
+            "raw IMU input (no orientation) needs the imufusion package: pip install 'gait_estimator[imu]'"
+        ) from None
+    return imufusion
+
+
+FUSION_GAIN = 0.5
+"""imufusion AHRS gain (its default): weight of the accelerometer's tilt correction."""
+FUSION_ACCELERATION_REJECTION_DEG = 0.0
+"""imufusion acceleration rejection (deg; 0 = off). Off: on the camargo walking trials its
+recoveries (jumps back to the accelerometer's tilt) cost more than the accelerations it ignores
+(benchmarks/imu.py)."""
+FUSION_REJECTION_TIMEOUT_S = 1.0
+STILL_GAIN = 5.0
+"""imufusion gain while the sensor is still (the accelerometer then reads gravity alone): the tilt
+settles on it within a fraction of a second instead of keeping the error of the last movement."""
+STILL_RATE_DPS = 10.0
+STILL_ACC_G = 0.05
+STILL_AFTER_S = 0.1
+"""A sensor is still after STILL_AFTER_S with |gyro - bias| < STILL_RATE_DPS and
+||acc| - 1 g| < STILL_ACC_G."""
+_STILL_RATE2 = STILL_RATE_DPS * STILL_RATE_DPS
+_STILL_ACC2 = 2.0 * STILL_ACC_G  # |acc|^2 - 1 ~ 2 (|acc| - 1)
+
+
+def _tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
+    """The smallest rotation (world <- sensor, [w, x, y, z]) that turns ``acc`` to world up."""
+    n = float(np.linalg.norm(acc))
+    if not (math.isfinite(n) and n > 0):
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    a = acc / n
+    w = 1.0 + a[2]
+    if w < 1e-9:  # upside down: half a turn about x
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    q = np.array([w, a[1], -a[0], 0.0])  # axis a x z, angle acos(a.z)
+    return q / np.linalg.norm(q)
+
+
+class RawFusion:
+    """Gyro + accelerometer -> ``up`` for one sensor, with imufusion's AHRS (no magnetometer).
+
+    Args:
+        rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given.
+        gyro_bias_dps: Subtracted from every gyro sample (deg/s, sensor frame).
+    """
+
+    def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)) -> None:
+        fusion = _imufusion()
+        self._ahrs = fusion.Ahrs()
+        self._settings = [fusion.AhrsSettings(
+            sample_rate=float(rate_hz),
+            convention=fusion.CONVENTION_NWU,
+            gain=gain,
+            gyroscope_range=2000.0,
+            acceleration_rejection=FUSION_ACCELERATION_REJECTION_DEG,
+            magnetic_rejection=0.0,
+            rejection_timeout=FUSION_REJECTION_TIMEOUT_S,
+        ) for gain in (FUSION_GAIN, STILL_GAIN)]
+        self._ahrs.set_settings(self._settings[0])
+        self._still_needed = max(1, round(STILL_AFTER_S * rate_hz))
+        self._still = 0
+        self._period = 1.0 / rate_hz
+        self.gyro_bias_dps = gyro_bias_dps
+        self._gyro = np.zeros(3)
+        self._acc = np.zeros(3)
+        self._first = True
+
+    def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> Vec3:
+        """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up``."""
+        g, a, b = self._gyro, self._acc, self.gyro_bias_dps
+        gx, gy, gz = gyro_dps[0] - b[0], gyro_dps[1] - b[1], gyro_dps[2] - b[2]  # Python floats: numpy
+        ax, ay, az = acc_g  # scalars would make the arithmetic below several times slower
+        g[0], g[1], g[2] = gx, gy, gz
+        a[0], a[1], a[2] = ax, ay, az
+        if dt_s is not None and dt_s > 0 and abs(dt_s - self._period) > 1e-6:
+            self._period = dt_s
+            self._ahrs.set_sample_period(dt_s)
+        if self._first:  # start from the accelerometer's tilt, not from a level sensor
+            self._first = False
+            self._ahrs.set_quaternion(_tilt_quaternion_wxyz(a))
+            self._ahrs.skip_startup()
+        if gx * gx + gy * gy + gz * gz < _STILL_RATE2 and -_STILL_ACC2 < ax * ax + ay * ay + az * az - 1.0 < _STILL_ACC2:
+            self._still += 1
+            if self._still == self._still_needed:
+                self._ahrs.set_settings(self._settings[1]).set_sample_period(self._period)
+        elif self._still:
+            if self._still >= self._still_needed:
+                self._ahrs.set_settings(self._settings[0]).set_sample_period(self._period)
+            self._still = 0
+        self._ahrs.update_no_magnetometer(g, a)
+        x, y, z = self._ahrs.get_gravity().tolist()
+        return x, y, z
+
+
+def fuse_raw(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
+             gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """``RawFusion`` over a whole stream: (T,), (T, 3), (T, 3) -> up (T, 3)."""
+    t = np.asarray(time_s, dtype=np.float64)
+    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 200.0
+    fusion = RawFusion(rate, gyro_bias_dps)
+    out = np.empty((len(t), 3))
+    prev = None
+    for i in range(len(t)):
+        dt = None if prev is None else t[i] - prev
+        out[i] = fusion.update(gyro_dps[i], acc_g[i], dt)
+        prev = t[i]
+    return out

@@ -1,0 +1,259 @@
+"""Learning the IMU mounts (``core/imu.py`` ``SegmentMount``) from a standing pose and strides.
+
+* **Standing pose** (the first still ``still_s`` seconds, or the first after a request): every
+  sensor's mean up direction is the segment's ``proximal`` axis (segments taken as vertical, or at
+  ``standing_deg``), the mean gyro its bias.
+* **Strides** after it: the up direction rotates, in the sensor frame, about the segment's
+  sagittal axis; the principal axis of those rotations (u[k] x u[k+lag], summed as outer
+  products), made perpendicular to ``proximal``, is ``lateral`` up to its sign.
+* **Signs** per leg from the knee: with the right signs the knee (shank - thigh) flexes (negative)
+  by 40-65 deg in swing and hardly extends past straight; every other sign choice makes it extend
+  by tens of degrees. The choice with the smallest 98th percentile of the knee angle wins and must
+  beat the next by ``MIN_SIGN_MARGIN_DEG``.
+
+Every function takes whole arrays (a file, or the live node's buffer); ``learn_calibration``
+returns the calibration or what is still missing.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .channels import CHANNELS, N_CHANNELS
+from .imu import CalibrationError, ImuCalibration, SegmentMount, Vec3
+
+STILL_S = 1.0
+"""Length (s) of the still stretch that makes a standing pose."""
+STILL_MAX_TILT_DEG = 3.0
+"""Most any sensor's up direction may move within the still stretch (deg)."""
+STILL_MAX_RATE_DPS = 25.0
+"""Largest gyro magnitude in a still stretch (deg/s; raw input)."""
+STILL_ACC_TOLERANCE = 0.1
+"""Accelerometer magnitude in a still stretch within 1 +- this (g; raw input)."""
+WALK_S = 4.0
+"""Time of movement (s) after the standing pose before the sagittal axes are learnt."""
+MIN_SWING_DEG = 20.0
+"""Least angle range (2nd-98th percentile, deg) a segment must sweep for its axis to be learnt."""
+MIN_PLANARITY = 0.8
+"""Share of the rotation that must lie about the principal axis (a sagittal swing)."""
+MIN_SIGN_MARGIN_DEG = 15.0
+"""Margin (deg) by which the knee rule's best sign choice must beat the next."""
+ROTATION_LAG_S = 0.05
+LEGS = ((0, 2), (1, 3))
+"""(thigh, shank) channel indices of the right and the left leg (CHANNELS order)."""
+
+
+@dataclass(frozen=True)
+class Standing:
+    """A standing pose found in a stream: sample range and, per sensor, up direction and bias."""
+
+    start: int
+    stop: int
+    proximal: tuple[Vec3, ...]
+    gyro_bias_dps: tuple[Vec3, ...]
+
+
+def _norm_rows(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return v / n
+
+
+def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """Trailing mean over ``n`` samples along axis 1 (the first samples: over what there is)."""
+    c = np.cumsum(x, axis=1)
+    out = c.copy()
+    out[:, n:] = c[:, n:] - c[:, :-n]
+    count = np.minimum(np.arange(1, x.shape[1] + 1), n)
+    return out / count[None, :, None]
+
+
+def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | None = None,
+                  acc_g: np.ndarray | None = None, start_s: float | None = None,
+                  still_s: float = STILL_S) -> Standing | None:
+    """The first still stretch of ``still_s`` seconds (after ``start_s``), or None.
+
+    Args:
+        time_s: (T,) sample times, s.
+        ups: (4, T, 3) up directions per sensor (sensor frames; from orientation or fusion).
+        gyro_dps: (4, T, 3) gyro, deg/s, or None (nan for a sensor without rates).
+        acc_g: (4, T, 3) accelerometer, g, or None (nan for a sensor with an orientation): a raw
+            sensor's stillness and up direction come from its accelerometer (the fused direction
+            may still be settling), with twice the tilt tolerance (accelerometer noise).
+        start_s: Only stretches that start at or after this time.
+    """
+    t = np.asarray(time_s, dtype=np.float64)
+    if len(t) < 2:
+        return None
+    ups_a = np.asarray(ups, dtype=np.float64)
+    acc_a = None if acc_g is None else np.asarray(acc_g, dtype=np.float64)
+    raw = np.zeros(len(ups_a), dtype=bool) if acc_a is None else np.isfinite(acc_a).all(axis=(1, 2))
+    dt = float(np.median(np.diff(t)))
+    if acc_a is not None and raw.any():  # accelerometer noise: its 0.1 s means
+        acc_a = acc_a.copy()
+        acc_a[raw] = _moving_mean(acc_a[raw], max(1, round(0.1 / dt)))
+    u = _norm_rows(np.where(raw[:, None, None], acc_a if acc_a is not None else ups_a, ups_a))
+    tilt_limit = np.where(raw, 2.0 * STILL_MAX_TILT_DEG, STILL_MAX_TILT_DEG)
+    lag = max(1, round(0.2 / dt))
+    ok = np.isfinite(u).all(axis=(0, 2))
+    moved = np.zeros(len(t), dtype=bool)
+    cos_lim = np.cos(np.radians(tilt_limit))[:, None]
+    moved[lag:] = (np.einsum("stk,stk->st", u[:, lag:], u[:, :-lag]) < cos_lim).any(axis=0)
+    if gyro_dps is not None:
+        with np.errstate(invalid="ignore"):
+            moved |= (np.linalg.norm(gyro_dps, axis=2) > STILL_MAX_RATE_DPS).any(axis=0)
+    if acc_a is not None and raw.any():
+        moved |= (np.abs(np.linalg.norm(acc_a[raw], axis=2) - 1.0) > STILL_ACC_TOLERANCE).any(axis=0)
+    still = ok & ~moved
+    if start_s is not None:
+        still &= t >= start_s
+    length = still_s - dt / 2
+    edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
+    step = max(1, round(0.1 / dt))  # a stretch that drifts: try again 0.1 s later
+    for first, end in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
+        if t[end - 1] - t[first] < length:
+            continue
+        last = int(np.searchsorted(t, t[end - 1] - length, side="right")) - 1
+        for i in range(int(first), last + 1, step):
+            stop = int(np.searchsorted(t, t[i] + length, side="right"))
+            win = u[:, i:stop]
+            mean = _norm_rows(win.mean(axis=1))  # at rest the accelerometer reads up, unaffected by gyro bias
+            spread = np.degrees(np.arccos(np.clip(np.einsum("stk,sk->st", win, mean), -1, 1))).max(axis=1)
+            if (spread <= tilt_limit).all():
+                bias = (np.zeros((N_CHANNELS, 3)) if gyro_dps is None
+                        else np.nan_to_num(np.asarray(gyro_dps, dtype=np.float64)[:, i:stop].mean(axis=1)))
+                return Standing(i, stop, tuple(tuple(map(float, m)) for m in mean),
+                                tuple(tuple(map(float, b)) for b in bias))
+    return None
+
+
+def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3,
+               gyro_dps: np.ndarray | None = None) -> tuple[Vec3 | None, str]:
+    """Sagittal axis (sign undecided) of one sensor while walking: the principal axis of its
+    rotation perpendicular to ``proximal`` (which removes turning about the vertical), from the
+    gyro (T, 3) when there is one, else from the rotation of its up directions (T, 3); or None
+    and why not."""
+    t = np.asarray(time_s, dtype=np.float64)
+    if len(t) < 10:
+        return None, "too few samples"
+    p = np.asarray(proximal)
+    if gyro_dps is not None and np.isfinite(gyro_dps).all():
+        d = np.asarray(gyro_dps, dtype=np.float64)
+    else:
+        lag = max(1, round(ROTATION_LAG_S / float(np.median(np.diff(t)))))
+        u = _norm_rows(np.asarray(ups, dtype=np.float64))
+        d = np.cross(u[:-lag], u[lag:])
+        d = d[np.isfinite(d).all(axis=1)]
+    if len(d) < 10:
+        return None, "too few samples"
+    d = d - np.outer(d @ p, p)
+    m = d.T @ d
+    w, v = np.linalg.eigh(m)
+    if w[-1] <= 0 or w[-1] / w.sum() < MIN_PLANARITY:
+        return None, f"no clear sagittal swing (planarity {w[-1] / max(w.sum(), 1e-300):.2f} < {MIN_PLANARITY})"
+    a = v[:, -1] - float(v[:, -1] @ p) * p
+    if np.linalg.norm(a) < 0.5:
+        return None, "swing axis along the segment"
+    return tuple(float(x) for x in a / np.linalg.norm(a)), ""
+
+
+def _leg_signs(cands: dict[int, list[SegmentMount]], ups: np.ndarray, thigh: int,
+               shank: int) -> tuple[dict[int, SegmentMount], str]:
+    """Pick the mounts of one leg's thigh and shank by the knee rule (module docstring)."""
+    options = [cands[thigh], cands[shank]]
+    scores = []
+    for mt, ms in itertools.product(*options):
+        knee = ms.angles_deg(ups[shank]) - mt.angles_deg(ups[thigh])
+        knee = knee[np.isfinite(knee)]
+        scores.append((float(np.percentile(knee, 98)), mt, ms))
+    scores.sort(key=lambda s: s[0])
+    if len(scores) > 1 and scores[1][0] - scores[0][0] < MIN_SIGN_MARGIN_DEG:
+        return {}, (f"{CHANNELS[thigh]}/{CHANNELS[shank]}: cannot tell forward from backward "
+                    f"(knee rule margin {scores[1][0] - scores[0][0]:.1f} < {MIN_SIGN_MARGIN_DEG:g} deg); "
+                    "walk a few more strides")
+    return {thigh: scores[0][1], shank: scores[0][2]}, ""
+
+
+def learn_calibration(
+    time_s: np.ndarray,
+    ups: np.ndarray,
+    *,
+    lateral: Sequence[Vec3 | None] = (None,) * N_CHANNELS,
+    proximal: Sequence[Vec3 | None] = (None,) * N_CHANNELS,
+    standing_deg: Sequence[float] = (0.0,) * N_CHANNELS,
+    standing: Standing | None = None,
+    gyro_dps: np.ndarray | None = None,
+    acc_g: np.ndarray | None = None,
+    walk_s: float = WALK_S,
+    still_s: float = STILL_S,
+) -> tuple[ImuCalibration | None, Standing | None, str]:
+    """Complete the configured axes into a calibration from a stream.
+
+    Args:
+        time_s: (T,) sample times (s) of the paired four-sensor samples.
+        ups: (4, T, 3) up directions (sensor frames).
+        lateral, proximal: Configured sensor-frame axes per segment, None = learn.
+        standing_deg: Angle (deg) each segment is taken to have in the standing pose.
+        standing: A standing pose already found (else the first in the stream, if needed).
+        gyro_dps, acc_g: (4, T, 3) raw rates and accelerations for the still test and the bias.
+        walk_s: Seconds of stream after the standing pose needed before learning axes.
+        still_s: Length of the still stretch taken as the standing pose (s).
+
+    Returns:
+        (calibration or None, the standing pose used or None, what is missing: '' when done).
+    """
+    t = np.asarray(time_s, dtype=np.float64)
+    ups = np.asarray(ups, dtype=np.float64)
+    need_stand = any(p is None for p in proximal)
+    if need_stand and standing is None:
+        standing = find_standing(t, ups, gyro_dps, acc_g, still_s=still_s)
+        if standing is None:
+            return None, None, f"stand still for {still_s:g} s"
+    prox = [p if p is not None else standing.proximal[i] for i, p in enumerate(proximal)]  # type: ignore[union-attr]
+    bias = standing.gyro_bias_dps if standing is not None else ((0.0, 0.0, 0.0),) * N_CHANNELS
+    tags = ["configured" if (lateral[i] is not None and proximal[i] is not None) else "learnt" for i in range(N_CHANNELS)]
+    if all(a is not None for a in lateral):
+        return ImuCalibration(tuple(SegmentMount(lateral[i], prox[i], standing_deg[i], bias[i], tags[i])  # type: ignore[arg-type]
+                                    for i in range(N_CHANNELS))), standing, ""
+    begin = standing.stop if standing is not None else 0
+    walk = slice(begin, None)
+    if len(t) <= begin or t[-1] - t[begin] < walk_s:
+        return None, standing, f"walk {walk_s:g} s"
+    cands: dict[int, list[SegmentMount]] = {}
+    for i in range(N_CHANNELS):
+        if lateral[i] is not None:
+            cands[i] = [SegmentMount(lateral[i], prox[i], standing_deg[i], bias[i], tags[i])]  # type: ignore[arg-type]
+            continue
+        axis, why = swing_axis(t[walk], ups[i, walk], prox[i], None if gyro_dps is None else gyro_dps[i, walk])
+        if axis is None:
+            return None, standing, f"{CHANNELS[i]}: {why}; walk a few more strides"
+        both = [SegmentMount(s, prox[i], standing_deg[i], bias[i], "learnt") for s in (axis, tuple(-x for x in axis))]
+        swept = np.percentile(both[0].angles_deg(ups[i, walk]), [2, 98])
+        if swept[1] - swept[0] < MIN_SWING_DEG:
+            return None, standing, f"{CHANNELS[i]}: swings only {swept[1] - swept[0]:.0f} deg; walk a few more strides"
+        cands[i] = both
+    mounts: dict[int, SegmentMount] = {}
+    for thigh, shank in LEGS:
+        chosen, why = _leg_signs(cands, ups[:, walk], thigh, shank)
+        if why:
+            return None, standing, why
+        mounts.update(chosen)
+    return ImuCalibration(tuple(mounts[i] for i in range(N_CHANNELS))), standing, ""  # type: ignore[arg-type]
+
+
+def check_configured(lateral: Sequence[str], proximal: Sequence[str]) -> tuple[list[Vec3 | None], list[Vec3 | None]]:
+    """Parse configured axis names per segment ('' = learn); CalibrationError names the segment."""
+    from .imu import parse_axis
+
+    if len(lateral) != N_CHANNELS or len(proximal) != N_CHANNELS:
+        raise CalibrationError(f"IMU axes: need {N_CHANNELS} entries each ({', '.join(CHANNELS)}), '' = learn")
+    lat = [parse_axis(a, f"{c} lateral axis") if a.strip() else None for a, c in zip(lateral, CHANNELS, strict=False)]
+    prox = [parse_axis(a, f"{c} proximal axis") if a.strip() else None for a, c in zip(proximal, CHANNELS, strict=False)]
+    for c, a, p in zip(CHANNELS, lat, prox, strict=False):
+        if a is not None and p is not None and abs(float(np.dot(a, p))) > 0.5:
+            raise CalibrationError(f"{c}: lateral and proximal axes must differ")
+    return lat, prox

@@ -1,0 +1,263 @@
+"""Reading four ``sensor_msgs/Imu`` topics of a rosbag2 bag into a Recording of segment angles.
+
+The same code as the node's ``input_type: imu`` (``imu_stream.py``): each message becomes its
+sensor's up direction, the four streams are paired by stamp, and the calibration (given, or
+learnt from the first still second and the strides after it) turns them into angles. Unlike the
+node, the whole file is known: a learnt calibration applies from the first sample, and with raw
+input (no orientation) the fusion is run again with the gyro bias measured while standing.
+
+Topics: ``imu_topics`` (four names, CHANNELS order), else ``/imu/right_thigh``, ... if present,
+else the four Imu topics whose names end in the channel names.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.errors import RecordingError
+from ..core.imu import CalibrationError, ImuCalibration
+from ..core.imu_learn import STILL_S, check_configured, learn_calibration
+from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
+from .imu_stream import DEFAULT_TOLERANCE_S, UNPAIRED, ImuPairer, SensorInput, load_calibration
+from .stream import SampleRejected
+
+IMU = "sensor_msgs/msg/Imu"
+SHORT_STILL_S = 0.5
+"""Still stretch (s) taken as the standing pose when a file has none of STILL_S."""
+DEFAULT_IMU_TOPICS = tuple(f"imu/{c}" for c in CHANNELS)
+"""Relative topic names of the four IMUs (the node's default ``imu_topics``)."""
+
+
+@dataclass
+class ImuBagRecording(BagRecording):
+    """A BagRecording made from four Imu topics; ``calibration`` is the one used."""
+
+    calibration: ImuCalibration | None = None
+    calibration_note: str = ""
+
+    @property
+    def notes(self) -> list[str]:
+        out = [n for n in super().notes if "had a zero header stamp" not in n]
+        if self.calibration_note:
+            out.append(self.calibration_note)
+        return out
+
+
+def imu_topics_of(topics: dict[str, tuple[str, int]]) -> list[str] | None:
+    """The four IMU topics of a bag (CHANNELS order) by the rules in the module docstring."""
+    defaults = ["/" + t for t in DEFAULT_IMU_TOPICS]
+    if all(topics.get(t, ("",))[0] == IMU for t in defaults):
+        return defaults
+    imus = [t for t, (ty, _) in topics.items() if ty == IMU]
+    found = []
+    for c in CHANNELS:
+        match = [t for t in imus if t.rstrip("/").endswith(c)]
+        if len(match) != 1:
+            return None
+        found.append(match[0])
+    return found
+
+
+def is_imu_bag(p: Path) -> bool:
+    """A bag with Imu topics and no JointState/Float64MultiArray input topic."""
+    if not is_bag_path(p):
+        return False
+    try:
+        with open_bag(p) as reader:
+            types = {ty for ty, _ in bag_topics(reader).values()}
+    except RecordingError:
+        return False
+    return IMU in types and not types & {"sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray"}
+
+
+def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list | None, tolerance_s: float):
+    """Messages (sensor, log_ns, msg) -> paired (stamp_ns, log_ns, ups, gyro, acc) and rejections."""
+    inputs = [SensorInput(rate_hz) for _ in range(N_CHANNELS)]
+    if bias is not None:
+        for s, b in zip(inputs, bias, strict=False):
+            s.set_gyro_bias(b)
+    pairer = ImuPairer(tolerance_s)
+    rejected: Counter = Counter()
+    paired = []
+    for sensor, log_ns, m in messages:
+        stamp_ns = stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) or log_ns
+        o, w, a = m.orientation, m.angular_velocity, m.linear_acceleration
+        try:
+            up, gyro, acc = inputs[sensor].convert(stamp_ns, (o.x, o.y, o.z, o.w), float(m.orientation_covariance[0]),
+                                                   (w.x, w.y, w.z), (a.x, a.y, a.z))
+        except SampleRejected as exc:
+            rejected[exc.reason] += 1
+            continue
+        for stamp, items in pairer.push(sensor, stamp_ns, (log_ns, up, gyro, acc)):
+            paired.append((stamp, items[0][0], [i[1] for i in items], [i[2] for i in items], [i[3] for i in items]))
+    if pairer.unpaired:
+        rejected[UNPAIRED] += pairer.unpaired
+    return paired, rejected
+
+
+def read_imu_bag(
+    path: str | Path,
+    imu_topics: list[str] | None = None,
+    imu_calibration: str | Path | ImuCalibration | None = None,
+    imu_lateral_axes: list[str] | None = None,
+    imu_proximal_axes: list[str] | None = None,
+    imu_standing_deg: list[float] | None = None,
+    imu_tolerance_s: float = DEFAULT_TOLERANCE_S,
+    max_gap_s: float = 0.5,
+    **_: Any,
+) -> ImuBagRecording:
+    """Segment angles (deg, CHANNELS order) from a bag's four Imu topics.
+
+    Args:
+        path: rosbag2 directory or storage file.
+        imu_topics: The four topics (CHANNELS order); default: see the module docstring.
+        imu_calibration: A calibration (or its YAML file) to use instead of learning one.
+        imu_lateral_axes, imu_proximal_axes: Configured sensor axes per segment ('' = learn).
+        imu_standing_deg: Angle of each segment in the standing pose (deg; default 0).
+        imu_tolerance_s: Pairing tolerance (s).
+
+    Raises:
+        RecordingError: one line (missing topics, unusable messages, no calibration possible).
+    """
+    p = Path(path)
+    try:
+        lateral, proximal = check_configured(imu_lateral_axes or [""] * N_CHANNELS, imu_proximal_axes or [""] * N_CHANNELS)
+        cal = imu_calibration or None
+        if isinstance(cal, (str, Path)):
+            cal = load_calibration(cal)
+    except CalibrationError as exc:
+        raise RecordingError(str(exc)) from None
+    standing_deg = list(imu_standing_deg or [0.0] * N_CHANNELS)
+    with open_bag(p, "imu") as reader:
+        topics = bag_topics(reader)
+        names = ["/" + t.lstrip("/") for t in imu_topics] if imu_topics else imu_topics_of(topics)
+        if names is None or any(topics.get(t, ("",))[0] != IMU for t in names):
+            want = ", ".join(names or ["/" + t for t in DEFAULT_IMU_TOPICS])
+            raise RecordingError(f"{p}: needs four {IMU} topics ({want}); {format_topics(topics)}")
+        index = {t: i for i, t in enumerate(names)}
+        conns = [c for c in reader.connections if c.topic in index]
+        deserialize = typestore().deserialize_cdr
+        messages = []
+        undecodable = 0
+        for conn, log_ns, raw in reader.messages(connections=conns):
+            try:
+                messages.append((index[conn.topic], int(log_ns), deserialize(raw, IMU)))
+            except Exception:
+                undecodable += 1
+    stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for s, _, m in messages[:800] if s == 0]
+    rate = 200.0
+    if len(stamps) > 8:
+        d = float(np.median(np.diff(np.array(stamps, dtype=np.int64)))) * 1e-9
+        rate = 1.0 / d if d > 0 else rate
+    paired, rejected = _front_end(messages, rate, None, imu_tolerance_s)
+    if undecodable:
+        rejected["undecodable"] += undecodable
+    if len(paired) < 2:
+        raise RecordingError(
+            f"{p}: fewer than 2 samples with all four IMUs within {imu_tolerance_s:g} s; skipped: {dict(rejected)}")
+    note = ""
+    if cal is None:
+        cal, note = _learn(p, paired, lateral, proximal, standing_deg)
+        if cal is not None and any(any(b) for m in cal.mounts for b in [m.gyro_bias_dps]):
+            paired, rejected = _front_end(messages, rate, [m.gyro_bias_dps for m in cal.mounts], imu_tolerance_s)
+            if undecodable:
+                rejected["undecodable"] += undecodable
+            cal, note = _learn(p, paired, lateral, proximal, standing_deg)
+    else:
+        note = "IMU calibration given: " + cal.summary()
+    assert cal is not None
+    stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
+    angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)
+    return ImuBagRecording(
+        time_s=(stamp_ns - stamp_ns[0]) * 1e-9,
+        angles_deg=angles,
+        source=f"{p} {','.join(names)}",
+        skipped={k: int(v) for k, v in rejected.items() if v},
+        stamp_ns=stamp_ns,
+        log_time_ns=np.array([s[1] for s in paired], dtype=np.int64),
+        bag=str(p),
+        topic=",".join(names),
+        msgtype=IMU,
+        messages=len(messages) + undecodable,
+        max_gap_s=max_gap_s,
+        calibration=cal,
+        calibration_note=note,
+    )
+
+
+def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list) -> tuple[ImuCalibration, str]:
+    t = np.array([s[0] for s in paired], dtype=np.int64)
+    time_s = (t - t[0]) * 1e-9
+    ups = np.asarray([s[2] for s in paired], dtype=np.float64).transpose(1, 0, 2)
+    gyro = np.asarray([s[3] for s in paired], dtype=np.float64).transpose(1, 0, 2)
+    acc = np.asarray([s[4] for s in paired], dtype=np.float64).transpose(1, 0, 2)
+    try:
+        for still_s in (STILL_S, SHORT_STILL_S):  # a short still stretch if the file has no longer one
+            cal, standing, missing = learn_calibration(
+                time_s, ups, lateral=lateral, proximal=proximal, standing_deg=standing_deg,
+                gyro_dps=gyro if np.isfinite(gyro).any() else None, acc_g=acc if np.isfinite(acc).any() else None,
+                still_s=still_s)
+            if cal is not None:
+                break
+    except CalibrationError as exc:
+        raise RecordingError(f"{p}: IMU calibration: {exc}") from None
+    if cal is None:
+        raise RecordingError(f"{p}: cannot learn the IMU mounting from this file: {missing} "
+                             "(or give --imu-calibration FILE)")
+    where = f" from the standing pose at {time_s[standing.start]:.1f}-{time_s[standing.stop - 1]:.1f} s" if standing else ""
+    return cal, "IMU calibration learnt" + where + ": " + cal.summary()
+
+
+def imu_msg(ts: Any, stamp_ns: int, frame_id: str, quat_xyzw: Any | None, gyro_rps: Any, acc_mps2: Any) -> Any:
+    """A rosbags ``sensor_msgs/msg/Imu``; ``quat_xyzw`` None = no orientation (covariance[0] -1)."""
+    t = ts.types
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    vec, quat = t["geometry_msgs/msg/Vector3"], t["geometry_msgs/msg/Quaternion"]
+    ocov = np.zeros(9)
+    if quat_xyzw is None:
+        ocov[0] = -1.0
+        quat_xyzw = (0.0, 0.0, 0.0, 1.0)
+    x, y, z, w = (float(v) for v in quat_xyzw)
+    return t[IMU](
+        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame_id),
+        orientation=quat(x=x, y=y, z=z, w=w),
+        orientation_covariance=ocov,
+        angular_velocity=vec(x=float(gyro_rps[0]), y=float(gyro_rps[1]), z=float(gyro_rps[2])),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=vec(x=float(acc_mps2[0]), y=float(acc_mps2[1]), z=float(acc_mps2[2])),
+        linear_acceleration_covariance=np.zeros(9),
+    )
+
+
+def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray, acc_mps2: np.ndarray,
+                  quat_xyzw: np.ndarray | None = None, topics: list[str] | None = None, storage: str = "mcap") -> Path:
+    """Write four IMU streams as ``sensor_msgs/msg/Imu`` topics of a new bag.
+
+    Args:
+        stamps_ns: (4, T) or (T,) header stamps (int ns); the log time is the stamp.
+        gyro_rps, acc_mps2: (4, T, 3) rates (rad/s) and accelerations (m/s^2), sensor frames.
+        quat_xyzw: (4, T, 4) orientations (world <- sensor), or None for raw IMUs (also per
+            sensor: a list of four (T, 4) arrays or None).
+        topics: Four topic names (default ``/imu/<channel>``).
+    """
+    from .bag_write import _writer, offered_qos
+
+    ts = typestore()
+    names = ["/" + t.lstrip("/") for t in (topics or DEFAULT_IMU_TOPICS)]
+    stamps = np.broadcast_to(np.asarray(stamps_ns, dtype=np.int64), gyro_rps.shape[:2])
+    writer = _writer(path, storage)
+    with writer:
+        conns = [writer.add_connection(n, IMU, typestore=ts, offered_qos_profiles=offered_qos(100)) for n in names]
+        for k in range(stamps.shape[1]):
+            for c in range(N_CHANNELS):
+                q = None if quat_xyzw is None or quat_xyzw[c] is None else quat_xyzw[c][k]
+                msg = imu_msg(ts, int(stamps[c, k]), CHANNELS[c], q,
+                              gyro_rps[c, k], acc_mps2[c, k])
+                writer.write(conns[c], int(stamps[c, k]), ts.serialize_cdr(msg, IMU))
+    return Path(path)

@@ -1,0 +1,284 @@
+"""Four ``sensor_msgs/Imu`` streams -> segment angle samples, ROS-free (the node and bag reading).
+
+* ``SensorInput``: one sensor's message fields -> its up direction (``core/imu.py``): from the
+  orientation, or (``orientation_covariance[0] == -1``, REP 145: no orientation) from gyro +
+  accelerometer through ``RawFusion``; bad messages raise ``SampleRejected`` (non-finite values,
+  a zero quaternion or acceleration, a stamp not after the sensor's previous one).
+* ``ImuPairer``: the four streams paired by stamp within a tolerance; a message without partners
+  is dropped (``unpaired``), so a silent sensor stops the samples instead of repeating its last
+  value.
+* ``ImuCalibrator``: while no calibration is complete, keeps the paired samples and learns the
+  mounts from them (``core/imu_learn.py``); the standing pose can be asked for again.
+* ``save_calibration`` / ``load_calibration``: the calibration as YAML (atomic write).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.imu import STANDARD_GRAVITY, CalibrationError, ImuCalibration, RawFusion, Vec3
+from ..core.imu_learn import Standing, find_standing, learn_calibration
+from .atomic import atomic_write_text
+from .stream import NON_FINITE, NON_INCREASING_STAMP, SampleRejected
+
+ZERO_NORM = "zero_norm"
+UNPAIRED = "unpaired"
+WRONG_FRAME = "wrong_frame"
+IMU_REASONS = (NON_FINITE, ZERO_NORM, NON_INCREASING_STAMP, UNPAIRED, WRONG_FRAME)
+DEFAULT_TOLERANCE_S = 0.004
+"""Largest stamp spread (s) of four messages that make one sample (a 200 Hz period is 0.005 s)."""
+MAX_QUEUE = 50
+"""Messages kept per sensor while waiting for partners; older ones are dropped (unpaired)."""
+_RAD2DEG = 180.0 / math.pi
+_INF = math.inf
+NO_RATES: Vec3 = (math.nan, math.nan, math.nan)
+
+
+class SensorInput:
+    """One IMU's messages -> (up, gyro deg/s, acc g), sensor frame; see the module docstring.
+
+    Args:
+        rate_hz: Nominal rate for the raw-input fusion.
+        frame_id: The ``header.frame_id`` this sensor's messages must carry ('' = any).
+    """
+
+    def __init__(self, rate_hz: float = 200.0, frame_id: str = "") -> None:
+        self._rate_hz = rate_hz
+        self.frame_id = frame_id
+        self.fusion: RawFusion | None = None
+        self.gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
+        self.last_ns: int | None = None
+
+    def convert(self, stamp_ns: int, orientation: Any, orientation_cov0: float, gyro_rps: Any,
+                acc_mps2: Any, frame_id: str = "") -> tuple[Vec3, Vec3, Vec3]:
+        """Fields of one Imu message (quaternion x, y, z, w; rad/s; m/s^2) -> (up, gyro, acc)."""
+        if self.frame_id and frame_id != self.frame_id:
+            raise SampleRejected(WRONG_FRAME, f"frame_id {frame_id!r}, expected {self.frame_id!r}")
+        last = self.last_ns
+        if last is not None and stamp_ns <= last:
+            raise SampleRejected(NON_INCREASING_STAMP,
+                                 f"stamp {stamp_ns * 1e-9:.6f} s is not after the previous {last * 1e-9:.6f} s")
+        gx, gy, gz = gyro_rps
+        if orientation_cov0 != -1.0:
+            x, y, z, w = orientation
+            n = x * x + y * y + z * z + w * w
+            if not 1e-12 < n < _INF:  # (up_from_quaternion, inlined: this runs for every message)
+                raise SampleRejected(ZERO_NORM if x == x and y == y and z == z and w == w else NON_FINITE,
+                                     f"unusable orientation quaternion ({x}, {y}, {z}, {w})")
+            s = 2.0 / n
+            up = (s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y))
+            gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG)
+            if not (-_INF < gyro[0] < _INF and -_INF < gyro[1] < _INF and -_INF < gyro[2] < _INF):
+                gyro = NO_RATES
+            self.last_ns = stamp_ns
+            return up, gyro, NO_RATES  # the accelerometer is the orientation filter's business
+        ax, ay, az = acc_mps2
+        inf = _INF
+        if not (-inf < gx < inf and -inf < gy < inf and -inf < gz < inf and -inf < ax < inf and -inf < ay < inf
+                and -inf < az < inf):
+            raise SampleRejected(NON_FINITE, f"non-finite rate or acceleration ({gx}, {gy}, {gz}; {ax}, {ay}, {az})")
+        if ax * ax + ay * ay + az * az < 1e-6:
+            raise SampleRejected(ZERO_NORM, "zero acceleration (no gravity in the accelerometer)")
+        if self.fusion is None:
+            self.fusion = RawFusion(self._rate_hz, self.gyro_bias_dps)
+        gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG)
+        acc = (ax / STANDARD_GRAVITY, ay / STANDARD_GRAVITY, az / STANDARD_GRAVITY)
+        up = self.fusion.update(gyro, acc, None if last is None else (stamp_ns - last) * 1e-9)
+        self.last_ns = stamp_ns
+        return up, gyro, acc
+
+    def set_gyro_bias(self, bias_dps: Vec3) -> None:
+        self.gyro_bias_dps = bias_dps
+        if self.fusion is not None:
+            self.fusion.gyro_bias_dps = bias_dps
+
+
+class ImuPairer:
+    """Pairs the four sensors' messages by stamp.
+
+    Args:
+        tolerance_s: Largest spread of the four stamps in one sample (s).
+    """
+
+    def __init__(self, tolerance_s: float = DEFAULT_TOLERANCE_S) -> None:
+        if not (math.isfinite(tolerance_s) and tolerance_s >= 0):
+            raise ValueError(f"pairing tolerance must be >= 0 s, got {tolerance_s!r}")
+        self.tolerance_ns = round(tolerance_s * 1e9)
+        self.queues: list[deque] = [deque() for _ in range(N_CHANNELS)]
+        self.dropped: Counter = Counter()  # unpaired messages per sensor name
+
+    def push(self, sensor: int, stamp_ns: int, item: Any) -> list[tuple[int, list[Any]]]:
+        """Add one accepted message; returns the samples it completes: (stamp_ns = the latest
+        of the four, [item per sensor])."""
+        queues = self.queues
+        q = queues[sensor]
+        q.append((stamp_ns, item))
+        if len(q) > MAX_QUEUE:
+            q.popleft()
+            self.dropped[CHANNELS[sensor]] += 1
+        q0, q1, q2, q3 = queues
+        if not (q0 and q1 and q2 and q3):
+            return []
+        out = []
+        tol = self.tolerance_ns
+        while q0 and q1 and q2 and q3:
+            heads = (q0[0][0], q1[0][0], q2[0][0], q3[0][0])
+            lo, hi = min(heads), max(heads)
+            if hi - lo <= tol:
+                out.append((hi, [q0.popleft()[1], q1.popleft()[1], q2.popleft()[1], q3.popleft()[1]]))
+                continue
+            oldest = heads.index(lo)
+            queues[oldest].popleft()
+            self.dropped[CHANNELS[oldest]] += 1
+        return out
+
+    @property
+    def unpaired(self) -> int:
+        return int(sum(self.dropped.values()))
+
+    def clear(self) -> None:
+        for q in self.queues:
+            q.clear()
+
+
+LEARN_EVERY_S = 0.5
+MAX_LEARN_BUFFER_S = 120.0
+
+
+class ImuCalibrator:
+    """Learns the mounts from paired samples while no calibration is complete.
+
+    Args:
+        lateral, proximal: Configured sensor axes per segment (None = learn).
+        standing_deg: Angle each segment is taken to have while standing (deg).
+        calibration: A complete calibration to start with (saved or configured), or None.
+    """
+
+    def __init__(self, lateral: list[Vec3 | None], proximal: list[Vec3 | None], standing_deg: list[float],
+                 calibration: ImuCalibration | None = None) -> None:
+        self.lateral, self.proximal, self.standing_deg = list(lateral), list(proximal), list(standing_deg)
+        self.calibration = calibration
+        self.status = "calibrated" if calibration is not None else "waiting for samples"
+        self._keep_lateral: list[Vec3 | None] | None = None
+        self._standing: Standing | None = None
+        self._clear()
+
+    def _clear(self) -> None:
+        self._t = np.empty(1024)
+        self._rows = np.empty((1024, N_CHANNELS, 9))  # per sensor: up, gyro, acc
+        self._n = 0
+        self._next_try = -math.inf
+
+    def request_standing(self) -> None:
+        """Take a new standing pose from the next still stretch (keeping learnt lateral axes)."""
+        if self.calibration is not None:
+            self._keep_lateral = [m.lateral for m in self.calibration.mounts]
+        self.calibration = None
+        self._standing = None
+        self.status = "stand still"
+        self._clear()
+
+    def reset(self) -> None:
+        """Forget everything learnt: back to the configured axes."""
+        self.calibration = None
+        self._keep_lateral = None
+        self._standing = None
+        self.status = "waiting for samples"
+        self._clear()
+
+    def add(self, t: float, ups: list[Vec3], gyro: list[Vec3], acc: list[Vec3]) -> ImuCalibration | None:
+        """One paired sample (t in s); returns the calibration when it has just been learnt."""
+        n = self._n
+        if n == len(self._t):
+            if t - self._t[0] > MAX_LEARN_BUFFER_S:  # bounded: drop the oldest half (no standing found)
+                half = n // 2
+                self._t[:n - half], self._rows[:n - half] = self._t[half:n], self._rows[half:n]
+                n -= half
+                self._standing = None
+            else:
+                self._t = np.concatenate([self._t, np.empty_like(self._t)])
+                self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
+        self._t[n] = t
+        row = self._rows[n]
+        row[:, 0:3], row[:, 3:6], row[:, 6:9] = ups, gyro, acc
+        self._n = n = n + 1
+        if t < self._next_try:
+            return None
+        self._next_try = t + LEARN_EVERY_S
+        time_s = self._t[:n]
+        ups_a = self._rows[:n, :, 0:3].transpose(1, 0, 2)
+        gyro_a = self._rows[:n, :, 3:6].transpose(1, 0, 2)
+        acc_a = self._rows[:n, :, 6:9].transpose(1, 0, 2)
+        have_rates = bool(np.isfinite(gyro_a).any())
+        have_acc = bool(np.isfinite(acc_a).any())
+        lateral = self.lateral
+        if self._keep_lateral is not None:
+            lateral = [a if a is not None else k for a, k in zip(self.lateral, self._keep_lateral, strict=False)]
+        if self._standing is None and any(p is None for p in self.proximal):
+            self._standing = find_standing(time_s, ups_a, gyro_a if have_rates else None, acc_a if have_acc else None)
+        try:
+            cal, standing, missing = learn_calibration(
+                time_s, ups_a, lateral=lateral, proximal=self.proximal, standing_deg=self.standing_deg,
+                standing=self._standing, gyro_dps=gyro_a if have_rates else None, acc_g=acc_a if have_acc else None)
+        except CalibrationError as exc:
+            cal, standing, missing = None, self._standing, str(exc)
+        self._standing = standing
+        if cal is None:
+            self.status = missing
+            return None
+        self.calibration = cal
+        self.status = "calibrated"
+        self._keep_lateral = None
+        self._clear()
+        return cal
+
+
+# ---------------------------------------------------------------------------------------------
+# Files
+
+
+def save_calibration(cal: ImuCalibration, path: str | Path) -> Path:
+    """Write ``cal`` as YAML (atomically: a crash leaves the old file or the new one)."""
+    p = Path(path).expanduser()
+    p.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(p, yaml.safe_dump(cal.as_dict(), sort_keys=False))
+    return p
+
+
+def load_calibration(path: str | Path) -> ImuCalibration:
+    """Read a calibration written by ``save_calibration``; CalibrationError (one line naming the
+    file) when it is missing or malformed."""
+    p = Path(path).expanduser()
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise CalibrationError(f"{p}: no such IMU calibration file") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise CalibrationError(f"{p}: cannot read the IMU calibration ({' '.join(str(exc).split())[:200]})") from None
+    try:
+        return ImuCalibration.from_dict(data)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{p}: {exc}") from None
+
+
+def calibration_path_for(library_path: str | Path | None, library_name: str) -> Path:
+    """Where a learnt calibration is kept by default: beside a user's library file
+    (``<stem>.imu.yaml``), or ``~/.ros/gait_estimator/<name>.imu.yaml`` for a bundled one."""
+    from .resources import config_dir
+
+    if library_path:
+        lib = Path(library_path)
+        try:
+            bundled = lib.resolve().is_relative_to(config_dir().resolve())
+        except Exception:
+            bundled = True
+        if not bundled and lib.is_file():
+            return lib.with_name(lib.stem + ".imu.yaml")
+    return Path.home() / ".ros" / "gait_estimator" / f"{library_name}.imu.yaml"

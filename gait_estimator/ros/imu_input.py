@@ -1,0 +1,225 @@
+"""``input_type: imu`` for ``estimator_node``: four ``sensor_msgs/Imu`` topics -> segment angles.
+
+Each message becomes its sensor's up direction (``io/imu_stream.py``: from the orientation, or
+from gyro + accelerometer when ``orientation_covariance[0] == -1``); the four streams are paired
+by stamp (``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting
+calibration and goes to the node's estimator like any other sample. Until the calibration is
+complete (saved file, configured axes, or learnt: stand still, then walk a few strides) no sample
+reaches the estimator; a sensor silent for ``imu_timeout_s`` is named in the diagnostics and the
+estimate waits, since no sample pairs without it. Bad messages are dropped, counted and logged
+through the node (throttled).
+
+Services: ``~/calibrate_standing`` takes a new standing pose from the next still second (keeping
+learnt sagittal axes); the node's ``~/reset_calibration`` also forgets the IMU calibration (and
+deletes its saved file).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import Imu
+from std_srvs.srv import Trigger
+
+from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.imu import CalibrationError, ImuCalibration, SegmentMount
+from ..core.imu_learn import STILL_S, WALK_S, check_configured
+from ..io.cdr import Stamp
+from ..io.imu_bag import DEFAULT_IMU_TOPICS
+from ..io.imu_stream import (
+    DEFAULT_TOLERANCE_S,
+    UNPAIRED,
+    ImuCalibrator,
+    ImuPairer,
+    SensorInput,
+    calibration_path_for,
+    load_calibration,
+    save_calibration,
+)
+from ..io.stream import SampleRejected
+
+CALIBRATE_STANDING_SERVICE = "~/calibrate_standing"
+PARAMETERS: dict[str, tuple[Any, str]] = {
+    "imu_topics": (list(DEFAULT_IMU_TOPICS), "sensor_msgs/Imu topics of right_thigh, left_thigh, right_shank, left_shank."),
+    "imu_pairing_tolerance_s": (DEFAULT_TOLERANCE_S, "Largest stamp spread (s) of the four messages of one sample."),
+    "imu_timeout_s": (0.5, "A sensor without messages for this long (s) is reported silent in the diagnostics."),
+    "imu_frame_ids": ([""] * N_CHANNELS, "Per sensor, the header.frame_id its messages must carry ('' = any); "
+                      "messages with another frame are dropped (wrong_frame)."),
+    "imu_lateral_axes": ([""] * N_CHANNELS, "Per segment, the sensor axis pointing to the wearer's right (+x, -y, ...; "
+                         "forward swing is a positive rotation about it); '' = learn from strides."),
+    "imu_proximal_axes": ([""] * N_CHANNELS, "Per segment, the sensor axis pointing along the segment towards the "
+                          "proximal joint; '' = learn from the standing pose."),
+    "imu_standing_angles_deg": ([0.0] * N_CHANNELS, "Segment angles (deg) taken for the standing pose."),
+    "imu_calibration_path": ("", "IMU calibration file (YAML), read at start and written when learnt; '' = beside a "
+                             "user library (<library>.imu.yaml), or ~/.ros/gait_estimator/<library>.imu.yaml."),
+}
+"""Parameters declared (read-only) when ``input_type`` is ``imu``: default and description."""
+
+
+class ImuInput:
+    """The node's IMU input; see the module docstring. Raises CalibrationError (one line) for
+    invalid axes or an unreadable calibration file."""
+
+    def __init__(self, node: Any, qos: QoSProfile) -> None:
+        """``node``: the EstimatorNode (its ``_process``, ``_reject`` and counters are used)."""
+        self.node = node
+        values = {}
+        for name, (default, text) in PARAMETERS.items():
+            node.declare_parameter(name, default, ParameterDescriptor(description=text, read_only=True))
+            values[name] = node.get_parameter(name).value
+        topics = list(values["imu_topics"])
+        if len(topics) != N_CHANNELS or not all(t.strip() for t in topics):
+            raise CalibrationError(f"imu_topics: needs {N_CHANNELS} topic names ({', '.join(CHANNELS)})")
+        lateral, proximal = check_configured(list(values["imu_lateral_axes"]), list(values["imu_proximal_axes"]))
+        standing = [float(v) for v in values["imu_standing_angles_deg"]]
+        if len(standing) != N_CHANNELS or not all(math.isfinite(v) and abs(v) <= 90 for v in standing):
+            raise CalibrationError(f"imu_standing_angles_deg: needs {N_CHANNELS} angles within +-90 deg")
+        lib = node.library
+        self.path = Path(values["imu_calibration_path"]).expanduser() if values["imu_calibration_path"] else \
+            calibration_path_for(lib.path, lib.name)
+        saved = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
+        self.configured = all(a is not None for a in lateral) and all(p is not None for p in proximal)
+        from_file = saved is not None
+        if saved is None and self.configured:  # nothing to learn (and nothing to save)
+            saved = ImuCalibration(tuple(SegmentMount(a, p, d) for a, p, d in zip(lateral, proximal, standing, strict=True)))
+        self.timeout_s = float(values["imu_timeout_s"])
+        frames = list(values["imu_frame_ids"])
+        if len(frames) != N_CHANNELS:
+            raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
+        self.inputs = [SensorInput(frame_id=f.strip()) for f in frames]
+        self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
+        self.calibrator = ImuCalibrator(lateral, proximal, standing, saved)
+        if saved is not None:
+            self._apply_biases(saved)
+        self.rejected: Counter = Counter()
+        self.last_arrival = [math.nan] * N_CHANNELS
+        self.received = [0] * N_CHANNELS
+        self.started = time.monotonic()
+        self.subscriptions = [
+            node.create_subscription(Imu, topic, lambda msg, i=i: self._on_imu(i, msg), qos)
+            for i, topic in enumerate(topics)
+        ]
+        self._srv = node.create_service(Trigger, CALIBRATE_STANDING_SERVICE, self._calibrate_standing)
+        log = node.get_logger()
+        if saved is not None:
+            log.info(f"IMU calibration from {self.path if from_file else 'the configured axes'}: {saved.summary()}")
+            if from_file and self.configured:
+                log.warn(f"imu_lateral_axes/imu_proximal_axes are configured, but {self.path} is used; "
+                         "~/reset_calibration deletes it")
+        else:
+            log.info(f"no IMU calibration at {self.path}: {self.calibrator.status or 'learning'} "
+                     f"(stand still {STILL_S:g} s, then walk {WALK_S:g} s); the estimate waits until then")
+
+    # -----------------------------------------------------------------------------------------
+
+    def _on_imu(self, sensor: int, msg: Imu) -> None:
+        t0 = time.perf_counter()
+        node = self.node
+        self.received[sensor] += 1
+        self.last_arrival[sensor] = time.monotonic()
+        st = msg.header.stamp
+        stamp_ns = st.sec * 1_000_000_000 + st.nanosec
+        if stamp_ns == 0:
+            stamp_ns = node.get_clock().now().nanoseconds
+        o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
+        try:
+            item = self.inputs[sensor].convert(stamp_ns, (o.x, o.y, o.z, o.w), msg.orientation_covariance[0],
+                                               (w.x, w.y, w.z), (a.x, a.y, a.z), msg.header.frame_id)
+        except SampleRejected as exc:
+            self.rejected[exc.reason] += 1
+            node._received += 1
+            node._period_received += 1
+            node._reject(SampleRejected(exc.reason, f"{CHANNELS[sensor]}: {exc}"))
+            return
+        unpaired = self.pairer.unpaired
+        for stamp, items in self.pairer.push(sensor, stamp_ns, item):
+            self._sample(stamp, items, t0)
+        for _ in range(self.pairer.unpaired - unpaired):
+            self.rejected[UNPAIRED] += 1
+            node._reject(SampleRejected(UNPAIRED, f"an IMU message without partners within the pairing tolerance "
+                                        f"(dropped so far: {dict(self.pairer.dropped)})"))
+
+    def _sample(self, stamp_ns: int, items: list, t0: float) -> None:
+        node = self.node
+        node._received += 1
+        node._period_received += 1
+        ups = [i[0] for i in items]
+        cal = self.calibrator.calibration
+        if cal is None:
+            learnt = self.calibrator.add(stamp_ns * 1e-9, ups, [i[1] for i in items], [i[2] for i in items])
+            if learnt is not None:
+                self._learnt(learnt)
+            return
+        node._process(cal.angles_deg(ups), Stamp(*divmod(stamp_ns, 1_000_000_000)), t0)
+
+    def _learnt(self, cal: ImuCalibration) -> None:
+        self._apply_biases(cal)
+        log = self.node.get_logger()
+        if self.configured:
+            log.info(f"IMU calibration from the configured axes: {cal.summary()}")
+            return
+        try:
+            save_calibration(cal, self.path)
+            where = f"saved to {self.path}"
+        except OSError as exc:
+            where = f"NOT saved ({self.path}: {exc})"
+        log.info(f"IMU calibration learnt, {where}: {cal.summary()}")
+
+    def _apply_biases(self, cal: ImuCalibration) -> None:
+        for s, m in zip(self.inputs, cal.mounts, strict=True):
+            s.set_gyro_bias(m.gyro_bias_dps)
+
+    # -----------------------------------------------------------------------------------------
+
+    def _calibrate_standing(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self.calibrator.request_standing()
+        response.success = True
+        response.message = (f"stand still for {STILL_S:g} s: the next still stretch becomes the standing pose "
+                            "(the estimate waits until then)")
+        self.node.get_logger().info(response.message)
+        return response
+
+    def reset_calibration(self) -> str:
+        """Forget the IMU calibration (and its file); what happened, for the service reply."""
+        self.calibrator.reset()
+        removed = ""
+        try:
+            self.path.unlink()
+            removed = f", {self.path} deleted"
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            removed = f", {self.path} NOT deleted ({exc})"
+        for s in self.inputs:
+            s.set_gyro_bias((0.0, 0.0, 0.0))
+        return f"; IMU calibration forgotten{removed}: {self.calibrator.status} to learn it again"
+
+    def diagnostics(self) -> tuple[dict[str, str], list[str]]:
+        """Key/values and problems for the node's diagnostics status."""
+        now = time.monotonic()
+        silent = []
+        for c, last in zip(CHANNELS, self.last_arrival, strict=True):
+            since = (now - self.started) if math.isnan(last) else now - last
+            if since > self.timeout_s:
+                silent.append(f"{c} ({since:.1f} s)")
+        cal = self.calibrator.calibration
+        values = {
+            "imu_calibration": cal.summary() if cal is not None else "",
+            "imu_calibration_status": self.calibrator.status,
+            "imu_calibration_path": str(self.path),
+            "imu_messages": ",".join(str(n) for n in self.received),
+            "imu_silent": ", ".join(silent),
+            **{f"imu_rejected_{r}": str(n) for r, n in sorted(self.rejected.items())},
+        }
+        problems = []
+        if silent:
+            problems.append("IMU silent: " + ", ".join(silent) + " (estimate waits)")
+        if cal is None:
+            problems.append(f"IMU calibration: {self.calibrator.status}")
+        return values, problems

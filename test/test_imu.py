@@ -1,0 +1,310 @@
+"""IMU -> segment angles (core/imu.py, core/imu_learn.py, io/imu_stream.py, io/imu_bag.py) on
+synthetic IMU streams made from known segment angles (test/imu_synth.py)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from imu_synth import gait_angles, random_mounts, synthesize
+from scipy.spatial.transform import Rotation
+
+from gait_estimator.core.channels import CHANNELS
+from gait_estimator.core.errors import RecordingError
+from gait_estimator.core.imu import (
+    CalibrationError,
+    ImuCalibration,
+    SegmentMount,
+    fuse_raw,
+    parse_axis,
+    up_from_quaternion,
+    ups_from_quaternions,
+)
+from gait_estimator.core.imu_learn import check_configured, learn_calibration
+from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
+from gait_estimator.io.imu_stream import (
+    NON_FINITE,
+    NON_INCREASING_STAMP,
+    WRONG_FRAME,
+    ZERO_NORM,
+    ImuCalibrator,
+    ImuPairer,
+    SensorInput,
+    load_calibration,
+    save_calibration,
+)
+from gait_estimator.io.readers import read_recording
+from gait_estimator.io.recording import read_project_csv
+from gait_estimator.io.stream import SampleRejected
+
+RATE = 200.0
+BASE_NS = 1_700_000_000 * 1_000_000_000
+G = 9.80665
+
+
+def rms(a: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(np.square(a), axis=0))
+
+
+@pytest.fixture(scope="module")
+def angles() -> np.ndarray:
+    return gait_angles(RATE, walk_s=18.0)
+
+
+def _ups(s) -> np.ndarray:
+    return np.stack([ups_from_quaternions(s.quat_xyzw[c]) for c in range(4)])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_orientation_input_any_mounting_learnt_within_half_degree(angles, seed):
+    rng = np.random.default_rng(seed)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    cal, standing, missing = learn_calibration(s.time_s, ups)
+    assert missing == "" and standing is not None and standing.start == 0
+    got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
+    assert (rms(got - s.angles_deg) < 0.5).all(), rms(got - s.angles_deg)
+    # the scalar path (the node's) gives the same angles as the vectorised one
+    k = len(s.time_s) // 2
+    assert np.allclose(cal.angles_deg([tuple(ups[c, k]) for c in range(4)]), got[k], atol=1e-9)
+
+
+def test_orientation_input_with_noisy_quaternions_and_standing_angle(angles):
+    """Orientation noise of 0.3 deg and a known standing pose of +5/-6 deg."""
+    rng = np.random.default_rng(11)
+    stand = np.array([5.0, 4.0, -6.0, -7.0])
+    truth = angles + stand
+    s = synthesize(truth, RATE, random_mounts(rng), rng)
+    noise = Rotation.from_rotvec(rng.normal(0, math.radians(0.3), (4 * len(truth), 3)))
+    q = (Rotation.from_quat(s.quat_xyzw.reshape(-1, 4)) * noise).as_quat().reshape(s.quat_xyzw.shape)
+    ups = np.stack([ups_from_quaternions(q[c]) for c in range(4)])
+    cal, _, missing = learn_calibration(s.time_s, ups, standing_deg=stand)
+    assert missing == ""
+    got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
+    assert (rms(got - truth) < 0.5).all(), rms(got - truth)
+
+
+def test_configured_axes_need_no_learning(angles):
+    """Sensors mounted along the segment axes: configured '+z'/'-x' style axes give the angles
+    with no standing pose or strides at all."""
+    rng = np.random.default_rng(3)
+    # sensor axes in segment (forward, proximal, right) coordinates: x = -proximal, y = forward, z = right
+    mount = Rotation.from_matrix(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
+    s = synthesize(angles[400:], RATE, [mount] * 4, rng, stand_s=0.0)
+    lateral, proximal = check_configured(["+z"] * 4, ["-x"] * 4)
+    cal, standing, missing = learn_calibration(s.time_s, _ups(s), lateral=lateral, proximal=proximal)
+    assert missing == "" and standing is None
+    assert all(m.source == "configured" for m in cal.mounts)
+    got = np.stack([cal.mounts[c].angles_deg(_ups(s)[c]) for c in range(4)], axis=1)
+    assert np.abs(got - s.angles_deg).max() < 1e-9
+
+
+def test_raw_input_within_one_degree_after_ten_seconds(angles):
+    """Gyro + accelerometer only (noise, 2 deg/s gyro bias, arbitrary mounts): imufusion with the
+    bias measured while standing."""
+    pytest.importorskip("imufusion")
+    for seed in range(3):
+        rng = np.random.default_rng(100 + seed)
+        s = synthesize(angles, RATE, random_mounts(rng), rng, acc_noise_g=0.02, gyro_noise_dps=0.5, gyro_bias_dps=2.0)
+        first = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c]) for c in range(4)])
+        _, standing, _ = learn_calibration(s.time_s, first, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
+        assert standing is not None
+        bias_err = np.linalg.norm(np.array(standing.gyro_bias_dps) - (s.gyro_dps[:, :200].mean(axis=1)), axis=1)
+        assert (bias_err < 1e-9).all()
+        ups = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], standing.gyro_bias_dps[c]) for c in range(4)])
+        cal, _, missing = learn_calibration(s.time_s, ups, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
+        assert missing == ""
+        got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
+        late = s.time_s >= 10.0
+        assert (rms((got - s.angles_deg)[late]) < 1.0).all(), rms((got - s.angles_deg)[late])
+
+
+def test_learning_says_what_is_missing(angles):
+    rng = np.random.default_rng(5)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    walking = slice(500, None)  # no standing pose in the stream
+    cal, standing, missing = learn_calibration(s.time_s[walking], ups[:, walking])
+    assert cal is None and standing is None and missing.startswith("stand still")
+    early = s.time_s < 3.0  # standing, then only one second of walking
+    cal, standing, missing = learn_calibration(s.time_s[early], ups[:, early])
+    assert cal is None and standing is not None and missing.startswith("walk")
+
+
+def test_live_calibrator_learns_from_the_stream(angles):
+    rng = np.random.default_rng(6)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    cal_offline, _, _ = learn_calibration(s.time_s, ups)
+    calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4)
+    learnt_at = None
+    nan3 = (math.nan,) * 3
+    for k, t in enumerate(s.time_s):
+        got = calib.add(float(t), [tuple(ups[c, k]) for c in range(4)], [tuple(s.gyro_dps[c, k]) for c in range(4)], [nan3] * 4)
+        if got is not None:
+            learnt_at = t
+            break
+    assert learnt_at is not None and learnt_at < 2.0 + 1.0 + 4.0 + 0.6
+    for m_live, m_off in zip(calib.calibration.mounts, cal_offline.mounts, strict=False):
+        assert np.allclose(m_live.proximal, m_off.proximal, atol=1e-6)
+        assert np.dot(m_live.lateral, m_off.lateral) > math.cos(math.radians(2.0))
+    calib.reset()
+    assert calib.calibration is None
+
+
+def test_calibration_file_round_trip_and_bad_files(tmp_path):
+    cal = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x", standing_deg=3.0) for _ in CHANNELS))
+    p = save_calibration(cal, tmp_path / "sub" / "lib.imu.yaml")
+    assert load_calibration(p) == cal
+    with pytest.raises(CalibrationError, match="no such IMU calibration file"):
+        load_calibration(tmp_path / "missing.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("segments:\n  right_thigh: {lateral: [0, 0, 1], proximal: [0, 0, 1]}\n")
+    with pytest.raises(CalibrationError) as err:
+        load_calibration(bad)
+    assert str(bad) in str(err.value) and "\n" not in str(err.value)
+    bad.write_text("segments: {}\n")
+    with pytest.raises(CalibrationError, match="no mount for right_thigh"):
+        load_calibration(bad)
+    with pytest.raises(CalibrationError, match="not a sensor axis"):
+        parse_axis("+w")
+    with pytest.raises(CalibrationError, match="lateral and proximal axes must differ"):
+        check_configured(["+z"] * 4, ["-z", "", "", ""])
+
+
+def test_bad_messages_are_rejected_with_a_reason():
+    s = SensorInput()
+    ok = s.convert(10, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+    assert ok[0] == pytest.approx((0.0, 0.0, 1.0))
+    cases = [
+        (20, (math.nan, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G), NON_FINITE),
+        (20, (0.0, 0.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G), ZERO_NORM),
+        (10, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G), NON_INCREASING_STAMP),
+        (5, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G), NON_INCREASING_STAMP),
+    ]
+    for stamp, q, cov0, w, a, reason in cases:
+        with pytest.raises(SampleRejected) as err:
+            s.convert(stamp, q, cov0, w, a)
+        assert err.value.reason == reason
+    raw = SensorInput()
+    for w, a, reason in [((math.inf, 0, 0), (0, 0, G), NON_FINITE), ((0, 0, 0), (0, 0, 0), ZERO_NORM)]:
+        with pytest.raises(SampleRejected) as err:
+            raw.convert(30, (0.0, 0.0, 0.0, 1.0), -1.0, w, a)
+        assert err.value.reason == reason
+    assert up_from_quaternion(0.0, 0.0, 0.0, 0.0) is None
+    framed = SensorInput(frame_id="thigh_r_imu")
+    with pytest.raises(SampleRejected) as err:
+        framed.convert(40, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G), "shank_r_imu")
+    assert err.value.reason == WRONG_FRAME
+    assert framed.convert(40, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G), "thigh_r_imu")
+
+
+def test_pairer_waits_for_a_silent_sensor_and_drops_unpaired_messages():
+    p = ImuPairer(tolerance_s=0.002)
+    period = 5_000_000
+    out = []
+    for k in range(10):
+        for c in range(4):
+            if c == 2 and 3 <= k < 7:  # right shank silent for four periods
+                continue
+            out += p.push(c, k * period + c * 100_000, (c, k))
+    ks = [items[0][1] for _, items in out]
+    assert ks == [0, 1, 2, 7, 8, 9]  # never a sample with a stale shank value
+    assert all(len({i[1] for i in items}) == 1 for _, items in out)
+    assert p.unpaired == 3 * 4
+    # one sensor's stamps offset by more than the tolerance: nothing pairs, memory stays bounded
+    q = ImuPairer(tolerance_s=0.002)
+    got = []
+    for k in range(200):
+        for c in range(4):
+            got += q.push(c, k * period + (2_500_000 if c == 1 else 0), k)
+    assert got == [] and max(len(d) for d in q.queues) <= 50
+
+
+@pytest.fixture(scope="module")
+def synthetic_bags(tmp_path_factory, angles):
+    rng = np.random.default_rng(21)
+    s = synthesize(angles[:3000], RATE, random_mounts(rng), rng, acc_noise_g=0.01, gyro_noise_dps=0.3, gyro_bias_dps=1.0)
+    d = tmp_path_factory.mktemp("imu_bags")
+    stamps = BASE_NS + np.round(s.time_s * 1e9).astype(np.int64)
+    # sensors stamped up to 1 ms apart, as four drivers would be
+    stamps4 = stamps[None, :] + np.array([0, 300_000, 600_000, 900_000])[:, None]
+    write_imu_bag(d / "orientation", stamps4, np.radians(s.gyro_dps), s.acc_g * G, s.quat_xyzw)
+    write_imu_bag(d / "raw.db3dir", stamps4, np.radians(s.gyro_dps), s.acc_g * G, None, storage="sqlite3")
+    return s, d
+
+
+def test_imu_bag_reads_as_a_recording_of_the_four_angles(synthetic_bags):
+    s, d = synthetic_bags
+    rec = read_recording(d / "orientation")
+    assert len(rec) == len(s.time_s) and rec.time_s[0] == 0.0
+    assert (rms(rec.angles_deg - s.angles_deg) < 0.5).all()
+    assert any("IMU calibration learnt from the standing pose" in n for n in rec.notes)
+    raw = read_imu_bag(d / "raw.db3dir")
+    late = s.time_s >= 10.0
+    assert (rms((raw.angles_deg - s.angles_deg)[late]) < 1.0).all()
+    # a given calibration is used as is
+    again = read_imu_bag(d / "orientation", imu_calibration=rec.calibration)
+    assert np.array_equal(again.angles_deg, rec.angles_deg)
+
+
+def test_convert_imu_bag_to_csv_and_process_it(synthetic_bags, tmp_path):
+    s, d = synthetic_bags
+    out = tmp_path / "rec.csv"
+    cmd = [sys.executable, "-m", "gait_estimator.cli", "convert", str(d / "orientation"), "--out", str(out)]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "IMU calibration learnt" in r.stdout
+    rec = read_project_csv(out)
+    assert (rms(rec.angles_deg - s.angles_deg) < 0.5).all()
+    cal = tmp_path / "cal.yaml"
+    cal.write_text("segments: {}\n")
+    r = subprocess.run([*cmd[:-1], str(tmp_path / "x.csv"), "--imu-calibration", str(cal)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "no mount for right_thigh" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = subprocess.run([sys.executable, "-m", "gait_estimator.cli", "process", str(d / "orientation")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+
+
+def test_a_bag_without_the_four_imus_says_which_topics_it_has(synthetic_bags, tmp_path):
+    s, _ = synthetic_bags
+    stamps = BASE_NS + np.round(s.time_s[:100] * 1e9).astype(np.int64)
+    write_imu_bag(tmp_path / "b", stamps, np.zeros((4, 100, 3)), np.tile([0, 0, G], (4, 100, 1)), None,
+                  topics=["/a", "/b", "/c", "/d"])
+    with pytest.raises(RecordingError, match=r"needs four sensor_msgs/msg/Imu topics.*topics in the bag: /a"):
+        read_recording(tmp_path / "b")
+
+
+def test_standing_pose_on_request_keeps_the_learnt_axes(angles):
+    rng = np.random.default_rng(8)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4)
+    nan3 = (math.nan,) * 3
+
+    def feed(ks, t_offset=0.0):
+        for k in ks:
+            got = calib.add(float(s.time_s[k] + t_offset), [tuple(ups[c, k]) for c in range(4)],
+                            [tuple(s.gyro_dps[c, k]) for c in range(4)], [nan3] * 4)
+            if got is not None:
+                return got
+        return None
+
+    first = feed(range(len(s.time_s)))
+    assert first is not None
+    calib.request_standing()
+    assert calib.calibration is None and calib.status == "stand still"
+    again = feed(range(400), t_offset=100.0)  # standing again: no strides needed this time
+    assert again is not None
+    for a, b in zip(first.mounts, again.mounts, strict=True):
+        assert np.allclose(a.lateral, b.lateral) and np.allclose(a.proximal, b.proximal, atol=1e-6)
+
+
+def test_raw_input_without_imufusion_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "imufusion", None)
+    with pytest.raises(CalibrationError, match=r"pip install 'gait_estimator\[imu\]'"):
+        SensorInput().convert(1, (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))

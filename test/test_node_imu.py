@@ -1,0 +1,198 @@
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61/62): four
+sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles; learning
+the calibration live, saving and forgetting it; bad messages and a silent sensor."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+from imu_synth import gait_angles, random_mounts, synthesize
+from ros_helpers import InProcess, answered_indices, assert_same_trace, offline, wait_all_answered
+from sensor_msgs.msg import Imu
+from std_srvs.srv import Trigger
+
+from gait_estimator import load_library
+from gait_estimator.core.channels import CHANNELS
+from gait_estimator.core.imu import STANDARD_GRAVITY
+from gait_estimator.core.imu_learn import learn_calibration
+from gait_estimator.io.imu_stream import ImuPairer, SensorInput, load_calibration, save_calibration
+from gait_estimator.ros.imu_input import CALIBRATE_STANDING_SERVICE
+from gait_estimator.ros.node import RESET_CALIBRATION_SERVICE, StartupError
+
+RATE = 200.0
+BASE_NS = 1_700_000_000 * 1_000_000_000
+OFFSETS_NS = (0, 200_000, 400_000, 600_000)  # four drivers, stamped a little apart
+TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shank")
+
+
+@pytest.fixture
+def ros(monkeypatch):
+    made: list[InProcess] = []
+
+    def make(domain_id: int) -> InProcess:
+        assert 60 <= domain_id <= 69
+        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
+        monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
+        h = InProcess(domain_id)
+        made.append(h)
+        return h
+
+    yield make
+    for h in made:
+        h.close()
+
+
+def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray, frame: str = "") -> Imu:
+    m = Imu()
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    m.header.frame_id = frame
+    if q is None:
+        m.orientation_covariance[0] = -1.0
+    else:
+        m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = (float(v) for v in q)
+    m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = (float(v) for v in np.radians(gyro_dps))
+    a = acc_g * STANDARD_GRAVITY
+    m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z = (float(v) for v in a)
+    return m
+
+
+def stream(client, pubs, msgs: list[list[Imu]], skip=lambda k, c: False, rate_hz: float = RATE) -> None:
+    """Publish sample k's four messages at k / rate_hz, spinning in between."""
+    spin = client.executor.spin_once
+    start = time.perf_counter()
+    for k, four in enumerate(msgs):
+        due = start + k / rate_hz
+        while (left := due - time.perf_counter()) > 0:
+            spin(timeout_sec=min(left, 0.002))
+        for c, m in enumerate(four):
+            if not skip(k, c):
+                pubs[c].publish(m)
+        spin(timeout_sec=0.0)
+
+
+def make_messages(s, n: int, raw: bool = False) -> list[list[Imu]]:
+    return [[imu_msg(BASE_NS + round(s.time_s[k] * 1e9) + OFFSETS_NS[c], None if raw else s.quat_xyzw[c, k],
+                     s.gyro_dps[c, k], s.acc_g[c, k], CHANNELS[c]) for c in range(4)] for k in range(n)]
+
+
+def node_angles(msgs: list[list[Imu]], cal) -> tuple[np.ndarray, np.ndarray]:
+    """What the node computes from these messages: paired stamps and angles (same code)."""
+    inputs = [SensorInput() for _ in range(4)]
+    pairer = ImuPairer()
+    stamps, angles = [], []
+    for four in msgs:
+        for c, m in enumerate(four):
+            o, w, a = m.orientation, m.angular_velocity, m.linear_acceleration
+            ns = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+            item = inputs[c].convert(ns, (o.x, o.y, o.z, o.w), m.orientation_covariance[0], (w.x, w.y, w.z), (a.x, a.y, a.z))
+            for stamp, items in pairer.push(c, ns, item):
+                stamps.append(stamp)
+                angles.append(cal.angles_deg([i[0] for i in items]))
+    return np.array(stamps, dtype=np.int64), np.array(angles)
+
+
+def publishers(client):
+    return [client.node.create_publisher(Imu, t, 1000) for t in TOPICS]
+
+
+def test_imu_input_with_a_saved_calibration_equals_offline_processing(ros, tmp_path):
+    rng = np.random.default_rng(3)
+    s = synthesize(gait_angles(RATE, walk_s=6.0), RATE, random_mounts(rng), rng)
+    ups = np.stack([np.array([SensorInput().convert(1, s.quat_xyzw[c, k], 0.0, (0, 0, 0), (0, 0, 1))[0]
+                              for k in range(len(s.time_s))]) for c in range(4)])
+    cal, _, missing = learn_calibration(s.time_s, ups)
+    assert missing == ""
+    path = save_calibration(cal, tmp_path / "user.imu.yaml")
+    h = ros(61)
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path))
+    client = h.client(node)
+    pubs = publishers(client)
+    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
+    client.spin_for(1.0)  # the node's best-effort subscriptions and our output subscriptions match too
+    msgs = make_messages(s, len(s.time_s))
+    stream(client, pubs, msgs, rate_hz=RATE / 2)  # time comes from the stamps; half speed spares a loaded CI
+    stamps, angles = node_angles(msgs, load_calibration(path))  # as saved (rounded)
+    wait_all_answered(client, len(stamps))
+    lib = load_library("able_bodied")
+    idx = answered_indices(client.received, stamps)
+    assert idx.size >= 0.9 * len(stamps), f"only {idx.size}/{len(stamps)} samples answered"
+    assert_same_trace(client.received.trace(lib.mode_names), offline(angles[idx], lib, stamps[idx]))
+    diag = client.latest_diagnostics(3.0)
+    assert diag["imu_calibration_status"] == "calibrated" and diag["imu_calibration_path"] == str(path)
+    assert diag["input_type"] == "imu"
+    assert all(c in diag["imu_silent"] for c in CHANNELS), "the stream ended: every sensor is silent"
+
+
+def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_input(ros, tmp_path):
+    rng = np.random.default_rng(4)
+    s = synthesize(gait_angles(RATE, walk_s=7.0), RATE, random_mounts(rng), rng, acc_noise_g=0.01,
+                   gyro_noise_dps=0.3, gyro_bias_dps=1.0)
+    path = tmp_path / "learnt.imu.yaml"
+    h = ros(62)
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path), imu_frame_ids=list(CHANNELS))
+    client = h.client(node)
+    pubs = publishers(client)
+    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
+    client.spin_for(1.0)  # the node's best-effort subscriptions and our output subscriptions match too
+    msgs = make_messages(s, len(s.time_s), raw=True)
+    # bad messages on top: NaN and zero quaternions, an out-of-order stamp, and a silent right shank
+    bad = imu_msg(BASE_NS + 10_000_000, [math.nan, 0, 0, 1], s.gyro_dps[0, 0], s.acc_g[0, 0], "right_thigh")
+    zero = imu_msg(BASE_NS + 20_000_000, [0, 0, 0, 0], s.gyro_dps[0, 0], s.acc_g[0, 0], "right_thigh")
+    late = imu_msg(BASE_NS, None, s.gyro_dps[1, 0], s.acc_g[1, 0], "left_thigh")
+    wrong = imu_msg(BASE_NS + 30_000_000, None, s.gyro_dps[3, 0], s.acc_g[3, 0], "right_thigh")
+    for m in (bad, zero):
+        pubs[0].publish(m)
+    pubs[3].publish(wrong)
+    stream(client, pubs, msgs[:600])
+    pubs[1].publish(late)
+    silent = (1000, 1400)  # 2 s without the right shank
+    stream(client, pubs, msgs[600:], skip=lambda k, c: c == 2 and silent[0] - 600 <= k < silent[1] - 600)
+    client.spin_for(0.5)
+    assert path.is_file(), "the learnt calibration is saved"
+    diag = client.latest_diagnostics(3.0)
+    assert diag["imu_calibration_status"] == "calibrated" and "[learnt]" in diag["imu_calibration"]
+    assert int(diag["rejected_non_finite"]) >= 1 and int(diag["imu_rejected_zero_norm"]) >= 1
+    assert int(diag["rejected_non_increasing_stamp"]) >= 1 and int(diag["imu_rejected_unpaired"]) >= 1
+    assert int(diag["imu_rejected_wrong_frame"]) >= 1
+    assert any(d.get("imu_silent", "").startswith("right_shank (") and "thigh" not in d["imu_silent"]
+               for d in client.received.diagnostics), "the silent sensor is named in the diagnostics"
+    assert client.received.estimate_stamp_ns, "estimates once calibrated"
+    got = np.array(client.received.estimate_stamp_ns)
+    shank_silent = (got >= BASE_NS + silent[0] * 5_000_000) & (got < BASE_NS + silent[1] * 5_000_000)
+    assert not shank_silent.any(), "no estimate while the right shank was silent"
+    # ~/calibrate_standing and ~/reset_calibration answer; reset deletes the learnt file
+    for name in (CALIBRATE_STANDING_SERVICE, RESET_CALIBRATION_SERVICE):
+        srv = client.node.create_client(Trigger, f"{h.namespace}/{h.node_name}/{name[2:]}")
+        assert srv.wait_for_service(5.0)
+        future = srv.call_async(Trigger.Request())
+        assert client.spin_until(future.done, 5.0)
+        assert future.result().success
+    assert "IMU calibration forgotten" in future.result().message and not path.exists()
+
+
+def test_bad_imu_parameters_and_calibration_files_stop_the_node_with_one_line(ros, tmp_path):
+    h = ros(63)
+    with pytest.raises(StartupError, match="right_thigh lateral axis: '\\+w' is not a sensor axis"):
+        h.estimator(input_type="imu", imu_lateral_axes=["+w", "", "", ""], imu_calibration_path=str(tmp_path / "x.yaml"))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("segments: [1, 2]\n")
+    with pytest.raises(StartupError) as err:
+        h.estimator(input_type="imu", imu_calibration_path=str(bad))
+    assert str(bad) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_configured_axes_need_no_calibration_file(ros, tmp_path):
+    h = ros(64)
+    path = tmp_path / "never.imu.yaml"
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path), imu_lateral_axes=["+z"] * 4,
+                       imu_proximal_axes=["-x"] * 4, imu_standing_angles_deg=[5.0, 5.0, -6.0, -6.0])
+    cal = node._imu.calibrator.calibration
+    assert cal is not None and all(m.source == "configured" for m in cal.mounts)
+    assert cal.angles_deg([(-1.0, 0.0, 0.0)] * 4) == (5.0, 5.0, -6.0, -6.0)  # segment vertical: standing angle
+    node._imu.reset_calibration()
+    assert node._imu.calibrator.add(0.0, [(-1.0, 0.0, 0.0)] * 4, [(0.0,) * 3] * 4, [(0.0, 0.0, 1.0)] * 4) is not None
+    assert not path.exists()
