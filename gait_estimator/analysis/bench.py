@@ -102,8 +102,8 @@ def time_steps(matcher: IncrementalMatcher | NaiveMatcher, samples: np.ndarray, 
 def matcher_options(preset: str) -> dict[str, Any]:
     """IncrementalMatcher keyword arguments of an estimator preset (its matching options)."""
     c = EstimatorConfig.preset(preset)
-    return {"window_fraction": c.window_fraction, "channel_weights": c.effective_weights(), "subsample": c.subsample_phase,
-            "time_scales": c.time_scales, "offset_tolerance_deg": c.offset_tolerance_deg, "normalize": c.normalize_error,
+    return {"channel_weights": c.effective_weights(), "time_scales": c.time_scales,
+            "offset_tolerance_deg": c.offset_tolerance_deg, "normalize": c.normalize_error,
             "recency_half_life": c.effective_recency_half_life}
 
 

@@ -29,7 +29,6 @@ from .matcher import (
     check_offset_tolerance,
     check_recency_half_life,
     check_time_scales,
-    check_window_fraction,
 )
 from .resample import UniformResampler
 from .stride_reader import SUGGESTED_EVIDENCE_DEG2S, StrideStartReader
@@ -206,7 +205,8 @@ class EstimatorConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "resample", _resample_mode(self.resample))
-        check_window_fraction(self.window_fraction)
+        if not (0.0 < float(self.window_fraction) <= 1.0):
+            raise ValueError(f"window_fraction must be in (0, 1], got {self.window_fraction!r}")
         object.__setattr__(self, "recency_half_life", check_recency_half_life(self.recency_half_life))
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "channel_weights", tuple(float(w) for w in self.channel_weights))
@@ -316,9 +316,7 @@ class Estimator:
         c = self.config
         self.matcher = IncrementalMatcher(
             library,
-            window_fraction=c.window_fraction,
             channel_weights=c.effective_weights(),
-            subsample=c.subsample_phase,
             time_scales=c.time_scales,
             offset_tolerance_deg=c.offset_tolerance_deg,
             normalize=c.normalize_error,
@@ -430,22 +428,26 @@ class Estimator:
     def _step(self, time_s: float, x: Sample) -> Estimate:
         result = self.matcher.step(x)
         est = self.supervisor.update(time_s, result)
-        c = self.config
         if (self._calibrates or self.reader is not None) and self._confident_stride_end(est):
-            if c.offset_calibration_rate > 0:
-                self._calibrate_offset(est, result)
-            if self._learns_cadence:
-                self._calibrate_cadence(est)
-            if self._calibrates:
-                self.calibration_strides += 1
-            self._learn_typical_fit(est.fit_rms_deg)
-            if self._recency_waits and self.calibration_strides == CADENCE_MIN_STRIDES:
-                self.matcher.set_recency_half_life(c.effective_recency_half_life)
+            self._calibrate_stride(est, result)
         if self.adapter is not None:
             self._adapt(x, est, result)
         if self.reader is not None:
             est = self._read_stride(x, est, result)
         return est
+
+    def _calibrate_stride(self, est: Estimate, result: Any) -> None:
+        """The walking calibrations at the end of a confident stride (``_confident_stride_end``)."""
+        c = self.config
+        if c.offset_calibration_rate > 0:
+            self._calibrate_offset(est, result)
+        if self._learns_cadence:
+            self._calibrate_cadence(est)
+        if self._calibrates:
+            self.calibration_strides += 1
+        self._learn_typical_fit(est.fit_rms_deg)
+        if self._recency_waits and self.calibration_strides == CADENCE_MIN_STRIDES:
+            self.matcher.set_recency_half_life(c.effective_recency_half_life)
 
     def _read_stride(self, x: Sample, est: Estimate, result: Any) -> Estimate:
         """The stride-start reader's look at this sample: a reading starts at a heel strike of the
