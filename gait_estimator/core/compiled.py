@@ -310,3 +310,74 @@ def reader_step(  # pragma: no cover - compiled
             best_value = mode_min + bias[m]
             best_mode = m
     return best_mode
+
+
+def run_steps(  # pragma: no cover - compiled
+    e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
+    decay, lam, lam_w, wsum, wsums, pend, e2, ws2, plam, plam_w,
+    offset, mu, mu_seg, tau, scratch, normalize, n_scales, allowed, active, out_col, out_score,
+    out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
+    track, near, mid_lo, mid_hi, ready_from,
+):
+    """Matcher steps ``start`` .. ``stop`` - 1 of ``samples`` (G, 4) (weighted; ``squares`` their
+    squared norms) through step_rows (step_twin first while ``pend``), on one thread, the
+    matcher's state in place from ``count`` samples on. Per step: every mode's score
+    and phase into out_sse/out_phase (G, M), the best mode and its variant, column and window.
+
+    The walking calibrations' stride tracker (``Estimator._confident_stride_end`` without its
+    confidence test) runs along on the best mode and its phase: ``track`` = (valid, mode, phase,
+    passed_mid, began_in_mode) as floats, ``near`` (M, M) the near copies; the steps stop after a
+    heel strike that ends a whole stride, where the calibrations may act. Returns the step after
+    the last done and whether it ended such a stride."""
+    for g in range(start, stop):
+        i = count + g - start
+        d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
+        if pend:
+            step_twin(e2, ws2, kern, ksq, lens, ring, ring_sq, i, d0, d1, d2, d3, dsq, plam, plam_w, active)
+        b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
+                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, tau, scratch, normalize,
+                 n_scales, allowed, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
+        best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
+        if track.shape[0] == 0:
+            continue
+        phase = out_phase[g, b]
+        same = track[0] > 0.0 and (int(track[1]) == b or near[int(track[1]), b])
+        wrapped = same and phase < track[2] - 0.5
+        passed_mid = same and track[3] > 0.0
+        whole = same and track[4] > 0.0
+        midway = (mid_lo <= phase < mid_hi) or (passed_mid and not wrapped)
+        if i + 1 >= ready_from:
+            track[0], track[1], track[2] = 1.0, b, phase
+            track[3] = 1.0 if midway else 0.0
+            track[4] = 1.0 if wrapped or whole else 0.0
+        else:
+            track[0] = 0.0
+        if wrapped and whole and passed_mid:
+            return g + 1, True
+    return stop, False
+
+
+run_steps = njit(cache=True, nogil=True)(run_steps)
+
+
+@njit(cache=True, nogil=True)
+def phase_rates(time_s, mode, phase, ready, alpha, state, out):  # pragma: no cover - compiled
+    """``Supervisor._phase_rate`` over a run of steps: ``state`` = (has_last, last time, last
+    mode, last phase, rate), in place; ``alpha`` per step the smoothing weight for the time since
+    the previous ready step (precomputed with math.exp); nan while not ready."""
+    for g in range(time_s.shape[0]):
+        if not ready[g]:
+            out[g] = np.nan
+            continue
+        t, m, p = time_s[g], mode[g], phase[g]
+        has, lt, lm, lp = state[0] > 0.0, state[1], int(state[2]), state[3]
+        state[0], state[1], state[2], state[3] = 1.0, t, m, p
+        if has and lm == m and t > lt:
+            dt = t - lt
+            dphi = (p - lp + 0.5) % 1.0 - 0.5
+            inst = dphi / dt
+            if np.isnan(state[4]):
+                state[4] = inst
+            else:
+                state[4] += alpha[g] * (inst - state[4])
+        out[g] = state[4]

@@ -671,8 +671,15 @@ class EstimateTrace:
 def run_estimator(
     estimator: Estimator, time_s: np.ndarray, angles_deg: np.ndarray, index: np.ndarray | None = None
 ) -> EstimateTrace:
-    """Stream a whole recording through ``estimator`` (fresh or not) and collect the estimates."""
+    """Stream a whole recording through ``estimator`` (fresh or not) and collect the estimates:
+    in bulk (``core/batch.py``, the same results many times faster) where the options allow it,
+    else by ``Estimator.update`` sample by sample."""
     idx = np.arange(len(time_s)) if index is None else np.asarray(index)
+    from .batch import run_batch  # (batch builds on this module)
+
+    trace = run_batch(estimator, time_s, angles_deg, idx)
+    if trace is not None:
+        return trace
     rows = [(int(idx[i]), estimator.update(float(time_s[i]), angles_deg[i])) for i in range(len(time_s))]
     return trace_from_estimates(estimator.mode_names, rows)
 
