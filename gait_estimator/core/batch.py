@@ -203,13 +203,11 @@ def _match(estimator: Estimator, grid_t: np.ndarray, grid_x: np.ndarray) -> dict
         stop = min(g_total, g + chunk)
         if mt._resync_every:
             stop = min(stop, g + mt._resync_every - mt._count % mt._resync_every)
-        p = mt._pending
         count = mt._count
         done, ended = run(
             mt._e, mt._kernels, mt._ksq, mt.lengths, mt._ring, mt._ring_sq,
             mt._psum_ring, mt._psum, count, d, sq, g, stop,
-            mt._decay, mt._lam, mt._lam_w, mt._wsum, mt._wsums, p is not None,
-            p.e if p else mt._e, p.wsums if p else mt._wsums, p.lam if p else mt._lam, p.lam_w if p else mt._lam_w,
+            mt._decay, mt._lam, mt._lam_w, mt._wsum, mt._wsums,
             mt._offset, mt._mu, mt._mu_seg, mt._tau, mt._scratch, mt.normalize, mt.n_scales, mt._scale_allowed,
             mt._active, mt._out_col, mt._out_score,
             sse, phases, best, variant, column, window, scratch_v, scratch_c, scratch_w,

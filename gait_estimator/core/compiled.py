@@ -198,31 +198,6 @@ def step_rows(
     return best_mode
 
 
-def step_twin(
-    e: np.ndarray, wsums: np.ndarray, kern: np.ndarray, ksq: np.ndarray, lens: np.ndarray,
-    ring: np.ndarray, ring_sq: np.ndarray, count: int, d0: float, d1: float, d2: float, d3: float, dsq: float,
-    lam: np.ndarray, lam_w: np.ndarray, active: np.ndarray,
-) -> None:  # pragma: no cover - compiled
-    """The running sums e (R, Nmax) and age-weighted window sums wsums (R, 4) of other age weights
-    (lam, lam_w = lam^N per row) than the step's, kept alongside and not read out
-    (``IncrementalMatcher.start_uniform``), for the rows ``active``; before ``step_rows`` of the
-    same sample (which puts it into the ring)."""
-    wmax = ring.shape[0]
-    for a in prange(active.shape[0]):
-        r = active[a]
-        n = lens[r]
-        full = count >= n
-        r0 = r1 = r2 = r3 = rsq = 0.0
-        if full:
-            s = (count - n) % wmax
-            r0, r1, r2, r3, rsq = ring[s, 0], ring[s, 1], ring[s, 2], ring[s, 3], ring_sq[s]
-        lw = lam_w[r] if full else 0.0  # nothing leaves a filling window
-        q0, q1, q2, q3 = r0 * lw, r1 * lw, r2 * lw, r3 * lw
-        _aged_update(e[r], n, lam[r], lw, dsq - rsq * lw, d0 - q0, d1 - q1, d2 - q2, d3 - q3,
-                     kern[r, 0], kern[r, 1], kern[r, 2], kern[r, 3], ksq[r])
-        _age_sums(wsums, r, lam[r], d0 - q0, d1 - q1, d2 - q2, d3 - q3)
-
-
 def _serial_and_parallel(fn, name):  # type: ignore[no-untyped-def]
     """Two compiled copies of ``fn``: serial (prange runs as range) and with the rows spread over
     numba's threads, a function object of its own name so that the two caches do not collide."""
@@ -232,7 +207,6 @@ def _serial_and_parallel(fn, name):  # type: ignore[no-untyped-def]
 
 
 step_rows, step_rows_parallel = _serial_and_parallel(step_rows, "step_rows_parallel")
-step_twin, step_twin_parallel = _serial_and_parallel(step_twin, "step_twin_parallel")
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -314,15 +288,15 @@ def reader_step(  # pragma: no cover - compiled
 
 def run_steps(  # pragma: no cover - compiled
     e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
-    decay, lam, lam_w, wsum, wsums, pend, e2, ws2, plam, plam_w,
+    decay, lam, lam_w, wsum, wsums,
     offset, mu, mu_seg, tau, scratch, normalize, n_scales, allowed, active, out_col, out_score,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
     """Matcher steps ``start`` .. ``stop`` - 1 of ``samples`` (G, 4) (weighted; ``squares`` their
-    squared norms) through step_rows (step_twin first while ``pend``), on one thread, the
-    matcher's state in place from ``count`` samples on. Per step: every mode's score
-    and phase into out_sse/out_phase (G, M), the best mode and its variant, column and window.
+    squared norms) through step_rows, on one thread, the matcher's state in place from ``count``
+    samples on. Per step: every mode's score and phase into out_sse/out_phase (G, M), the best
+    mode and its variant, column and window.
 
     The walking calibrations' stride tracker (``Estimator._confident_stride_end`` without its
     confidence test) runs along on the best mode and its phase: ``track`` = (valid, mode, phase,
@@ -332,8 +306,6 @@ def run_steps(  # pragma: no cover - compiled
     for g in range(start, stop):
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
-        if pend:
-            step_twin(e2, ws2, kern, ksq, lens, ring, ring_sq, i, d0, d1, d2, d3, dsq, plam, plam_w, active)
         b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
                  decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, tau, scratch, normalize,
                  n_scales, allowed, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)

@@ -371,7 +371,7 @@ class Estimator:
         # learnt, its shorter memory cannot tell the speed classes apart well enough to be confident.
         self._recency_waits = self.matcher.recency_half_life > 0 and self._calibrates
         if self._recency_waits:
-            self.matcher.start_uniform()  # the weighted sums are kept alongside: the switch costs nothing
+            self.matcher.start_uniform()  # until the switch, which rebuilds the weighted sums from the window
         self._calib_last: _StrideTrack | None = None
         self.last_time: float | None = None
         self.resets = 0

@@ -19,7 +19,6 @@ from .matching import (
     MatchTrace,
     StepResult,
     _MatcherBase,
-    _Pending,
     check_channel_weights,
     check_offset_tolerance,
     check_recency_half_life,
@@ -118,14 +117,12 @@ class IncrementalMatcher(_MatcherBase):
             self._kernels = self._kernels.astype(np.float32)
         if compiled.AVAILABLE:
             self._compiled_step = compiled.step_rows_parallel if self.parallel else compiled.step_rows
-            self._compiled_twin = compiled.step_twin_parallel if self.parallel else compiled.step_twin
         self._active = self._rows  # rows the compiled step updates (the scale band's)
         self._synced = np.zeros(r, dtype=np.int64)  # outside the band: the step count its sums are exact at
         self._ring_sq = np.zeros(self.max_window)
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
         self._psum = np.zeros(N_CHANNELS)
         self._wsums = np.zeros((r, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
-        self._pending = None
         self._e = np.empty((r, n))
         self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
         self._update_row_constants()
@@ -146,10 +143,6 @@ class IncrementalMatcher(_MatcherBase):
         self.reset()
         if self.backend == "numba":  # compile (or load the cached code) now, not at the first sample
             self._step_numba(0.0, 0.0, 0.0, 0.0, 0.0)
-            if self._decay:  # and the step of the sums kept alongside (start_uniform)
-                self._compiled_twin(self._e.copy(), self._wsums.copy(), self._kernels, self._ksq, self.lengths,
-                                    self._ring, self._ring_sq, 0, 0.0, 0.0, 0.0, 0.0, 0.0, self._lam, self._lam_w,
-                                    self._active)
             self.reset()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
@@ -163,10 +156,12 @@ class IncrementalMatcher(_MatcherBase):
         return np.where(self._valid[rows], score, np.inf).min(axis=1)
 
     def _reweighted(self) -> None:
-        self._pending = None
-        self._e[:] = self._rows_sse_fft(self._rows, self._lam)
-        self._wsums[:] = self.age_weighted_sums()
-        self._synced[:] = self._count
+        # The compiled step rebuilds the rows of the scale band; the others when they are needed.
+        rows = self._active if self.backend == "numba" else self._rows
+        self._e[rows] = self._rows_sse_fft(rows, self._lam)
+        self._wsums[rows] = self.age_weighted_sums(rows)
+        self._synced[:] = -1
+        self._synced[rows] = self._count
 
     def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
         super().set_scale_band(allowed)
@@ -198,41 +193,7 @@ class IncrementalMatcher(_MatcherBase):
             return
         self._e[rows] = self._rows_sse_fft(rows, self._lam)
         self._wsums[rows] = self.age_weighted_sums(rows)
-        p = self._pending
-        if p is not None:
-            p.e[rows] = self._rows_sse_fft(rows, p.lam)
-            p.wsums[rows] = self.age_weighted_sums(rows, p.lam)
         self._synced[rows] = self._count
-
-    def start_uniform(self) -> None:
-        """Match with uniform weights for now, and keep the running sums of this matcher's
-        ``recency_half_life`` alongside (a second update pass per row, not read out), so that
-        ``set_recency_half_life`` back to it later switches at once, without recomputing
-        anything. Free on a fresh or reset matcher; otherwise the uniform sums are recomputed
-        from the window once (as set_recency_half_life(0) does)."""
-        if self._pending is not None:
-            return
-        h = self.recency_half_life
-        if h == 0:
-            raise ValueError("start_uniform needs a matcher using recency_half_life > 0")
-        keep = _Pending(h, self._lam, self._lam_w, self._wsum, self._e.copy(), self._wsums.copy())
-        self._set_weights(0.0)
-        if self._count == 0:
-            self._e[:] = np.where(self._valid, 0.0, np.inf)
-            self._wsums[:] = 0.0
-        else:
-            self._reweighted()
-        self._pending = keep  # mu_seg keeps the means of these weights
-
-    def _switch_to_pending(self, half_life: float) -> bool:
-        p = self._pending
-        if p is None or p.half_life != half_life:
-            return False
-        self.recency_half_life, self._lam, self._lam_w, self._wsum = p.half_life, p.lam, p.lam_w, p.wsum
-        self._e, p.e = p.e, self._e
-        self._wsums = p.wsums
-        self._pending = None
-        return True
 
     def _update_row_constants(self, rows: np.ndarray | None = None) -> None:
         """||k_j||^2 of ``rows`` (default: all) after their kernels changed."""
@@ -249,9 +210,6 @@ class IncrementalMatcher(_MatcherBase):
         self._psum[:] = 0.0
         self._wsums[:] = 0.0
         self._e[:] = np.where(self._valid, 0.0, np.inf)
-        if self._pending is not None:
-            self._pending.e[:] = self._e
-            self._pending.wsums[:] = 0.0
         self._resync_cursor = 0
         self._synced[:] = 0
 
@@ -271,10 +229,6 @@ class IncrementalMatcher(_MatcherBase):
         m = self.n_modes
         sse, phases = np.empty(m), np.empty(m)
         variant, column, window = np.empty((3, m), dtype=np.int64)  # fresh arrays: results outlive the step
-        p = self._pending
-        if p is not None:
-            self._compiled_twin(p.e, p.wsums, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
-                                self._count, d0, d1, d2, d3, dsq, p.lam, p.lam_w, self._active)
         b = self._compiled_step(
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
@@ -295,9 +249,6 @@ class IncrementalMatcher(_MatcherBase):
         stale = (i - self.windows) % w
         full = None if i >= w else i >= self.windows  # None: every window is full
         old, old_sq = self._ring[stale], self._ring_sq[stale]
-        p = self._pending
-        if p is not None:
-            p.e, p.buf = self._advance(p.e, p.buf, d, dsq, old, old_sq, full, p.lam, p.lam_w, p.wsums)
         self._e, self._next = self._advance(
             self._e, self._next, d, dsq, old, old_sq, full, self._lam, self._lam_w, self._wsums
         )
@@ -417,8 +368,6 @@ class IncrementalMatcher(_MatcherBase):
         rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
         self._update_row_constants(rows)
         self._e[rows] = self._rows_sse_fft(rows, self._lam)
-        if self._pending is not None:  # the sums kept alongside, with their weights
-            self._pending.e[rows] = self._rows_sse_fft(rows, self._pending.lam)
         if self._active is not self._rows:  # outside the band: the age-weighted sums too
             self._sync_rows(rows)
 
@@ -432,24 +381,28 @@ class IncrementalMatcher(_MatcherBase):
         """
         data = self._window_data()
         out = np.full((rows.size, self.max_length), np.inf)
-        for a, r in enumerate(rows):
-            n = int(self.lengths[r])
-            w = min(self._count, int(self.windows[r]))
+        # Rows of one length and age weight compare the same window part: one batch of transforms each.
+        keys = np.stack([self.lengths[rows].astype(np.float64), lam[rows]], axis=1)
+        _, group = np.unique(keys, axis=0, return_inverse=True)
+        group = group.reshape(-1)
+        for g in range(int(group.max()) + 1 if rows.size else 0):
+            sel = np.flatnonzero(group == g)
+            r0 = int(rows[sel[0]])
+            n = int(self.lengths[r0])
+            w = min(self._count, int(self.windows[r0]))
             age = np.zeros(n)
-            age[:w] = lam[r] ** np.arange(w)
+            age[:w] = lam[r0] ** np.arange(w)
             x = np.zeros((n, N_CHANNELS))
             x[:w] = data[:w]
-            k = self._kernels[r, :, :n].astype(np.float64)  # (4, n)
-            fx = np.fft.rfft(x.T * age, n=n)
-            cross = np.fft.irfft((fx * np.fft.rfft(k, n=n)).sum(axis=0), n=n)
-            ksq = np.fft.irfft(np.fft.rfft(age) * np.fft.rfft((k * k).sum(axis=0)), n=n)
-            out[a, :n] = float((age[:, None] * x * x).sum()) - 2.0 * cross + ksq
+            k = self._kernels[rows[sel], :, :n].astype(np.float64)  # (g, 4, n)
+            fx = np.fft.rfft(x.T * age, n=n)  # (4, n // 2 + 1)
+            cross = np.fft.irfft((fx[None] * np.fft.rfft(k, n=n)).sum(axis=1), n=n)
+            ksq = np.fft.irfft(np.fft.rfft(age)[None] * np.fft.rfft((k * k).sum(axis=1), n=n), n=n)
+            out[sel, :n] = float((age[:, None] * x * x).sum()) - 2.0 * cross + ksq
         return out
 
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
         arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid,
                   self._psum_ring, self._mu, self._mu_seg, self._wsums, self._scratch]
-        if self._pending is not None:
-            arrays += [self._pending.e, self._pending.buf, self._pending.wsums]
         return int(sum(a.nbytes for a in arrays))

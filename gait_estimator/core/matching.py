@@ -160,8 +160,6 @@ class _MatcherBase:
             uniform weights, the paper.
     """
 
-    _pending: _Pending | None = None  # running sums kept alongside for other weights (start_uniform)
-
     def __init__(
         self,
         library: KernelLibrary,
@@ -197,6 +195,7 @@ class _MatcherBase:
         self.max_length = int(self.lengths.max())
         self.max_window = self.max_length
         self._decay = self.recency_half_life > 0  # age weights possible (set_recency_half_life)
+        self._means_half_life = self.recency_half_life  # the age weights whose kernel means mu_seg holds
         self._set_weights(self.recency_half_life)
         self._per_shift = self._decay  # the kernel part's weighted mean depends on the shift
         self._rows = np.arange(self.n_rows)
@@ -230,18 +229,18 @@ class _MatcherBase:
             if self._mu_seg.shape[2] > 1:
                 self._mu_seg[r, :, :n] = self._shift_means(k, r)
 
-    def _set_weights(self, half_life: float) -> None:
+    def _weights(self, half_life: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per row: the weight factor per sample of age lambda, lambda^W (the weight of the sample
         leaving the window) and the weight sum of a full window W_a (lambda = 1: W)."""
-        self.recency_half_life = half_life
         if half_life > 0:
-            self._lam = 2.0 ** (-1.0 / (half_life * self.lengths))
-            self._lam_w = self._lam ** self.windows
-            self._wsum = (1.0 - self._lam_w) / (1.0 - self._lam)
-        else:
-            self._lam = np.ones(self.lengths.size)
-            self._lam_w = np.ones(self.lengths.size)
-            self._wsum = self.windows.astype(np.float64)
+            lam = 2.0 ** (-1.0 / (half_life * self.lengths))
+            lam_w = lam ** self.windows
+            return lam, lam_w, (1.0 - lam_w) / (1.0 - lam)
+        return np.ones(self.lengths.size), np.ones(self.lengths.size), self.windows.astype(np.float64)
+
+    def _set_weights(self, half_life: float) -> None:
+        self.recency_half_life = half_life
+        self._lam, self._lam_w, self._wsum = self._weights(half_life)
 
     def set_recency_half_life(self, half_life: float) -> None:
         """Change ``recency_half_life`` (strides; 0 = uniform weights) at any sample, keeping the
@@ -253,19 +252,28 @@ class _MatcherBase:
             raise ValueError("set_recency_half_life needs a matcher made with recency_half_life > 0")
         if h == self.recency_half_life:
             return
-        if self._switch_to_pending(h):
-            return
-        self._pending = None  # sums kept for other weights are of no use now
         self._set_weights(h)
-        if h > 0:  # mu_seg: the means of the weights in use (uniform weights use the kernel means)
+        if h > 0 and h != self._means_half_life:  # mu_seg: the means of the weights in use
+            self._means_half_life = h
             for r in range(self.n_rows):
                 n = int(self.lengths[r])
                 self._mu_seg[r, :, :n] = self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r)
         self._reweighted()
 
-    def _switch_to_pending(self, half_life: float) -> bool:
-        """Adopt running sums kept alongside for ``half_life`` (start_uniform), if any."""
-        return False
+    def start_uniform(self) -> None:
+        """Match with uniform weights until ``set_recency_half_life`` sets the matcher's own age
+        weights again (the estimator does so once its walking calibrations have read a few
+        strides). Free on a fresh or reset matcher; otherwise the uniform sums are recomputed from
+        the window once (as set_recency_half_life(0) does)."""
+        if not self._decay:
+            raise ValueError("start_uniform needs a matcher made with recency_half_life > 0")
+        if self.recency_half_life == 0:
+            return
+        self._set_weights(0.0)
+        if self._count == 0:
+            self.reset()
+        else:
+            self._reweighted()
 
     def _reweighted(self) -> None:
         """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
@@ -275,8 +283,7 @@ class _MatcherBase:
         at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (4, n) (a_t = 1 without recency weighting); ``k``
         (n, 4)."""
         n, w = k.shape[0], int(self.windows[r])
-        pending = self._pending  # mu_seg holds the means of the weights kept alongside
-        lam, wsum = (pending.lam, pending.wsum) if pending is not None else (self._lam, self._wsum)
+        lam, _, wsum = self._weights(self._means_half_life)
         if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
             c = np.cumsum(np.concatenate([k, k]), axis=0)
             j = np.arange(n) + n
@@ -499,22 +506,3 @@ class _MatcherBase:
 
     def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
         raise NotImplementedError
-
-
-@dataclass
-class _Pending:
-    """Running sums kept alongside for other age weights (IncrementalMatcher.start_uniform)."""
-
-    half_life: float
-    lam: np.ndarray
-    lam_w: np.ndarray
-    wsum: np.ndarray
-    e: np.ndarray
-    wsums: np.ndarray
-    buf: np.ndarray = None  # type: ignore[assignment]  # the numpy step's spare array
-
-    def __post_init__(self) -> None:
-        if self.buf is None:
-            self.buf = np.empty((self.e.shape[0], 1, self.e.shape[1]))
-
-
