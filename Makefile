@@ -11,7 +11,7 @@ OLD_VENV ?= .venv-numpy126
 $(BIN)/.installed: setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[ros,test,colcon]'
+	$(BIN)/python -m pip install -q -e '.[all]'
 	touch $@
 
 venv: $(BIN)/.installed
@@ -25,7 +25,7 @@ test: venv lint test-core-old-numpy
 $(OLD_VENV)/bin/.installed: setup.py
 	$(PYTHON) -m venv $(OLD_VENV)
 	$(OLD_VENV)/bin/python -m pip install -q --upgrade pip
-	$(OLD_VENV)/bin/python -m pip install -q "numpy==$(OLD_NUMPY)" -e '.[test]'
+	$(OLD_VENV)/bin/python -m pip install -q "numpy==$(OLD_NUMPY)" -e '.[test,fast,analysis,bags]'
 	touch $@
 
 test-core-old-numpy: $(OLD_VENV)/bin/.installed
@@ -54,17 +54,19 @@ SOAK_SAMPLES ?= 1800000
 soak: venv
 	ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST GAIT_SOAK_SAMPLES=$(SOAK_SAMPLES) $(BIN)/pytest -q -s test/test_faults.py -k soak
 
-# The measured tables in README.md and docs/: rebuild the evaluation, headline and node tables from
-# the results in experiments/results/, then copy every experiments/results/**/tables.md section into
-# its <!-- BEGIN name --> block (docs/performance.md, "Regenerating the numbers").
+# The measured tables in README.md and docs/: rebuild every benchmarks/results/*/tables.md from the
+# results there (no benchmark is rerun; the reference agreement runs `process` on 3,000 samples),
+# then copy each section into its <!-- BEGIN name --> block. Rerunning the benchmarks themselves:
+# docs/performance.md, "Regenerating the numbers".
 docs: venv
-	$(BIN)/python experiments/summary_tables.py
-	$(BIN)/python experiments/matcher_tables.py
-	$(BIN)/python experiments/node_tables.py
-	$(BIN)/python experiments/update_docs.py
+	$(BIN)/python benchmarks/performance.py
+	$(BIN)/python benchmarks/node.py
+	$(BIN)/python benchmarks/cross_session.py --tables-only
+	$(BIN)/python benchmarks/accuracy.py --tables-only
+	$(BIN)/python -m benchmarks.common --update-docs
 
 docs-check: venv
-	$(BIN)/python experiments/update_docs.py --check
+	$(BIN)/python -m benchmarks.common --check-docs
 
 clean:
 	rm -rf $(VENV) $(OLD_VENV) build install log out *.egg-info

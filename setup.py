@@ -15,6 +15,18 @@ def data_tree(top: str) -> list[tuple[str, list[str]]]:
     ]
 
 
+ROS = ["ros-jazzy-rclpy", "ros-jazzy-common-interfaces", "ros-jazzy-rmw-fastrtps-cpp"]
+EXTRAS = {
+    "fast": ["numba>=0.59"],  # the compiled matcher step; without it the pure-numpy step runs (slower)
+    "analysis": ["scipy>=1.11", "matplotlib>=3.6"],  # train, evaluate, label tools, figures
+    "bags": ["rosbags>=0.10"],  # rosbag2 (mcap, sqlite3) reading and writing without ROS
+    "ros": [*ROS, "rosbags>=0.10"],  # estimator_node, demo, play; numba recommended: [ros,fast]
+    "test": ["pytest>=7", "hypothesis>=6.80", "ruff>=0.5", "wheel"],
+    "colcon": ["colcon-common-extensions", "ros-jazzy-ament-package"],
+}
+EXTRAS["all"] = sorted({r for reqs in EXTRAS.values() for r in reqs})
+
+
 setup(
     name=package_name,
     version="0.1.0",
@@ -31,37 +43,18 @@ setup(
         ("share/" + package_name + "/config/kernels", glob("config/kernels/*.yaml")),
         *data_tree("data"),
     ],
+    # The estimator, the offline `process` and the file formats need numpy and PyYAML only; the
+    # rest is optional (a missing extra is reported in one line naming it).
     install_requires=[
-        "setuptools",
         "numpy>=1.26",
         "pyyaml>=6.0",
-        "scipy>=1.11",
-        "matplotlib>=3.6",
-        "rosbags>=0.10",
-        "numba>=0.59",  # the compiled matcher step; without it the pure-numpy step runs (slower)
     ],
-    extras_require={
-        "ros": [
-            "ros-jazzy-rclpy",
-            "ros-jazzy-common-interfaces",
-            "ros-jazzy-rmw-fastrtps-cpp",
-        ],
-        "test": [
-            "pytest>=7",
-            "hypothesis>=6.80",
-            "ruff>=0.5",
-            "wheel",
-        ],
-        "colcon": [
-            "colcon-common-extensions",
-            "ros-jazzy-ament-package",
-        ],
-    },
+    extras_require=EXTRAS,
     zip_safe=False,
     entry_points={
         "console_scripts": [
             "gait-estimator = gait_estimator.cli:main",
-            "estimator_node = gait_estimator.ros.node:main",
+            "estimator_node = gait_estimator.ros:node_main",
         ],
     },
 )

@@ -13,26 +13,40 @@ Architecture (data flows left to right; a subpackage imports only those to its l
 * ``cli``: the ``gait-estimator`` argparse front ends.
 
 ``test/test_architecture.py`` enforces these rules. See docs/architecture.md.
+
+The public API: ``Estimator`` (one sample in, one ``Estimate`` out), ``EstimatorConfig`` (its
+options, ``EstimatorConfig.preset("default" | "paper", **overrides)``), ``load_library`` and
+``run_recording`` (a whole CSV or bag through a fresh estimator: an ``EstimateTrace``).
 """
 
 from .core.channels import CHANNELS
 from .core.errors import GaitEstimatorError, LibraryError, RecordingError
+from .core.estimator import EstimateTrace, Estimator
 from .core.kernels import KernelLibrary, KernelMode
-from .core.matcher import IncrementalMatcher, NaiveMatcher, StepResult
+from .core.matcher import IncrementalMatcher, StepResult
+from .core.options import EstimatorConfig
+from .core.supervisor import Estimate
 from .io.library_io import load_library, save_library
+from .io.process import run_recording
+from .io.recording import Recording
 
 __version__ = "0.1.0"
 
 __all__ = [
     "CHANNELS",
+    "Estimate",
+    "EstimateTrace",
+    "Estimator",
+    "EstimatorConfig",
     "GaitEstimatorError",
     "IncrementalMatcher",
     "KernelLibrary",
     "KernelMode",
     "LibraryError",
-    "NaiveMatcher",
+    "Recording",
     "RecordingError",
     "StepResult",
     "load_library",
+    "run_recording",
     "save_library",
 ]

@@ -96,6 +96,51 @@ def test_no_import_cycles_between_modules() -> None:
     assert cycles == []
 
 
+OPTIONAL = ("scipy", "matplotlib", "rosbags", "numba")
+"""Optional packages (setup.py extras): imported inside the functions that need them, so that the
+estimator and ``process`` run with numpy and PyYAML only (test_public_api.py runs that)."""
+TOP_LEVEL_OPTIONAL = {"gait_estimator.core.compiled": "numba", "gait_estimator.analysis.plots": "matplotlib"}
+"""Where a top-level import is fine: guarded (compiled: numba optional) or imported lazily itself
+(plots, by ``evaluate`` only)."""
+
+
+def test_optional_packages_are_imported_where_used() -> None:
+    bad = []
+    for name, path in _modules().items():
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:  # module level only
+            if isinstance(node, ast.Try):
+                continue  # a guarded import
+            mods = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            for mod in mods:
+                root = mod.split(".")[0]
+                if root in OPTIONAL and TOP_LEVEL_OPTIONAL.get(name) != root:
+                    bad.append(f"{path.relative_to(PKG.parent)}:{node.lineno} imports {mod}")
+    assert bad == []
+
+
+MAX_MODULE_LINES = 550
+MAX_FUNCTION_LINES = 90
+SIZE_EXCEPTIONS = {"gait_estimator.core.compiled.step_rows", "gait_estimator.core.compiled.step_rows_parallel",
+                   "gait_estimator.core.matcher"}
+"""The compiled kernel (one pass per step, by design); matcher.py until it is split (issue 30)."""
+
+
+def test_modules_and_functions_stay_small() -> None:
+    """Modules <= ~500 lines, functions <= ~80 (docs/architecture.md), with a little slack."""
+    bad = []
+    for name, path in _modules().items():
+        text = path.read_text(encoding="utf-8")
+        if text.count("\n") > MAX_MODULE_LINES and name not in SIZE_EXCEPTIONS:
+            bad.append(f"{name}: {text.count(chr(10))} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and f"{name}.{node.name}" not in SIZE_EXCEPTIONS:
+                length = (node.end_lineno or node.lineno) - node.lineno + 1
+                if length > MAX_FUNCTION_LINES:
+                    bad.append(f"{name}.{node.name}: {length} lines")
+    assert bad == []
+
+
 def test_offline_commands_import_without_ros() -> None:
     """The ROS-free layers and the CLI import with rclpy and every message package unavailable."""
     code = (

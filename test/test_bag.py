@@ -408,31 +408,24 @@ def test_no_usable_samples(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
-@pytest.mark.parametrize("damage", ["truncated", "garbage", "metadata_missing", "metadata_broken", "file_missing"])
+@pytest.mark.parametrize("damage", ["garbage", "file_missing"])
 def test_damaged_bags(tmp_path, ramp, capsys, storage, damage):
+    """Damage that is no cut (overwritten bytes, the storage file gone): one line, exit 2. Cut
+    files and a missing or wrong metadata.yaml are read as far as they go: test_bag_recover.py."""
     bag = write_input_bag(ramp, tmp_path / "bag", storage=storage, start_ns=START_NS)
     data = next(p for p in bag.iterdir() if p.suffix in (".mcap", ".db3"))
-    if damage == "truncated":
-        data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
-    elif damage == "garbage":
+    if damage == "garbage":
         raw = bytearray(data.read_bytes())
         raw[len(raw) // 3 : len(raw) // 3 + 4096] = b"\xff" * 4096
         data.write_bytes(bytes(raw))
-    elif damage == "metadata_missing":
-        (bag / "metadata.yaml").unlink()
-    elif damage == "metadata_broken":
-        (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
     else:
         data.unlink()
     with pytest.raises(RecordingError):
         read_bag(bag, topic="/segment_angles")
     err = _error(capsys, ["process", str(bag), "--topic", "/segment_angles"])
     assert str(bag) in err and "/segment_angles" in err
-    if damage == "metadata_missing":
-        assert "missing metadata.yaml" in err
     if damage == "file_missing":
-        # without its storage file and metadata the directory is no bag at all
-        return
+        assert f"metadata.yaml lists {data.name}, not in the directory; no complete message could be read" in err
     assert main(["convert", str(bag), "--out", str(tmp_path / "x.csv")]) == 2
     assert "topic /segment_angles" in capsys.readouterr().err
 

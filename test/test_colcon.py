@@ -22,7 +22,7 @@ from gait_estimator.ros.node_client import EstimatorClient, NodeProcess, local_r
 DOMAIN_ID = 29
 FIND_DEMO_RECORDING = "from gait_estimator.io.resources import DEMO_RECORDING, data_path; print(data_path(DEMO_RECORDING))"
 IGNORED = shutil.ignore_patterns(
-    ".git", ".venv*", "build", "install", "log", "out", "test", "experiments", "__pycache__", "*.egg-info",
+    ".git", ".venv*", "build", "install", "log", "out", "test", "benchmarks", "__pycache__", "*.egg-info",
     ".ruff_cache", ".pytest_cache", ".hypothesis", "*.pyc",
 )
 

@@ -67,17 +67,15 @@ def _two_mode_stream() -> tuple[KernelLibrary, np.ndarray, np.ndarray]:
     return lib, np.arange(len(stream)) / 100.0, stream
 
 
-def test_min_dwell_delays_the_switch_by_exactly_k_samples() -> None:
+def test_min_dwell_delays_the_switch_by_exactly_the_dwell() -> None:
     lib, time_s, x = _two_mode_stream()
     raw = run(lib, time_s, x)
     switch = int(np.flatnonzero(np.diff(raw.mode_index[raw.ready]) != 0)[0]) + 1 + int(np.argmax(raw.ready))
-    for k in (5, 20):
-        held = run(lib, time_s, x, min_dwell_samples=k)
+    for k in (5, 10, 20):  # k samples at 100 Hz
+        held = run(lib, time_s, x, min_dwell_s=k / 100.0)
         first_b = int(np.flatnonzero(held.mode_index == 1)[0])
-        assert first_b == switch + k - 1
+        assert first_b == switch + k
         assert held.held[switch : first_b].all() and not held.held[first_b]
-    timed = run(lib, time_s, x, min_dwell_s=0.1)
-    assert int(np.flatnonzero(timed.mode_index == 1)[0]) == switch + 10  # 0.1 s at 100 Hz
 
 
 def test_low_confidence_holds_the_last_confident_mode() -> None:
@@ -227,12 +225,15 @@ def test_rate_invariance(able_bodied, multispeed, rate) -> None:
 
 
 def test_config_validation() -> None:
-    for kwargs, msg in [({"window_fraction": 0}, "window_fraction"), ({"channels": ("right_knee",)}, "channels"),
+    for kwargs, msg in [({"channels": ("right_knee",)}, "channels"),
                         ({"channels": ()}, "channels"), ({"min_confidence": -1}, "min_confidence"),
-                        ({"min_dwell_samples": 1.5}, "min_dwell_samples"), ({"phase_rate_tau_s": 0}, "phase_rate_tau_s"),
+                        ({"min_dwell_s": float("nan")}, "min_dwell_s"), ({"phase_rate_tau_s": 0}, "phase_rate_tau_s"),
                         ({"channel_weights": (0, 0, 1, 1), "channels": ("right_thigh", "left_thigh")}, "not all 0")]:
         with pytest.raises(ValueError, match=msg):
             EstimatorConfig(**kwargs)
+    for removed in ("window_fraction", "subsample_phase", "switch_evidence_deg2s", "min_dwell_samples"):
+        with pytest.raises(ValueError, match="unknown estimator option"):
+            EstimatorConfig().with_options(**{removed: 1})
 
 
 def test_channel_subset_equals_zero_weights(able_bodied, multispeed) -> None:
@@ -247,12 +248,16 @@ def test_channel_subset_equals_zero_weights(able_bodied, multispeed) -> None:
 def test_cli_process_with_options(tmp_path: Path, multispeed_csv: Path) -> None:
     out = tmp_path / "p.csv"
     code = cli_main(["process", str(multispeed_csv), "--start", "4000", "--stop", "5000", "-o", str(out), "-q",
-                     "--window-fraction", "0.5", "--min-dwell-samples", "10", "--subsample-phase",
-                     "--channels", "right_thigh", "right_shank"])
+                     "--min-dwell-s", "0.05", "--channels", "right_thigh", "right_shank",
+                     "--offset-tolerance-deg", "inf"])
     assert code == 0
     header = out.read_text().splitlines()[0].split(",")
     assert header[-6:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio"]
-    assert cli_main(["process", str(multispeed_csv), "--window-fraction", "2", "-q"]) == 2
+    assert cli_main(["process", str(multispeed_csv), "--min-confidence", "-1", "-q"]) == 2
+    for removed in ("--window-fraction", "--subsample-phase", "--switch-evidence-deg2s", "--min-dwell-samples"):
+        with pytest.raises(SystemExit) as exc:
+            cli_main(["process", str(multispeed_csv), removed, "1", "-q"])
+        assert exc.value.code == 2
     assert cli_main(["process", str(multispeed_csv), "--transitions", str(tmp_path / "none.yaml"), "-q"]) == 2
 
 
@@ -272,8 +277,8 @@ def test_transitions_table_reports_the_best_allowed_mode() -> None:
         sse = np.array(sse, dtype=float)
         return StepResult(int(sse.argmin()), names[int(sse.argmin())], 0.0, sse, np.zeros(3), True, np.full(3, 10))
 
-    assert sup.update(0.0, result([1, 5, 5])).mode == "A"
-    est = sup.update(0.01, result([5, 1, 2]))
+    assert sup.decide(0.0, result([1, 5, 5])).mode == "A"
+    est = sup.decide(0.01, result([5, 1, 2]))
     assert est.mode == "C" and not est.held and est.raw_mode_index == 1
     assert est.confidence == pytest.approx((1 - 2) / 2)
 
@@ -286,7 +291,7 @@ def test_presets() -> None:
     paper = EstimatorConfig.preset("paper")
     assert (paper.resample, paper.time_scales, paper.offset_tolerance_deg, paper.normalize_error) == ("off", (1.0,), 0.0, False)
     assert paper.preset_name() == "paper" and EstimatorConfig().preset_name() == "default"
-    assert EstimatorConfig.preset("paper", window_fraction=0.5).changed_from("paper") == {"window_fraction": 0.5}
+    assert EstimatorConfig.preset("paper", min_dwell_s=0.5).changed_from("paper") == {"min_dwell_s": 0.5}
     assert EstimatorConfig(resample=True).resample == "on" and EstimatorConfig(resample="false").resample == "off"
     with pytest.raises(ValueError, match="preset"):
         EstimatorConfig.preset("fast")
@@ -443,29 +448,28 @@ def test_walking_calibration_finds_constant_sensor_offsets(able_bodied) -> None:
     assert "Med" not in set(np.asarray(off.modes)[tail])
 
 
-def test_walking_calibration_counts_near_copies_as_one_mode(able_bodied, monkeypatch) -> None:
+def test_walking_calibration_counts_near_copies_as_one_mode(able_bodied) -> None:
     """A library holding near copies of every mode: few strides are confident against the other
     copies, and the reported mode moves between them within a stride. Counted as one mode, they
     let the calibrations learn the offsets as with the bundled library, and recency weighting
-    starts; counted apart (NEAR_COPY_RMS_DEG 0), a stride is confident only when it happens to fit
+    starts; counted apart (near_copy_rms_deg 0), a stride is confident only when it happens to fit
     one copy much better than its neighbours (a few of these noise-free strides), and the right
     thigh's 6 deg offset is far from learnt."""
     from synthetic import near_copies
 
-    from gait_estimator.core import estimator as estimator_module
+    from gait_estimator.core.pipeline import PipelineParams
 
     lib = near_copies(able_bodied, 5)
     offsets, t, x = _med_walk_with_offsets(able_bodied)
     est = Estimator(lib)
     trace = run_estimator(est, t, x)
     np.testing.assert_allclose(est.sensor_offset_deg, offsets, atol=0.5)
-    assert est.calibration_strides >= 3 and est.matcher.recency_half_life == est.config.recency_half_life
+    assert est.calibration.strides >= 3 and est.matcher.recency_half_life == est.config.recency_half_life
     tail = trace.ready & (t > t[-1] - 5.0)
     assert {name.rsplit("_", 1)[0] for name in np.asarray(trace.modes)[tail]} == {"Med"}
-    monkeypatch.setattr(estimator_module, "NEAR_COPY_RMS_DEG", 0.0)
-    apart = Estimator(lib)
+    apart = Estimator(lib, params=PipelineParams.from_config(EstimatorConfig(), calibration={"near_copy_rms_deg": 0.0}))
     run_estimator(apart, t, x)
-    assert apart.calibration_strides < est.calibration_strides / 4
+    assert apart.calibration.strides < est.calibration.strides / 4
     assert abs(apart.sensor_offset_deg[0] - offsets[0]) > 2.0
 
 
@@ -487,7 +491,7 @@ def test_cadence_calibration_tells_speed_classes_apart_at_the_wearer_cadence(abl
     rec = generate(able_bodied, [("RA", 6), ("SA", 6), ("RD", 6), ("Fast", 12)], wearer, seed=1001).recording
     est = Estimator(able_bodied)
     trace = run_estimator(est, rec.time_s, rec.angles_deg)
-    assert est.cadence_scale == pytest.approx(1 / wearer.cadence, rel=0.03) and est.cadence_strides >= 3
+    assert est.cadence_scale == pytest.approx(1 / wearer.cadence, rel=0.03) and est.calibration.cadence_strides >= 3
     band = est.matcher.scale_band
     assert band[np.abs(est.matcher.time_scales - est.cadence_scale) < 0.02].all() and not band[0]
     tail = rec.time_s > rec.time_s[-1] - 5.0
@@ -500,28 +504,25 @@ def test_cadence_calibration_tells_speed_classes_apart_at_the_wearer_cadence(abl
     assert EstimatorConfig.preset("paper").cadence_calibration_rate == 0.0
 
 
-@pytest.mark.parametrize("window_fraction", [1.0, 0.5])
-def test_calibrations_read_each_stride_once(able_bodied, window_fraction: float) -> None:
+def test_calibrations_read_each_stride_once(able_bodied) -> None:
     """The calibrations read at most once per stride, however the reported phase flickers across
-    the heel strike (0.99, 0.01, 0.99, ...; frequent with part-stride windows), and still read
-    most strides. Reading at every flicker let a few strides of a wrong mode set the sensor
-    offsets (MS-LG2 with window_fraction 0.75: 58.8 % accuracy, 85.1 % with one read per stride).
-    They do not read the stride in which the mode changed: it blends two modes (one such SA
-    stride of this wearer read a time scale of 0.94 against the wearer's 1.07 and widened the
-    band until Fast was read as Med)."""
+    the heel strike (0.99, 0.01, 0.99, ...), and still read most strides: reading at every flicker
+    let a few strides of a wrong mode set the sensor offsets. They do not read the stride in which
+    the mode changed: it blends two modes (one such SA stride of this wearer read a time scale of
+    0.94 against the wearer's 1.07 and widened the band until Fast was read as Med)."""
     from synthetic import generate, new_wearer
 
     route = [("RA", 6), ("SA", 6), ("RD", 6), ("Fast", 12)]
     syn = generate(able_bodied, route, new_wearer(1), seed=1001)
-    est = Estimator(able_bodied, EstimatorConfig(window_fraction=window_fraction))
+    est = Estimator(able_bodied)
     reads = []
     for t, x in zip(syn.recording.time_s, syn.recording.angles_deg, strict=True):
-        before = est.cadence_strides
+        before = est.calibration.cadence_strides
         est.update(float(t), x)
-        if est.cadence_strides > before:
+        if est.calibration.cadence_strides > before:
             reads.append(float(t))
     strides = len(syn.stride_modes)
-    assert len(reads) == est.cadence_strides
+    assert len(reads) == est.calibration.cadence_strides
     assert strides - 3 * len(route) <= len(reads) <= strides - 1
     first = np.cumsum([n for _, n in route])[:-1]  # index of each mode's first stride after a change
     ends = syn.heel_strikes_s[first + 1]
@@ -538,7 +539,7 @@ def test_cadence_is_read_between_the_time_scales(able_bodied, mode: str, scale: 
     x = _stretched_strides(able_bodied, mode, 10, 1.0 / scale)
     est = Estimator(able_bodied)
     run_estimator(est, np.arange(len(x)) / 230.0, x)
-    assert est.cadence_strides >= 6
+    assert est.calibration.cadence_strides >= 6
     assert est.cadence_scale == pytest.approx(scale, abs=0.005)
 
 
@@ -550,12 +551,13 @@ def test_new_options_keep_the_learnt_calibration(able_bodied) -> None:
     x = np.concatenate([_stretched_strides(able_bodied, m, 6, 0.93) for m in ("RA", "SA", "Med")]) + offsets
     est = Estimator(able_bodied)
     run_estimator(est, np.arange(len(x)) / 230.0, x)
-    assert est.cadence_strides >= 3 and not est.matcher.scale_band.all()
+    assert est.calibration.cadence_strides >= 3 and not est.matcher.scale_band.all()
     other = Estimator(able_bodied, EstimatorConfig(min_dwell_s=0.1))
     other.adopt_calibration(est)
     np.testing.assert_array_equal(other.sensor_offset_deg, est.sensor_offset_deg)
-    assert (other.cadence_scale, other.cadence_strides, other.cadence_spread) == (
-        est.cadence_scale, est.cadence_strides, est.cadence_spread)
+    theirs, mine = est.calibration, other.calibration
+    assert (mine.cadence_scale, mine.cadence_strides, mine.cadence_spread) == (
+        theirs.cadence_scale, theirs.cadence_strides, theirs.cadence_spread)
     np.testing.assert_array_equal(other.matcher.scale_band, est.matcher.scale_band)
     plain = Estimator(able_bodied, EstimatorConfig(offset_calibration_rate=0.0, cadence_calibration_rate=0.0))
     plain.adopt_calibration(est)
@@ -570,7 +572,7 @@ def test_cadence_calibration_stays_open_when_the_scales_spread(able_bodied) -> N
     t = np.arange(len(x)) / 230.0
     est = Estimator(able_bodied)
     run_estimator(est, t, x)
-    assert est.cadence_strides >= 6 and est.cadence_spread > 0.04
+    assert est.calibration.cadence_strides >= 6 and est.calibration.cadence_spread > 0.04
     assert est.matcher.scale_band.sum() >= 5
 
 
@@ -619,30 +621,31 @@ def test_recency_weighting_starts_once_the_calibrations_have_read_three_strides(
     weights = []
     for ti, xi in zip(t, x, strict=True):
         est.update(float(ti), xi)
-        weights.append((est.calibration_strides, est.matcher.recency_half_life))
+        weights.append((est.calibration.strides, est.matcher.recency_half_life))
     assert {h for n, h in weights if n < 3} == {0.0}
-    assert {h for n, h in weights if n >= 3} == {EstimatorConfig().recency_half_life} and est.calibration_strides > 10
+    assert {h for n, h in weights if n >= 3} == {EstimatorConfig().recency_half_life} and est.calibration.strides > 10
     np.testing.assert_allclose(est.sensor_offset_deg, offsets, atol=0.3)
     est.reset_calibration()
-    assert est.matcher.recency_half_life == 0.0 and est.calibration_strides == 0
+    assert est.matcher.recency_half_life == 0.0 and est.calibration.strides == 0
     # without the wait (the matcher weighted from the start) this walk goes wrong
-    eager = Estimator(able_bodied)
-    eager._recency_waits = False
-    eager.matcher.set_recency_half_life(EstimatorConfig().recency_half_life)
+    from gait_estimator.core.pipeline import PipelineParams
+
+    eager = Estimator(able_bodied, params=PipelineParams.from_config(EstimatorConfig(),
+                                                                     calibration={"recency_after_strides": 0}))
+    assert eager.matcher.recency_half_life == EstimatorConfig().recency_half_life
     trace = run_estimator(eager, t, x)
     assert np.abs(eager.sensor_offset_deg - offsets).max() > 3.0
     assert np.mean(np.asarray(trace.modes)[len(x) // 2:] == "Med") < 0.9
-    # no calibrations: weighted from the start; a part-stride window: never; paper: never
+    # no calibrations: weighted from the start; paper: never
     assert Estimator(able_bodied, EstimatorConfig(offset_calibration_rate=0.0, cadence_calibration_rate=0.0)
                      ).matcher.recency_half_life == EstimatorConfig().recency_half_life
-    assert Estimator(able_bodied, EstimatorConfig(window_fraction=0.5)).matcher.recency_half_life == 0.0
     assert EstimatorConfig.preset("paper").recency_half_life == 0.0
 
 
 def test_recency_weighting_follows_mode_changes_sooner(able_bodied) -> None:
     """Synthetic new wearer 0 walks a route with 12 mode changes: with recency weighting (the
     default) the first correct estimate after a change comes sooner than with uniform weights,
-    and more rows are right (the stride-start reader off, which shortens the delay further)."""
+    and more rows are right."""
     from synthetic import generate, new_wearer
 
     route = [("Med", 5), ("RA", 5), ("Med", 4), ("SA", 5), ("Slow", 5), ("SD", 5), ("Fast", 5), ("RD", 5), ("Med", 5)]
@@ -651,7 +654,7 @@ def test_recency_weighting_follows_mode_changes_sooner(able_bodied) -> None:
     truth = np.asarray(rec.labels).astype(str)
     results = {}
     for h in (0.0, EstimatorConfig().recency_half_life):
-        config = EstimatorConfig(recency_half_life=h, switch_evidence_deg2s=0.0)
+        config = EstimatorConfig(recency_half_life=h)
         trace = run_estimator(Estimator(able_bodied, config), rec.time_s, rec.angles_deg)
         right = np.asarray(trace.modes) == truth
         changes = np.flatnonzero(truth[1:] != truth[:-1]) + 1

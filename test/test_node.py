@@ -6,7 +6,6 @@ Domain IDs 11..20, 26 and 28, one per test; LOCALHOST discovery; a namespace uni
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -30,12 +29,13 @@ from ros_helpers import (
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from synthetic import generate, new_wearer
 
 from gait_estimator import load_library
 from gait_estimator.core.estimator import Estimator, EstimatorConfig
+from gait_estimator.core.options import ADVANCED
 from gait_estimator.io.stream import REASONS
 from gait_estimator.ros.node import DEFAULTS, DESCRIPTIONS, EstimatorNode, StartupError
+from gait_estimator.ros.parameters import yaml_defaults
 
 PERIOD_NS = round(1e9 / 230.0)
 
@@ -193,22 +193,6 @@ def test_bad_input_is_dropped_counted_warned_and_state_stays_valid(ros, multispe
     assert any("left_shank" in w for w in warnings if "missing_joint" in w)
 
 
-def test_stride_start_reader_over_dds(ros, able_bodied) -> None:
-    """With ``switch_evidence_deg2s`` set, every estimate equals offline predict with that option,
-    and the reader changed some of them: a synthetic wearer walking Med -> SA -> Med, as
-    Float64MultiArray in degrees (no stamps: the library rate, published faster in lockstep)."""
-    rec = generate(able_bodied, [("Med", 8), ("SA", 4), ("Med", 4)], replace(new_wearer(2), rate_hz=None, jitter=0.0),
-                   seed=2).recording
-    h = ros(28)
-    node = h.estimator(input_type="float64_multi_array", input_units="deg", switch_evidence_deg2s=40.0)
-    client = h.client(node, input_type="float64_multi_array")
-    assert client.wait_for_node(10.0, settle_s=0.0)
-    lockstep(client, rec.angles_deg, 1000.0)
-    ref = offline(rec.angles_deg, able_bodied, config=EstimatorConfig(switch_evidence_deg2s=40.0))
-    assert_same_trace(client.received.trace(able_bodied.mode_names), ref)
-    assert (ref.mode_index != offline(rec.angles_deg, able_bodied).mode_index).sum() > 100
-
-
 def test_float64_multi_array_wrong_length_and_non_finite(ros) -> None:
     h = ros(15)
     node = h.estimator(input_type="float64_multi_array")
@@ -236,10 +220,10 @@ def test_parameters_validated_at_set_time(ros, tmp_path: Path) -> None:
         ("joint_names", ["a", "b", "", "d"], "empty"),
         ("max_gap_s", -1.0, ">= 0"),
         ("max_gap_s", math.nan, ">= 0"),
-        ("window_fraction", 1.5, "window_fraction"),
         ("channels", ["right_thigh", "tail"], "channels"),
-        ("channel_weights", [1.0, -1.0, 1.0, 1.0], "channel_weights"),
-        ("min_dwell_samples", -3, "min_dwell_samples"),
+        ("advanced.channel_weights", [1.0, -1.0, 1.0, 1.0], "channel_weights"),
+        ("advanced.time_scales", [0.1], "time_scales"),
+        ("min_dwell_s", -3.0, ">= 0"),
         ("transitions", str(tmp_path / "none.yaml"), "none.yaml"),
         ("kernels", str(tmp_path / "missing.yaml"), "missing.yaml: no such file"),
         ("kernels", "", "empty"),
@@ -377,12 +361,14 @@ def test_use_sim_time_and_unstamped_input(ros) -> None:
 def test_config_yaml_holds_the_declared_defaults(ros, tmp_path: Path) -> None:
     doc = yaml.safe_load((REPO / "config" / "estimator.yaml").read_text(encoding="utf-8"))
     params = doc["/**"]["ros__parameters"]
-    assert params == DEFAULTS
+    assert params == yaml_defaults()
     assert set(DESCRIPTIONS) == set(DEFAULTS)
+    assert {n for n in DEFAULTS if n.startswith("advanced.")} == {"advanced." + n for n in ADVANCED}
 
     # --params-file works (here through rclpy.init args, as ros2 run passes them).
     custom = tmp_path / "custom.yaml"
-    params = {**params, "input_units": "deg", "max_gap_s": 1.5, "kernels": "prosthesis"}
+    params = {**params, "input_units": "deg", "max_gap_s": 1.5, "kernels": "prosthesis",
+              "advanced": {**params["advanced"], "time_scales": [0.96, 1.0, 1.04]}, "window_fraction": 0.5}
     custom.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}), encoding="utf-8")
     h = ros(20)
     ctx = rclpy.context.Context()
@@ -392,6 +378,7 @@ def test_config_yaml_holds_the_declared_defaults(ros, tmp_path: Path) -> None:
         assert node.get_parameter("input_units").value == "deg"
         assert node.get_parameter("max_gap_s").value == 1.5
         assert node.library.name == "prosthesis"
+        assert node.config.time_scales == (0.96, 1.0, 1.04)  # advanced.time_scales from the nested mapping
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
@@ -405,12 +392,12 @@ def test_preset_services_and_new_wearer_outputs(ros, multispeed_csv: Path, able_
     so does a gap in the stream longer than calibration_reset_gap_s."""
     from std_srvs.srv import Trigger
 
-    from gait_estimator.core.estimator import EstimatorConfig
 
     h = ros(26)
-    paper = h.estimator(preset="paper", window_fraction=0.5)
-    assert paper.config == EstimatorConfig.preset("paper", window_fraction=0.5)
-    assert paper.get_parameter("resample").value == "off" and list(paper.get_parameter("time_scales").value) == [1.0]
+    paper = h.estimator(preset="paper", min_dwell_s=0.5)
+    assert paper.config == EstimatorConfig.preset("paper", min_dwell_s=0.5)
+    assert paper.get_parameter("resample").value == "off"
+    assert list(paper.get_parameter("advanced.time_scales").value) == [1.0]
     (result,) = paper.set_parameters([Parameter("preset", value="default")])
     assert not result.successful and "read-only" in result.reason.lower()
     paper.destroy_node()

@@ -133,6 +133,8 @@ def test_params_file_float64_multi_array_degrees_and_sigterm(
     # also the SingleThreadedExecutor (the other tests run the default EventsExecutor)
     params["/**"]["ros__parameters"].update(input_type="float64_multi_array", input_units="deg",
                                             executor="single_threaded")
+    # a removed option and an advanced one by its bare name: ignored, each with a warning
+    params["/**"]["ros__parameters"].update(window_fraction=0.75, time_scales=[1.0])
     file = tmp_path / "params.yaml"
     file.write_text(yaml.safe_dump(params), encoding="utf-8")
     run = Running(22, entry_point, ["--params-file", str(file)], input_type="float64_multi_array")
@@ -147,6 +149,8 @@ def test_params_file_float64_multi_array_degrees_and_sigterm(
     finally:
         run.close()
     _clean_exit(code, log)
+    assert "parameter window_fraction ignored: the option was removed (docs/options.md)" in log, log
+    assert "parameter time_scales ignored: it is advanced.time_scales now" in log, log
 
 
 @pytest.mark.parametrize(("sig", "domain_id"), [(signal.SIGINT, 23), (signal.SIGTERM, 24)])

@@ -17,7 +17,7 @@ def test_pip_install_finds_bundled_kernels_and_recordings(tmp_path: Path) -> Non
     files = subprocess.run(["git", "-C", str(REPO), "ls-files", "-co", "--exclude-standard", "-z"],
                            check=True, capture_output=True).stdout.decode().split("\0")
     for rel in filter(None, files):
-        if rel.startswith(("test/", "experiments/")) or not (REPO / rel).is_file():
+        if rel.startswith(("test/", "benchmarks/")) or not (REPO / rel).is_file():
             continue
         (src / rel).parent.mkdir(parents=True, exist_ok=True)
         (src / rel).write_bytes((REPO / rel).read_bytes())

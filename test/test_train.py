@@ -205,7 +205,7 @@ def test_lg2_ramp_training_from_documented_labels(swge):
     """The shared overground recording with the experiment's label ranges (README numbers)."""
     from pathlib import Path
 
-    labels = Path(__file__).resolve().parents[1] / "experiments" / "lg2_ramp_labels.csv"
+    labels = Path(__file__).resolve().parents[1] / "benchmarks" / "lg2_ramp_labels.csv"
     rec = with_ranges(read_recording(swge / "recordings" / "LG_2_Ramp_AB_Sample.csv"), read_label_ranges(labels))
     res = train_library([rec], "lg2", TrainOptions(heel_strikes="right_foot"))
     lib = res.library

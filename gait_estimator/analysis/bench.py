@@ -17,7 +17,7 @@ import numpy as np
 
 from ..core import compiled
 from ..core.batch import batch_supported
-from ..core.estimator import CADENCE_MIN_STRIDES, Estimator, EstimatorConfig, run_estimator
+from ..core.estimator import Estimator, EstimatorConfig, run_estimator
 from ..core.kernels import KernelLibrary
 from ..core.matcher import IncrementalMatcher, NaiveMatcher
 from ..io.library_io import load_library, save_library
@@ -104,7 +104,7 @@ def matcher_options(preset: str) -> dict[str, Any]:
     c = EstimatorConfig.preset(preset)
     return {"channel_weights": c.effective_weights(), "time_scales": c.time_scales,
             "offset_tolerance_deg": c.offset_tolerance_deg, "normalize": c.normalize_error,
-            "recency_half_life": c.effective_recency_half_life}
+            "recency_half_life": c.recency_half_life}
 
 
 def time_updates(estimator: Estimator, samples: np.ndarray, rate_hz: float, warmup: int) -> dict[str, float]:
@@ -127,13 +127,14 @@ def time_updates(estimator: Estimator, samples: np.ndarray, rate_hz: float, warm
 
 def calibrated_after(library: KernelLibrary, samples: np.ndarray, backend: str = "auto") -> int:
     """Input samples a fresh default-preset estimator needs before its walking calibrations have
-    read CADENCE_MIN_STRIDES strides (recency weighting on, the scale band narrowed), or the
-    matcher's window if that is longer; len(samples) if they never do."""
+    read the strides after which they narrow the scale band (and recency weighting starts), or
+    the matcher's window if that is longer; len(samples) if they never do."""
     est = Estimator(library, EstimatorConfig.preset("default"), backend=backend)
     t = np.arange(len(samples)) / library.sample_rate_hz
     for i in range(len(samples)):
         est.update(float(t[i]), samples[i])
-        if est.calibration_strides >= CADENCE_MIN_STRIDES:
+        cal = est.calibration
+        if cal.strides >= max(cal.params.cadence_min_strides, cal.params.recency_after_strides):
             return max(i + 1, est.matcher.max_window)
     return len(samples)
 

@@ -232,24 +232,14 @@ def evaluate(
     ph_true[~matched] = np.nan
     evaluated = matched & pred.ready & (labels != "")
     al = Aligned(t, pred.mode, pred.phase, pred.ready, pred.sse, pred.sse_modes, labels, correct, ph_true, evaluated, hs)
-
     err = circular_error(pred.phase, np.nan_to_num(ph_true))
     has_phase = evaluated & np.isfinite(ph_true)
     good = has_phase & correct
-    names = list(pred.sse_modes)
-    for m in [*pred.mode[evaluated].tolist(), *labels[evaluated].tolist()]:
-        if m not in names:
-            names.append(m)
-    index = {n: i for i, n in enumerate(names)}
-    matrix = np.zeros((len(names), len(names)), dtype=np.int64)
-    np.add.at(matrix, ([index[x] for x in labels[evaluated]], [index[x] for x in pred.mode[evaluated]]), 1)
-    truth_names = [n for n in names if (labels[evaluated] == n).any()]
+    names, matrix = _confusion(pred, labels, evaluated)
     settle = settle_time(pred)
     steady = evaluated & (time_in_run(t, labels) >= settle)
-    per_mode = {}
-    for n in truth_names:
-        rows = evaluated & (labels == n)
-        per_mode[n] = {
+    per_mode = {
+        n: {
             "samples": int(rows.sum()),
             "accuracy": _ratio(correct[rows].sum(), rows.sum()),
             "steady_samples": int((rows & steady).sum()),
@@ -258,6 +248,8 @@ def evaluate(
             **_stats(err[good & rows], "phase_error"),
             **_stats(err[has_phase & rows], "phase_error_all"),
         }
+        for n, rows in ((n, evaluated & (labels == n)) for n in names if (labels[evaluated] == n).any())
+    }
     metrics: dict[str, Any] = {
         "predictions": pred.source,
         "truth": truth.source,
@@ -296,6 +288,18 @@ def evaluate(
         "units": "phase errors are fractions of a stride (0.01 = 1 % of the gait cycle); delays in seconds",
     }
     return Evaluation(metrics, al)
+
+
+def _confusion(pred: PredictionTable, labels: np.ndarray, evaluated: np.ndarray) -> tuple[list[str], np.ndarray]:
+    """(mode names: the library's, then any other predicted or truth label; counts [truth, predicted])."""
+    names = list(pred.sse_modes)
+    for m in [*pred.mode[evaluated].tolist(), *labels[evaluated].tolist()]:
+        if m not in names:
+            names.append(m)
+    index = {n: i for i, n in enumerate(names)}
+    matrix = np.zeros((len(names), len(names)), dtype=np.int64)
+    np.add.at(matrix, ([index[x] for x in labels[evaluated]], [index[x] for x in pred.mode[evaluated]]), 1)
+    return names, matrix
 
 
 def settle_time(pred: PredictionTable) -> float:

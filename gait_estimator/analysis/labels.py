@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import GaitEstimatorError
+from ..io.atomic import atomic_open
 from ..io.recording import Recording
 
 
@@ -74,9 +75,9 @@ def read_label_ranges(path: str | Path) -> list[LabelRange]:
 
 
 def write_label_ranges(ranges: Sequence[LabelRange], path: str | Path, comments: Sequence[str] = ()) -> Path:
-    """Write ``ranges`` as a label range file, ``comments`` as leading ``#`` lines."""
+    """Write ``ranges`` as a label range file, ``comments`` as leading ``#`` lines (atomically)."""
     p = Path(path)
-    with p.open("w", encoding="utf-8", newline="") as f:
+    with atomic_open(p, "w", newline="") as f:
         for c in comments:
             for line in str(c).splitlines() or [""]:
                 f.write(f"# {line}".rstrip() + "\n")

@@ -24,7 +24,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from ..core.errors import RecordingError
 from ..io.recording import Recording
@@ -112,6 +111,8 @@ def detect_peaks(
         return np.empty(0)
     dt = float(np.median(np.diff(t)))
     distance = max(1, math.floor(options.min_stride_s / dt))
+    from scipy.signal import find_peaks  # the 'analysis' extra; imported here so the CLI starts without it
+
     peaks, _ = find_peaks(x, distance=distance, prominence=options.min_prominence_deg)
     peaks = peaks[(peaks > 0) & (peaks < x.size - 1)]
     y0, y1, y2 = x[peaks - 1], x[peaks], x[peaks + 1]

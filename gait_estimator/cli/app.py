@@ -14,13 +14,14 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from ..core.errors import GaitEstimatorError
+from ..core.errors import GaitEstimatorError, missing_extra
 from ..io.library_io import load_library, save_library
 from ..io.resources import DEFAULT_LIBRARY
 from .args import choice_list, int_list, positive_int, prepare_output
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.node_commands",
+    "gait_estimator.cli.bench_node",
     "gait_estimator.cli.bag_commands",
     "gait_estimator.cli.analysis_commands",
 )
@@ -72,10 +73,10 @@ def cmd_kernels_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_process(args: argparse.Namespace) -> int:
-    from ..core.estimator import config_from_args
     from ..io.process import format_summary, predict, write_predictions_csv
     from ..io.readers import read_recording
     from .bag_commands import finish_process
+    from .estimator_args import config_from_args
 
     lib = load_library(args.kernels)
     options = {"rate_hz": lib.sample_rate_hz}
@@ -211,8 +212,8 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--quiet", "-q", action="store_true", help="no summary on stdout")
     proc.add_argument("--save-adapted", metavar="LIB", help="with --adapt-rate > 0: write the personalised kernel "
                       "library (.yaml or .npz) at the end")
-    from ..core.estimator import add_estimator_arguments
     from .bag_commands import add_process_options
+    from .estimator_args import add_estimator_arguments
 
     add_process_options(proc)
     add_estimator_arguments(proc)
@@ -250,6 +251,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except GaitEstimatorError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except ImportError as exc:  # an optional dependency: name the extra that installs it
+        extra = missing_extra(exc)
+        if extra is None:
+            raise
+        print(f"{PROG} {args.command} {extra}", file=sys.stderr)
         return 2
     except BrokenPipeError:
         return 0

@@ -1,5 +1,5 @@
 """``gait-estimator`` subcommands for rosbag2 recordings: ``play``, ``convert``, ``bench-bag``,
-and the bag options of ``process`` (``--topic``, ``--joint-names``, ``--input-units``,
+``repair``, and the bag options of ``process`` (``--topic``, ``--joint-names``, ``--input-units``,
 ``--max-gap``, ``--out-bag``, ``--storage``).
 
 Importing this module imports neither rclpy nor rosbags (``play`` imports rclpy when it runs).
@@ -176,6 +176,23 @@ def cmd_play(args: argparse.Namespace) -> int:
 
 
 # ---------------------------------------------------------------------------------------------
+# repair
+
+
+def cmd_repair(args: argparse.Namespace) -> int:
+    from ..io.bag_repair import repair_bag
+
+    result = repair_bag(args.bag, args.out)
+    topics = ", ".join(f"{t} {n}" for t, n in sorted(result.counts.items()))
+    print(f"wrote {result.out} ({result.storage}, {result.messages} messages: {topics})")
+    for topic in result.skipped_topics:
+        print(f"note: not copied: {topic} (message type unknown to the ROS 2 Jazzy type store)")
+    if not result.recovered:
+        print(f"note: {args.bag} was intact; the copy holds the same messages")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
 # bench-bag
 
 
@@ -247,7 +264,7 @@ def cmd_bench_bag(args: argparse.Namespace) -> int:
 
 
 def add_commands(sub: Any) -> None:
-    """Add ``convert``, ``play`` and ``bench-bag`` to the ``gait-estimator`` subparsers."""
+    """Add ``convert``, ``play``, ``repair`` and ``bench-bag`` to the ``gait-estimator`` subparsers."""
     conv = sub.add_parser(
         "convert", help="convert a recording CSV to a rosbag2 bag (--out-bag) or a bag topic to a CSV (--out)",
         description="CSV -> bag: one message per sample, stamped from the CSV time (first sample at --start-time). "
@@ -301,6 +318,16 @@ def add_commands(sub: Any) -> None:
     )
     play.add_argument("--qos-depth", type=int, default=1000, help="publisher history depth, reliable (default %(default)s)")
     play.set_defaults(func=cmd_play)
+
+    rep = sub.add_parser(
+        "repair", help="write a complete, indexed copy of a cut or damaged bag (like ros2 bag reindex)",
+        description="Reads every complete message of BAG (a cut .mcap, a .db3 with an unfinished transaction, a "
+        "directory whose metadata.yaml is missing or wrong) and writes them to a new bag with metadata.yaml and "
+        "summary, same storage. The original is never modified; an existing output is never overwritten.",
+    )
+    rep.add_argument("bag", help="bag directory, .mcap or .db3 file")
+    rep.add_argument("--out", "-o", metavar="DIR", help="new bag directory (default: BAG_repaired beside BAG)")
+    rep.set_defaults(func=cmd_repair)
 
     b = sub.add_parser("bench-bag", help="measure offline bag processing throughput (samples/s)")
     b.add_argument("source", help="bag, or a CSV that is first converted to a temporary bag")

@@ -1,4 +1,4 @@
-"""``gait-estimator demo`` and ``gait-estimator bench-node``: the ROS 2 node at work.
+"""``gait-estimator demo``: the ROS 2 node at work (``bench-node`` is in bench_node.py).
 
 Both start ``estimator_node`` as a child process and talk to it over real DDS restricted to
 this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, a domain ID of their own). rclpy is
@@ -8,12 +8,8 @@ imported only when a command runs, so the offline CLI works without ROS.
 from __future__ import annotations
 
 import argparse
-import json
-import math
-import os
 import signal
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -23,52 +19,26 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import choice_list, positive_float, positive_int, prepare_output
+from .args import positive_float
 
 DEMO_DOMAIN_ID = 77
-BENCH_DOMAIN_ID = 78
-DEFAULT_RATES = (500, 1000, 1500, 2000, 3000, 4000, 6000, 8000)
-KEEP_UP_MS = 10.0
-"""bench-node: a rate is sustained only if the median input->estimate latency stays below this."""
 
 
-def _domain_id(text: str) -> int:
+def domain_id_arg(text: str) -> int:
     v = int(text)
     if not 0 <= v <= 232:
         raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
     return v
 
 
-def _priority(text: str) -> int:
-    from ..ros.priority import MAX_PRIORITY
-
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer 0..{MAX_PRIORITY}, got {text!r}") from None
-    if not 0 <= v <= MAX_PRIORITY:
-        raise argparse.ArgumentTypeError(f"SCHED_FIFO priorities are 1..{MAX_PRIORITY} (0 = as started), got {text}")
-    return v
-
-
-def _rates(text: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated rates in Hz, got {text!r}") from None
-    if not values or any(not (math.isfinite(v) and v > 0) for v in values):
-        raise argparse.ArgumentTypeError(f"expected positive rates, got {text!r}")
-    return values
-
-
-def _start_node(domain_id: int, kernels: str, extra_ros_args: list[str], node_cmd: str | None) -> Any:
+def start_node(domain_id: int, kernels: str, extra_ros_args: list[str], node_cmd: str | None) -> Any:
     from ..ros.node_client import NodeProcess, local_ros_environment, node_command
 
     ros_args = ["-p", f"kernels:={kernels}", *extra_ros_args]
     return NodeProcess(node_command(ros_args, node_cmd), local_ros_environment(domain_id))
 
 
-def _wait_node(client: Any, node: Any, timeout_s: float) -> None:
+def wait_node(client: Any, node: Any, timeout_s: float) -> None:
     deadline = time.monotonic() + timeout_s
     while not client.wait_for_node(timeout_s=0.2, settle_s=0.5):
         if node.poll() is not None:
@@ -78,7 +48,7 @@ def _wait_node(client: Any, node: Any, timeout_s: float) -> None:
             raise GaitEstimatorError(f"estimator_node did not connect within {timeout_s:g} s")
 
 
-def _percentiles(values_ms: np.ndarray) -> dict[str, float]:
+def percentiles(values_ms: np.ndarray) -> dict[str, float]:
     if values_ms.size == 0:
         return {}
     p50, p90, p99 = np.percentile(values_ms, [50, 90, 99])
@@ -89,12 +59,12 @@ def _percentiles(values_ms: np.ndarray) -> dict[str, float]:
 # demo
 
 
-def cmd_demo(args: argparse.Namespace) -> int:
+def _demo_recording(args: argparse.Namespace) -> tuple[Path, Any, Any]:
+    """(path, library, recording slice) of ``demo``'s arguments; one-line errors."""
     from ..io.library_io import load_library
-    from ..io.process import Predictions, format_summary, predict
     from ..io.readers import read_recording
-    from ..io.recording import Recording
     from ..io.resources import DEMO_RECORDING, data_path
+
     try:
         path = Path(args.recording) if args.recording else data_path(DEMO_RECORDING)
     except FileNotFoundError as exc:
@@ -105,20 +75,82 @@ def cmd_demo(args: argparse.Namespace) -> int:
     rec = read_recording(path, rate_hz=lib.sample_rate_hz).slice(args.start, args.stop)
     if len(rec) == 0:
         raise GaitEstimatorError(f"{path}: no samples in the selected range")
+    return path, lib, rec
+
+
+def _echo(client: Any, echo_every: int) -> None:
+    """Print mode and phase messages as ``ros2 topic echo`` would: 1 in ``echo_every``, and
+    every mode change."""
+    state = {"mode": None, "n_mode": 0, "n_phase": 0}
+
+    def on_mode(mode: str) -> None:
+        state["n_mode"] += 1
+        changed = mode != state["mode"]
+        if changed or state["n_mode"] % echo_every == 0:
+            print(f"mode: data: {mode}" + ("   <- mode change" if changed and state["mode"] else ""), flush=True)
+        state["mode"] = mode
+
+    def on_phase(phase: float) -> None:
+        state["n_phase"] += 1
+        if state["n_phase"] % echo_every == 0:
+            print(f"phase: data: {phase:.4f}", flush=True)
+
+    client.on_mode, client.on_phase = on_mode, on_phase
+
+
+def _demo_summary(client: Any, path: Path, lib: Any, rec: Any, stamps: np.ndarray, sent: np.ndarray,
+                  wall: float, diag: dict[str, str] | None) -> bool:
+    """Print what the node published against offline ``process``; True if every answered sample
+    has the offline mode."""
+    from ..io.process import Predictions, format_summary, predict
+    from ..io.recording import Recording
+
+    got = client.received
+    stamp_index = {int(s): i for i, s in enumerate(stamps)}
+    idx = np.array([stamp_index.get(s, -1) for s in got.estimate_stamp_ns], dtype=np.int64)
+    live = Predictions(rec.time_s[idx], np.asarray(rec.index)[idx], got.trace(lib.mode_names))
+    print()
+    print("summary of what the node published:")
+    print(format_summary(live, lib, f"{path.name} via estimator_node"))
+    print(
+        f"sent {len(rec)} samples in {wall:.1f} s; received {client.estimate_count} estimates, "
+        f"{client.mode_count} mode and {client.phase_count} phase messages"
+    )
+    answered = Recording(time_s=rec.time_s[idx], angles_deg=rec.angles_deg[idx], index=np.asarray(rec.index)[idx])
+    offline = predict(answered, lib).trace
+    same = int((offline.mode_index == live.trace.mode_index).sum())
+    print(f"same mode as offline 'gait-estimator process' on the same samples: {same}/{idx.size}")
+    if idx.size < len(rec):
+        missing = np.setdiff1d(np.arange(len(rec)), idx)
+        print(f"{len(rec) - idx.size} input samples were not answered (best-effort input; try --reliable): {missing[:10]}")
+    lat = (np.array(got.estimate_recv_ns, dtype=np.int64) - sent[idx]) / 1e6
+    if lat.size:
+        p = percentiles(lat)
+        print(f"input -> estimate latency: p50 {p['p50_ms']:.2f} ms, p99 {p['p99_ms']:.2f} ms")
+    if diag:
+        rejected = {k[len("rejected_") :]: v for k, v in diag.items() if k.startswith("rejected_") and v != "0"}
+        print(
+            f"node diagnostics: processing time mean {diag['processing_time_mean_ms']} ms, "
+            f"max {diag['processing_time_max_ms']} ms (last second); accepted {diag['samples_accepted']}, "
+            f"rejected {diag['samples_rejected']}" + (f" {rejected}" if rejected else "")
+        )
+    return same == idx.size
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    path, lib, rec = _demo_recording(args)
     rate = (rec.median_rate_hz if len(rec) > 1 else lib.sample_rate_hz) * args.speed
     due_s = (rec.time_s - rec.time_s[0]) / args.speed  # the recording's own timing
     require_ros()
     from ..ros.node_client import EstimatorClient, use_local_ros
 
     use_local_ros(args.domain_id)
-
-    kernels = lib.path or args.kernels
     print(
         f"starting estimator_node (library '{lib.name}', {len(lib)} modes; ROS_DOMAIN_ID={args.domain_id}, "
         "discovery LOCALHOST)",
         flush=True,
     )
-    node = _start_node(args.domain_id, kernels, [], args.node_cmd)
+    node = start_node(args.domain_id, lib.path or args.kernels, [], args.node_cmd)
     try:
         client = EstimatorClient(args.domain_id, reliable=args.reliable)
     except BaseException:
@@ -126,23 +158,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise
     code = 0
     try:
-        _wait_node(client, node, args.timeout)
+        wait_node(client, node, args.timeout)
         echo_every = max(1, args.echo_every)
-        state = {"mode": None, "n_mode": 0, "n_phase": 0}
-
-        def on_mode(mode: str) -> None:
-            state["n_mode"] += 1
-            changed = mode != state["mode"]
-            if changed or state["n_mode"] % echo_every == 0:
-                print(f"mode: data: {mode}" + ("   <- mode change" if changed and state["mode"] else ""), flush=True)
-            state["mode"] = mode
-
-        def on_phase(phase: float) -> None:
-            state["n_phase"] += 1
-            if state["n_phase"] % echo_every == 0:
-                print(f"phase: data: {phase:.4f}", flush=True)
-
-        client.on_mode, client.on_phase = on_mode, on_phase
+        _echo(client, echo_every)
         print(
             f"streaming {len(rec)} samples of {path.name} into segment_angles (sensor_msgs/JointState, rad) "
             f"at {rate:.0f} Hz (x{args.speed:g}, recorded timing); echoing 1 in {echo_every} mode/phase messages "
@@ -157,38 +175,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         wall = time.monotonic() - t0
         diag = client.latest_diagnostics(timeout_s=2.5)
         stop_code = node.stop(signal.SIGINT)
-
-        got = client.received
-        stamp_index = {int(s): i for i, s in enumerate(stamps)}
-        idx = np.array([stamp_index.get(s, -1) for s in got.estimate_stamp_ns], dtype=np.int64)
-        live = Predictions(rec.time_s[idx], np.asarray(rec.index)[idx], got.trace(lib.mode_names))
-        print()
-        print("summary of what the node published:")
-        print(format_summary(live, lib, f"{path.name} via estimator_node"))
-        print(
-            f"sent {len(rec)} samples in {wall:.1f} s; received {client.estimate_count} estimates, "
-            f"{client.mode_count} mode and {client.phase_count} phase messages"
-        )
-        answered = Recording(time_s=rec.time_s[idx], angles_deg=rec.angles_deg[idx], index=np.asarray(rec.index)[idx])
-        offline = predict(answered, lib).trace
-        same = int((offline.mode_index == live.trace.mode_index).sum())
-        print(f"same mode as offline 'gait-estimator process' on the same samples: {same}/{idx.size}")
-        if idx.size < len(rec):
-            missing = np.setdiff1d(np.arange(len(rec)), idx)
-            print(f"{len(rec) - idx.size} input samples were not answered (best-effort input; try --reliable): {missing[:10]}")
-        if same != idx.size:
+        if not _demo_summary(client, path, lib, rec, stamps, sent, wall, diag):
             code = 1
-        lat = (np.array(got.estimate_recv_ns, dtype=np.int64) - sent[idx]) / 1e6
-        if lat.size:
-            p = _percentiles(lat)
-            print(f"input -> estimate latency: p50 {p['p50_ms']:.2f} ms, p99 {p['p99_ms']:.2f} ms")
-        if diag:
-            rejected = {k[len("rejected_") :]: v for k, v in diag.items() if k.startswith("rejected_") and v != "0"}
-            print(
-                f"node diagnostics: processing time mean {diag['processing_time_mean_ms']} ms, "
-                f"max {diag['processing_time_max_ms']} ms (last second); accepted {diag['samples_accepted']}, "
-                f"rejected {diag['samples_rejected']}" + (f" {rejected}" if rejected else "")
-            )
         print(f"estimator_node stopped with SIGINT: exit code {stop_code}")
         if stop_code != 0:
             code = 1
@@ -202,387 +190,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 # ---------------------------------------------------------------------------------------------
-# bench-node
-
-
-EXECUTORS = ("events", "single_threaded")
-"""Values of estimator_node's ``executor`` parameter (gait_estimator.ros.node.EXECUTORS)."""
-OUTPUT_SETS = ("estimate", "all")
-"""bench-node --outputs: the bench subscribes to ``estimate`` only (like a controller), or to
-``mode``, ``phase``, ``sse`` and ``estimate`` (the node publishes all four per sample)."""
-
-
-def _stats_ms(values_ms: np.ndarray) -> dict[str, float]:
-    if values_ms.size == 0:
-        return {}
-    p50, p99 = np.percentile(values_ms, [50, 99])
-    return {"mean_ms": float(values_ms.mean()), "p50_ms": float(p50), "p99_ms": float(p99)}
-
-
-def _clock_offset_ns() -> int:
-    """time.time_ns() - time.perf_counter_ns(), from the closest of a few back-to-back readings."""
-    best = None
-    for _ in range(20):
-        a = time.perf_counter_ns()
-        w = time.time_ns()
-        b = time.perf_counter_ns()
-        if best is None or b - a < best[0]:
-            best = (b - a, w - (a + b) // 2)
-    assert best is not None
-    return best[1]
-
-
-def _profile(got: Any, stamps: np.ndarray, sent_wall: np.ndarray, recv_wall: np.ndarray) -> dict[str, Any]:
-    """Where the time of one latency run went, per answered sample (see bench_node)."""
-    from ..ros.node import PROFILE_COLUMNS
-
-    if not got.profile:
-        return {"error": "no ~/profile data from the node"}
-    rows = np.concatenate(got.profile)
-    col = {c: i for i, c in enumerate(PROFILE_COLUMNS)}
-    prof_stamp = rows[:, col["stamp_sec"]].astype(np.int64) * 1_000_000_000 + rows[:, col["stamp_nanosec"]].astype(np.int64)
-    start = rows[:, col["start_sec"]].astype(np.int64) * 1_000_000_000 + rows[:, col["start_nanosec"]].astype(np.int64)
-    by_stamp = {int(st): k for k, st in enumerate(prof_stamp)}
-    index = {int(st): i for i, st in enumerate(stamps)}
-    est_stamp = np.array(got.estimate_stamp_ns, dtype=np.int64)
-    dds = np.array(got.estimate_dds_ns, dtype=np.int64)
-    src = np.array(got.estimate_source_ns, dtype=np.int64)
-    pairs = [(j, index[int(st)], by_stamp[int(st)]) for j, st in enumerate(est_stamp) if int(st) in index and int(st) in by_stamp]
-    if not pairs:
-        return {"error": "no answered sample found in the node's ~/profile"}
-    j, i, k = (np.array(v, dtype=np.int64) for v in zip(*pairs, strict=True))
-    est_ns = rows[k, col["estimator_ns"]]
-    pub_ns = rows[k, col["publish_ns"]]
-    stages = {
-        "dds_in_and_executor": (start[k] - sent_wall[i]) / 1e6,
-        "estimator": est_ns / 1e6,
-        "publish": pub_ns / 1e6,
-        "dds_out": (dds[j] - src[j]) / 1e6,
-        "bench_callback": (recv_wall[j] - dds[j]) / 1e6,
-        "total_to_dds": (dds[j] - sent_wall[i]) / 1e6,
-        "total_to_callback": (recv_wall[j] - sent_wall[i]) / 1e6,
-    }
-    return {"samples": len(pairs), "stages": {name: _stats_ms(v) for name, v in stages.items()}}
-
-
-PROFILE_LABELS = {
-    "dds_in_and_executor": "input publish -> node starts handling it (DDS in, executor wake-up, take)",
-    "estimator": "node: angle extraction, stamp checks, estimator update",
-    "publish": "node: publishing (count queries, filling, publish calls)",
-    "dds_out": "estimate written by the node -> bench's DDS reader (DDS out)",
-    "bench_callback": "bench's DDS reader -> bench's Python callback (bench executor)",
-    "total_to_dds": "total: input publish -> estimate at the bench's DDS reader",
-    "total_to_callback": "total: input publish -> bench's callback (the latency above)",
-}
-
-
-def _bench_variant(
-    lib: Any,
-    kernels: str,
-    executor: str,
-    outputs: str,
-    latency_samples: int,
-    rate_hz: float,
-    rates: list[float] | tuple[float, ...],
-    rate_seconds: float,
-    domain_id: int,
-    node_cmd: str | None,
-    profile: bool,
-    throughput: bool,
-    log: Any,
-    preset: str = "default",
-    thread_priority: int = 0,
-) -> dict[str, Any]:
-    from ..analysis.bench import synthetic_walk
-    from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
-    from ..ros.node import NODE_NAME
-    from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient, publishing_costs_us
-
-    topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
-    priority = ["-p", f"thread_priority:={thread_priority}"] if thread_priority else []
-    node = _start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}", *priority], node_cmd)
-    try:
-        client = EstimatorClient(
-            domain_id,
-            reliable=True,
-            record=False,
-            outputs=(*topics, DIAGNOSTICS_TOPIC),
-            profile_topic=f"/{NODE_NAME}/profile" if profile else None,
-        )
-    except BaseException:
-        node.close()
-        raise
-    out: dict[str, Any] = {"executor": executor, "outputs": outputs, "node_cmd": node.cmd}
-    next_stamp = [time.time_ns()]
-
-    def node_received(at_least: int = 0) -> int:
-        """The node's samples_received from a report newer than now; up to 3 s for one that
-        counts ``at_least`` (a report composed before the last answered sample can arrive after
-        its estimate: the topics travel separately)."""
-        deadline = time.monotonic() + 3.0
-        d = client.latest_diagnostics(timeout_s=3.0)
-        while d is not None and int(d["samples_received"]) < at_least and time.monotonic() < deadline:
-            d = client.latest_diagnostics(timeout_s=max(deadline - time.monotonic(), 0.0)) or d
-        if d is None:
-            raise GaitEstimatorError("no diagnostics from estimator_node")
-        return int(d["samples_received"])
-
-    def run(n: int, rate: float, with_profile: bool = False) -> dict[str, Any]:
-        x = np.radians(synthetic_walk(lib, n, seed=n))
-        period = int(1e9 / lib.sample_rate_hz)  # stamps keep the library's time base
-        stamps = next_stamp[0] + period * np.arange(1, n + 1, dtype=np.int64)
-        next_stamp[0] = int(stamps[-1])
-        before = node_received()
-        n_diag = len(client.received.diagnostics)
-        got = client.received
-        got.clear()
-        first = client.estimate_count
-        offset = _clock_offset_ns()
-        sent = client.stream(x, stamps, rate)
-        achieved = (n - 1) / max((sent[-1] - sent[0]) / 1e9, 1e-9) if n > 1 else rate
-        last, last_change = client.estimate_count, time.monotonic()
-        while client.estimate_count - first < n and time.monotonic() - last_change < 0.5:
-            client.spin_once(0.05)
-            if client.estimate_count != last:
-                last, last_change = client.estimate_count, time.monotonic()
-        answered_now = client.estimate_count - first
-        processed = node_received(at_least=before + answered_now)
-        if with_profile:  # the rows of the last samples come with the next diagnostics period
-            client.latest_diagnostics(timeout_s=3.0)
-            client.spin_for(0.2)
-        processed -= before
-        index = {int(s): i for i, s in enumerate(stamps)}
-        idx = np.array([index.get(s, -1) for s in got.estimate_stamp_ns], dtype=np.int64)
-        ok = idx >= 0
-        recv = np.array(got.estimate_recv_ns, dtype=np.int64)
-        lat = (recv[ok] - sent[idx[ok]]) / 1e6
-        dds_lat = (np.array(got.estimate_dds_ns, dtype=np.int64)[ok] - (sent[idx[ok]] + offset)) / 1e6
-        busy = [d for d in client.received.diagnostics[n_diag:] if float(d["input_rate_hz"]) > 0]
-        res: dict[str, Any] = {
-            "rate_hz": rate,
-            "samples": n,
-            "achieved_rate_hz": float(achieved),
-            "node_processed": processed,
-            "input_drops": n - processed,
-            "answered": int(ok.sum()),
-            **_percentiles(lat),
-            **{f"dds_{k}": v for k, v in _percentiles(dds_lat).items()},
-        }
-        if busy:
-            res["node_processing_mean_ms"] = float(np.mean([float(d["processing_time_mean_ms"]) for d in busy]))
-            res["node_processing_max_ms"] = float(max(float(d["processing_time_max_ms"]) for d in busy))
-        if with_profile:
-            res["profile"] = _profile(got, stamps, sent + offset, recv + offset)
-        return res
-
-    label = f"[executor {executor}, outputs {outputs}]"
-    try:
-        _wait_node(client, node, 30.0)
-        run(int(lib.lengths.max()) + 50, rate_hz)  # warm-up: fill the window, first-call costs
-        lt = run(latency_samples, rate_hz, with_profile=profile)
-        out["latency"] = lt
-        log(
-            f"{label} latency at {rate_hz:g} Hz: {lt['samples']} samples, {lt['answered']} answered: "
-            f"p50 {lt.get('p50_ms', math.nan):.3f} ms, p90 {lt.get('p90_ms', math.nan):.3f} ms, "
-            f"p99 {lt.get('p99_ms', math.nan):.3f} ms, max {lt.get('max_ms', math.nan):.3f} ms "
-            f"(to the bench's DDS reader: p50 {lt.get('dds_p50_ms', math.nan):.3f}, "
-            f"p99 {lt.get('dds_p99_ms', math.nan):.3f} ms); node processing "
-            f"mean {lt.get('node_processing_mean_ms', math.nan):.3f} ms, max {lt.get('node_processing_max_ms', math.nan):.3f} ms"
-        )
-        if profile:
-            out["micro_us"] = publishing_costs_us(lib, client.node)
-            stages = lt["profile"].get("stages", {})
-            for name, text in PROFILE_LABELS.items():
-                st = stages.get(name)
-                if st:
-                    log(f"{label}   {text:<76} mean {st['mean_ms']:6.3f}  p50 {st['p50_ms']:6.3f}  p99 {st['p99_ms']:6.3f} ms")
-            if "error" in lt["profile"]:
-                log(f"{label}   profile: {lt['profile']['error']}")
-            log(f"{label}   in this process: " + ", ".join(f"{k} {v:.2f}" for k, v in out["micro_us"].items()))
-        if throughput:
-            steps = []
-            best = 0.0
-            ok = True
-            for rate in sorted(rates):
-                n = max(500, int(rate * rate_seconds))
-                for attempt in (1, 2):  # one retry: the machine is noisy
-                    step = run(n, rate)
-                    step["attempt"] = attempt
-                    keeps_up = step.get("p50_ms", math.inf) < KEEP_UP_MS
-                    ok = step["input_drops"] == 0 and step["achieved_rate_hz"] >= 0.95 * rate and keeps_up
-                    step["sustained"] = ok
-                    steps.append(step)
-                    log(
-                        f"{label} rate {rate:6.0f} Hz (attempt {attempt}): sent {n} at {step['achieved_rate_hz']:6.0f} Hz, "
-                        f"node processed {step['node_processed']}, estimates received {step['answered']}"
-                        + (f", latency p50 {step['p50_ms']:.3f} ms p99 {step['p99_ms']:.3f} ms" if "p50_ms" in step else "")
-                        + (
-                            ""
-                            if ok
-                            else "  <- input drops"
-                            if step["input_drops"]
-                            else "  <- falling behind"
-                            if not keeps_up
-                            else "  <- publisher too slow"
-                        )
-                    )
-                    if ok:
-                        break
-                if not ok:
-                    break
-                best = rate
-            out["throughput"] = {"steps": steps, "max_sustained_rate_hz": best, "rates_tried": sorted(rates)}
-            log(f"{label} highest input rate sustained without drops: {best:g} Hz" + (" (the highest tried)" if ok else ""))
-        out["node_exit_code"] = node.stop(signal.SIGINT)
-    finally:
-        client.close()
-        node.close()
-    return out
-
-
-def bench_node(
-    kernels: str = DEFAULT_LIBRARY,
-    latency_samples: int = 2300,
-    rate_hz: float = 230.0,
-    rates: list[float] | tuple[float, ...] = DEFAULT_RATES,
-    rate_seconds: float = 2.0,
-    domain_id: int = BENCH_DOMAIN_ID,
-    node_cmd: str | None = None,
-    log: Any = print,
-    executors: list[str] | tuple[str, ...] = EXECUTORS,
-    outputs: list[str] | tuple[str, ...] = OUTPUT_SETS,
-    profile: bool = False,
-    preset: str = "default",
-    modes: int | None = None,
-    thread_priority: int = 0,
-) -> dict[str, Any]:
-    """Measure estimator_node (with estimator preset ``preset``) in a child process over DDS on this machine, once per variant
-    (``executors`` x ``outputs``, a fresh node process each). With ``modes``, the node runs a
-    library of that many modes cycled from ``kernels`` (``KernelLibrary.replicated``, as
-    ``gait-estimator bench --modes``), written to a temporary NPZ. With ``thread_priority`` P > 0
-    the node runs with ``thread_priority: P`` (``cmd_bench_node`` also puts this process under
-    SCHED_FIFO P, as a controller subscribing to the node would run).
-
-    1. Latency: ``latency_samples`` inputs at ``rate_hz``; latency = arrival of the ``estimate``
-       message carrying an input's stamp in the bench's callback - publication of that input
-       (same clock, this process); ``dds_*``: arrival at the bench's DDS reader instead (the
-       message info's ``received_timestamp``), i.e. without the bench's own executor.
-    2. Throughput (variants with outputs ``estimate``): for each rate in ``rates`` (ascending),
-       ``rate_seconds`` of input; sustained = the node processed every input (its diagnostics
-       ``samples_received``, so nothing was lost in its best-effort input queue), the input went
-       out at >= 95% of the requested rate, and the median latency stayed below KEEP_UP_MS (no
-       growing backlog). Stops at the first rate that fails twice.
-    3. With ``profile``: the latency run's time split per sample (node's ``~/profile`` topic and
-       the message info of ``estimate``; see PROFILE_LABELS), and the per-call costs of the
-       publishing levers in this process.
-
-    Input: JointState (rad) of synthetic strides of the library's kernels with noise, stamped on
-    the library's time base, published reliably; this process subscribes to ``estimate`` (like a
-    controller) or to all four outputs, and to ``/diagnostics``. The report's top-level
-    ``latency``/``throughput`` are the first variant's (by default the node's default executor,
-    ``estimate`` only).
-    """
-    from ..io.library_io import load_library, save_library
-
-    lib = load_library(kernels)
-    kernels = str(lib.path or kernels)
-    with tempfile.TemporaryDirectory(prefix="gait_estimator_bench_") as tmp:
-        if modes is not None:
-            lib = lib.replicated(modes)
-            kernels = str(save_library(lib, Path(tmp) / f"{lib.name}_{modes}.npz"))
-        return _bench_node(lib, kernels, latency_samples, rate_hz, rates, rate_seconds, domain_id, node_cmd, log,
-                           executors, outputs, profile, preset, thread_priority)
-
-
-def _bench_node(
-    lib: Any, kernels: str, latency_samples: int, rate_hz: float, rates: Any, rate_seconds: float, domain_id: int,
-    node_cmd: str | None, log: Any, executors: Any, outputs: Any, profile: bool, preset: str, thread_priority: int = 0,
-) -> dict[str, Any]:
-    from ..analysis.bench import machine_info
-    from ..ros.node_client import use_local_ros
-
-    use_local_ros(domain_id)
-    report: dict[str, Any] = {
-        "machine": machine_info(),
-        "load_average_before": list(os.getloadavg()),
-        "library": lib.name,
-        "modes": len(lib),
-        "domain_id": domain_id,
-        "preset": preset,
-        "thread_priority": thread_priority,
-        "variants": [],
-    }
-    for executor in executors:
-        for out in outputs:
-            v = _bench_variant(
-                lib, kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
-                node_cmd, profile, throughput=out == "estimate", log=log, preset=preset, thread_priority=thread_priority,
-            )
-            report["variants"].append(v)
-    first = report["variants"][0]
-    report["node_cmd"] = first["node_cmd"]
-    report["executor"], report["outputs"] = first["executor"], first["outputs"]
-    report["latency"] = first["latency"]
-    if "throughput" in first:
-        report["throughput"] = first["throughput"]
-    codes = [v["node_exit_code"] for v in report["variants"]]
-    report["node_exit_code"] = next((c for c in codes if c != 0), 0)
-    report["load_average_after"] = list(os.getloadavg())
-    return report
-
-
-def cmd_bench_node(args: argparse.Namespace) -> int:
-    require_ros()
-    if args.json:  # before minutes of measuring, not after
-        prepare_output(args.json, "--json")
-    if args.thread_priority:  # this process too, as the controller subscribing to the node would run
-        from ..ros.priority import set_process_priority
-
-        try:
-            set_process_priority(args.thread_priority)
-        except OSError as exc:
-            raise GaitEstimatorError(f"--thread-priority {args.thread_priority}: {exc}") from None
-    report = bench_node(
-        kernels=args.kernels,
-        latency_samples=args.samples,
-        rate_hz=args.rate,
-        rates=args.rates,
-        rate_seconds=args.seconds,
-        domain_id=args.domain_id,
-        node_cmd=args.node_cmd,
-        executors=args.executor,
-        outputs=args.outputs,
-        profile=args.profile,
-        preset=args.preset,
-        modes=args.modes,
-        thread_priority=args.thread_priority,
-    )
-    m = report["machine"]
-    print(f"machine: {m['processor']}, {m['cpus']} CPUs ({m['cpus_allowed']} allowed), Python {m['python']}; "
-          f"library {report['library']} ({report['modes']} modes); load average before "
-          f"{report['load_average_before'][0]:.2f}, after {report['load_average_after'][0]:.2f}")
-    print(f"summary (latency at {args.rate:g} Hz, p50 / p99 ms, to the bench's callback | to its DDS reader; "
-          "highest rate):")
-    for v in report["variants"]:
-        lt = v["latency"]
-        tp = v.get("throughput")
-        print(
-            f"  executor {v['executor']:<15} outputs {v['outputs']:<8} "
-            f"{lt.get('p50_ms', math.nan):6.3f} / {lt.get('p99_ms', math.nan):6.3f} | "
-            f"{lt.get('dds_p50_ms', math.nan):6.3f} / {lt.get('dds_p99_ms', math.nan):6.3f}"
-            + (f"; {tp['max_sustained_rate_hz']:g} Hz" if tp else "")
-        )
-    if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
-    return 0 if report.get("node_exit_code") == 0 else 1
-
-
-# ---------------------------------------------------------------------------------------------
 
 
 def add_commands(sub: Any) -> None:
-    """Register ``demo`` and ``bench-node`` on the ``gait-estimator`` subparsers."""
+    """Register ``demo`` on the ``gait-estimator`` subparsers."""
     d = sub.add_parser(
         "demo",
         help="run estimator_node on a recording streamed over ROS 2 and echo mode/phase",
@@ -603,41 +214,7 @@ def add_commands(sub: Any) -> None:
     d.add_argument("--echo-every", type=int, default=23, metavar="N",
                    help="print every Nth mode/phase message, and every mode change (default 23, ~10 lines/s; 1 = all)")
     d.add_argument("--reliable", action="store_true", help="publish the input reliably (default best effort)")
-    d.add_argument("--domain-id", type=_domain_id, default=DEMO_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
+    d.add_argument("--domain-id", type=domain_id_arg, default=DEMO_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
     d.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the node to connect")
     d.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
     d.set_defaults(func=cmd_demo)
-
-    b = sub.add_parser(
-        "bench-node",
-        help="benchmark estimator_node over ROS 2: latency and highest sustained input rate",
-        description="Start estimator_node, measure input->estimate latency at --rate, then the highest of --rates "
-        "at which every input is answered. LOCALHOST discovery, its own ROS_DOMAIN_ID.",
-    )
-    b.add_argument("--kernels", "-k", default=DEFAULT_LIBRARY, metavar="LIB", help="kernel library (default %(default)s)")
-    b.add_argument("--rate", type=positive_float, default=230.0, help="rate of the latency run, Hz (default 230)")
-    b.add_argument("--samples", type=positive_int, default=2300, help="samples in the latency run (default 2300 = 10 s)")
-    b.add_argument("--rates", type=_rates, default=list(DEFAULT_RATES),
-                   help="input rates to try, Hz (default " + ",".join(str(r) for r in DEFAULT_RATES) + ")")
-    b.add_argument("--seconds", type=positive_float, default=2.0, help="duration of each rate step (default 2 s)")
-    b.add_argument("--domain-id", type=_domain_id, default=BENCH_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
-    b.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
-    b.add_argument("--executor", type=choice_list(EXECUTORS), default=list(EXECUTORS), metavar="LIST",
-                   help="node executors to measure, side by side (default " + ",".join(EXECUTORS) + "; the first "
-                   "one's numbers are the report's top-level latency/throughput)")
-    b.add_argument("--outputs", type=choice_list(OUTPUT_SETS), default=list(OUTPUT_SETS), metavar="LIST",
-                   help="what the bench subscribes to: estimate (like a controller) and/or all (mode, phase, sse, "
-                   "estimate; latency only); default " + ",".join(OUTPUT_SETS))
-    b.add_argument("--preset", choices=("default", "paper"), default="default",
-                   help="the node's estimator preset (default: default)")
-    b.add_argument("--modes", type=positive_int, metavar="M",
-                   help="run the node with a library of M modes cycled from --kernels (as 'bench --modes'; "
-                   "default: the library as it is)")
-    b.add_argument("--thread-priority", type=_priority, default=0, metavar="P",
-                   help="run the node with thread_priority P (SCHED_FIFO, 1-99) and the bench process at the same "
-                   "priority, like 'chrt -f P'; needs CAP_SYS_NICE (default 0: as started)")
-    b.add_argument("--profile", action="store_true",
-                   help="split the latency run's time per sample: DDS in + executor, estimator, publish, DDS out, "
-                   "bench callback (from the node's ~/profile topic)")
-    b.add_argument("--json", help="write the report as JSON")
-    b.set_defaults(func=cmd_bench_node)

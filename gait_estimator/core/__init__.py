@@ -1,5 +1,6 @@
 """The algorithm, with no I/O beyond small option files: kernel libraries in memory, the
-matcher (paper Algorithms 1 and 2), resampling, supervision and the estimator pipeline.
+matcher (paper Algorithms 1 and 2), the estimator's stages (gaps, resampling, supervision,
+walking calibration, personalisation), their options and the pipeline.
 
-Imports only numpy/scipy/yaml and itself.
+Imports only numpy, yaml (numba if installed) and itself.
 """

@@ -16,12 +16,15 @@ failing one is skipped, counted by reason):
   stride, or it changed during the stride;
 * ``confidence``: the confidence margin fell below ``min_confidence`` during the stride;
 * ``duration``: the stride (time between two heel strikes of the mode) differs from the length
-  of the kernel variant the matcher chose by more than 10 % (the duration floor of ``train``'s
-  outlier rule);
+  of the kernel variant the matcher chose by more than ``duration_tolerance`` (10 %: the duration
+  floor of ``train``'s outlier rule);
 * ``shape``: its RMS distance from the kernel exceeds the median distance of the mode's recent
-  candidate strides by more than max(3.5 robust sigmas, the median) (``train``'s shape rule,
-  applied to a sliding history of ``HISTORY`` strides); the first ``WARMUP`` candidates of a
-  mode only fill that history.
+  candidate strides by more than max(``shape_sigmas`` robust sigmas, the median) (``train``'s
+  shape rule, applied to a sliding history of ``history`` strides); the first ``warmup``
+  candidates of a mode only fill that history.
+
+``Personaliser`` is the pipeline stage: it keeps the last stride's samples and hands every ended
+stride to ``KernelAdapter``, then the adapted kernel to the matcher.
 """
 
 from __future__ import annotations
@@ -32,33 +35,42 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .channels import N_CHANNELS, Sample
 from .kernels import KernelLibrary, KernelMode, resample_stride
+from .matcher import IncrementalMatcher, StepResult
+from .supervisor import Estimate
 
-DURATION_TOLERANCE = 0.10
-SHAPE_SIGMAS = 3.5
-MAD_TO_SIGMA = 1.4826
-HISTORY = 16
-WARMUP = 3
-MAX_SHIFT = 0.05
+MAD_TO_SIGMA = 1.4826  # median absolute deviation -> standard deviation of a normal distribution
 SKIP_REASONS = ("held", "confidence", "duration", "warmup", "shape")  # keys of KernelAdapter.skipped
 
 
 @dataclass(frozen=True)
-class AdaptOptions:
+class AdaptParams:
     """Personalisation settings.
 
     Attributes:
         rate: Weight of one accepted stride in the kernel update, (0, 1]; 0 = off.
         min_confidence: Lowest confidence margin allowed during an adapted stride.
         max_step_deg: Per-sample clip of (stride - kernel) before weighting, degrees.
+        duration_tolerance: Largest relative difference between a stride's duration and the
+            chosen kernel variant's length.
+        shape_sigmas: Robust sigmas beyond the median distance that make a stride an outlier.
+        history: Candidate strides per mode kept for the shape rule.
+        warmup: Candidates of a mode that only fill the history.
+        max_shift: Largest alignment shift, fraction of the stride either way.
     """
 
     rate: float = 0.0
     min_confidence: float = 0.2
     max_step_deg: float = 5.0
+    duration_tolerance: float = 0.10
+    shape_sigmas: float = 3.5
+    history: int = 16
+    warmup: int = 3
+    max_shift: float = 0.05
 
 
-def aligned(stride: np.ndarray, kernel: np.ndarray, max_shift: float = MAX_SHIFT) -> np.ndarray:
+def aligned(stride: np.ndarray, kernel: np.ndarray, max_shift: float = 0.05) -> np.ndarray:
     """``stride`` (N, 4) circularly shifted by the whole number of samples (at most
     ``max_shift`` x N either way) that brings it closest (least squares) to ``kernel`` (N, 4).
 
@@ -83,13 +95,13 @@ class KernelAdapter:
         options: Rate and guards.
     """
 
-    def __init__(self, library: KernelLibrary, options: AdaptOptions) -> None:
+    def __init__(self, library: KernelLibrary, options: AdaptParams) -> None:
         self.library = library
         self.options = options
         self.kernels = [m.samples.copy() for m in library.modes]
         self.accepted = np.zeros(len(library), dtype=np.int64)
         self.skipped: Counter = Counter()
-        self._dist: list[deque] = [deque(maxlen=HISTORY) for _ in library.modes]
+        self._dist: list[deque] = [deque(maxlen=options.history) for _ in library.modes]
         self.reset()
 
     def adopt(self, other: KernelAdapter) -> None:
@@ -128,18 +140,18 @@ class KernelAdapter:
             return self._skip("held")
         if self._min_conf < self.options.min_confidence:
             return self._skip("confidence")
-        if abs(samples.shape[0] / expected_samples - 1.0) > DURATION_TOLERANCE:
+        if abs(samples.shape[0] / expected_samples - 1.0) > self.options.duration_tolerance:
             return self._skip("duration")
-        obs = aligned(resample_stride(samples, k.shape[0]), k)
+        obs = aligned(resample_stride(samples, k.shape[0]), k, self.options.max_shift)
         dist = float(np.sqrt(np.mean((obs - k) ** 2)))
         history = self._dist[mode]
         history.append(dist)
-        if len(history) <= WARMUP:
+        if len(history) <= self.options.warmup:
             return self._skip("warmup")
         h = np.asarray(history)
         med = float(np.median(h))
         sigma = MAD_TO_SIGMA * float(np.median(np.abs(h - med)))
-        if dist > med + max(SHAPE_SIGMAS * sigma, med):
+        if dist > med + max(self.options.shape_sigmas * sigma, med):
             return self._skip("shape")
         step = np.clip(obs - k, -self.options.max_step_deg, self.options.max_step_deg)
         self.kernels[mode] = k + self.options.rate * step
@@ -185,3 +197,45 @@ class KernelAdapter:
             "skipped_strides": dict(self.skipped),
         }
         return KernelLibrary(self.library.name, tuple(modes), prov)
+
+
+class Personaliser:
+    """The personalisation stage of the estimator: keeps the samples of the stride in progress
+    (on the library's clock) and, where a tracked stride of the reported mode ends, lets the
+    adapter update that mode's kernel in the matcher.
+
+    Args:
+        library: The library being adapted.
+        params: Rate and guards.
+        matcher: The matcher whose kernels follow the adapted ones.
+    """
+
+    def __init__(self, library: KernelLibrary, params: AdaptParams, matcher: IncrementalMatcher) -> None:
+        self.adapter = KernelAdapter(library, params)
+        self.matcher = matcher
+        self._history = np.zeros((2 * matcher.max_length, N_CHANNELS))  # the last stride, however long
+
+    def observe(self, x: Sample, est: Estimate, result: StepResult) -> None:
+        """Account for the matcher sample ``x`` and its estimate."""
+        adapter, matcher = self.adapter, self.matcher
+        step = matcher.steps - 1  # this sample's number since the window (re)started
+        h = self._history.shape[0]
+        self._history[step % h] = x
+        m = est.mode_index
+        start = adapter.stride_start
+        if est.ready and start is not None and adapter.ends_stride(m, est.phase) and step - start <= h:
+            stride = self._history[np.arange(start, step) % h]
+            variant = 0 if result.variant is None else int(result.variant[m])
+            new = adapter.finish_stride(m, stride, float(matcher.lengths[m * matcher.n_scales + variant]))
+            if new is not None:
+                matcher.set_kernel(m, new)
+        adapter.track(step, m, est.phase, est.held, est.confidence, est.ready)
+
+    def adopt(self, other: Personaliser, same_library: bool) -> None:
+        """Continue from the kernels ``other`` has personalised (``same_library``: its modes
+        are this one's)."""
+        if not same_library or not other.adapter.accepted.sum():
+            return
+        self.adapter.adopt(other.adapter)
+        for m in np.flatnonzero(self.adapter.accepted):  # once per option change, not per sample
+            self.matcher.set_kernel(int(m), self.adapter.kernels[m])

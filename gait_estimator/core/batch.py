@@ -1,14 +1,15 @@
 """Offline processing in bulk: a whole recording through an ``Estimator`` with the results of
-``Estimator.update`` sample by sample, bit for bit, many times faster.
+``Estimator.update`` sample by sample, bit for bit, without a Python step per sample.
 
 The streaming path hands every sample through Python (gap check, resampler, matcher step,
 supervisor, calibrations, an ``Estimate`` object). Here the stamps are checked and the input is
 resampled for the whole recording at once (numpy, the same float operations), the matcher runs
 many steps per compiled call (``compiled.run_steps``), and the supervisor's outputs are computed
 as arrays. Control returns to Python only where the streaming path would do more than that: at a
-heel strike that ends a whole stride (the walking calibrations may act there: the estimator's own
-methods do it), at the matcher's resynchronisation steps, and at gaps (the estimator's reset
-methods). Used by ``run_estimator`` when the options allow it (``batch_supported``); the streaming
+heel strike that ends a whole stride (the walking calibrations may act there:
+``WalkingCalibration.observe`` does it, from the stride tracker's state before that sample), at
+the matcher's resynchronisation steps, and at gaps (the estimator's reset methods). Used by
+``run_estimator`` when the options allow it (``batch_supported``); the streaming
 ``Estimator.update`` stays the reference (test/test_batch.py compares every field).
 """
 
@@ -16,18 +17,16 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from . import compiled
-from .estimator import CALIBRATION_CONFIDENCE, MID_STRIDE, EstimateTrace, _margin_over, _StrideTrack
+from .calibration import _StrideTrack
 from .matcher import StepResult
-from .resample import SNAP
 from .supervisor import Estimate
 
-if TYPE_CHECKING:
-    from .estimator import Estimator
+Estimator = Any  # an estimator.Estimator (not imported: estimator.run_estimator imports this module)
 
 CHUNK_VALUES = 1 << 21
 """Matcher steps per compiled call, at most this many values of the per-mode outputs (M per step)."""
@@ -35,25 +34,22 @@ CHUNK_VALUES = 1 << 21
 
 def batch_supported(estimator: Estimator) -> bool:
     """True when ``estimator``'s options allow bulk processing: the compiled matcher, no
-    supervisor holds, dwell or transitions, no personalisation or stride-start reader."""
+    supervisor holds, dwell or transitions, no personalisation."""
     sup = estimator.supervisor
     return (
         compiled.AVAILABLE
         and estimator.matcher.backend == "numba"
         and sup.min_confidence == 0
-        and sup.min_dwell_samples <= 1
         and sup.min_dwell_s == 0
         and sup.allowed is None
-        and estimator.adapter is None
-        and getattr(estimator, "reader", None) is None
+        and estimator.personaliser is None
     )
 
 
-def run_batch(
-    estimator: Estimator, time_s: np.ndarray, angles_deg: np.ndarray, index: np.ndarray
-) -> EstimateTrace | None:
-    """The trace ``run_estimator`` gives, computed in bulk; None (nothing done) when the options
-    or the input need the streaming path (a bad sample or stamp: it raises where it occurs)."""
+def run_batch(estimator: Estimator, time_s: np.ndarray, angles_deg: np.ndarray) -> dict[str, np.ndarray] | None:
+    """The columns of the trace ``run_estimator`` gives (``EstimateTrace`` fields but mode_names
+    and sample), computed in bulk; None (nothing done) when the options or the input need the
+    streaming path (a bad sample or stamp: it raises where it occurs)."""
     t = np.asarray(time_s, dtype=np.float64).reshape(-1)
     x = np.asarray(angles_deg, dtype=np.float64)
     if not batch_supported(estimator) or x.shape != (t.size, 4) or t.size == 0:
@@ -68,26 +64,24 @@ def run_batch(
     parts = []
     for a, b in segments:  # the resets of Estimator.update, in its order
         if restart[a]:
-            estimator.reset()
+            estimator._restart_window()
             estimator.resets += 1
         if forget[a]:
-            estimator.reset_calibration()
+            estimator.calibration.reset()
             estimator.calibration_resets += 1
         parts.append(_run_segment(estimator, t[a:b], x[a:b]))
-    names = estimator.mode_names
-    cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    return EstimateTrace(mode_names=list(names), sample=np.asarray(index, dtype=np.int64), **cols)
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 def _segments(estimator: Estimator, t: np.ndarray) -> tuple[list[tuple[int, int]], np.ndarray, np.ndarray]:
     """Where ``Estimator.update`` would restart the window (``restart``) or forget the
     calibrations (``forget``): at a sample after a long gap. The stretches between, as (start,
     stop) pairs, and the two flags per sample."""
-    c = estimator.config
+    c = estimator.gaps.params
     prev = np.concatenate([[np.nan if estimator.last_time is None else estimator.last_time], t[:-1]])
     gap = t - prev
     restart = (0 < c.max_gap_s) & (gap > c.max_gap_s)
-    forget = estimator._calibrates & (0 < c.calibration_reset_gap_s) & (gap > c.calibration_reset_gap_s)
+    forget = estimator.calibration.active & (0 < c.calibration_reset_gap_s) & (gap > c.calibration_reset_gap_s)
     bounds = [0, *[int(s) for s in np.flatnonzero(restart | forget) if s > 0], t.size]
     return list(itertools.pairwise(bounds)), restart, forget
 
@@ -107,7 +101,7 @@ def _grid(estimator: Estimator, t: np.ndarray, x: np.ndarray) -> tuple[np.ndarra
         t_in, x_in, lead = t[1:], x[1:], 1
     else:
         t_in, x_in, lead = t, x, 0
-    snap = SNAP / rs.rate_hz
+    snap = rs.snap / rs.rate_hz
     upper = t_in + snap
     if t_in.size:
         count = max(0, math.floor((float(upper[-1]) - rs._t0) * rs.rate_hz) - rs._k + 3)
@@ -136,12 +130,12 @@ def _grid(estimator: Estimator, t: np.ndarray, x: np.ndarray) -> tuple[np.ndarra
 def _run_segment(estimator: Estimator, t: np.ndarray, x: np.ndarray) -> dict[str, np.ndarray]:
     """One gap-free stretch of input through the estimator; the trace's columns."""
     had_last = estimator._last
-    estimator.last_time = float(t[-1])
+    estimator.gaps.last_time = float(t[-1])
     grid_t, grid_x, emitted = _grid(estimator, t, x)
     steps = _match(estimator, grid_t, grid_x)
     if estimator.resampler is None:
         return {**steps, "time_s": t}
-    # Every input sample: the latest grid estimate, restamped (Estimator._restamped).
+    # Every input sample: the latest grid estimate carried forward to it (Estimate.at).
     if had_last is not None:
         steps = {k: np.concatenate([_column_of(had_last, k, v), v]) for k, v in steps.items()}
         g = emitted
@@ -192,11 +186,12 @@ def _match(estimator: Estimator, grid_t: np.ndarray, grid_x: np.ndarray) -> dict
     best, variant, column, window = np.empty((4, g_total), dtype=np.int64)
     ready = np.empty(g_total, dtype=bool)
     scratch_v, scratch_c, scratch_w = np.empty((3, n_modes), dtype=np.int64)
-    tracking = estimator._calibrates or getattr(estimator, "reader", None) is not None
-    near = estimator._near_copies if estimator._near_copies is not None else np.zeros((n_modes, n_modes), dtype=bool)
+    cal = estimator.calibration
+    tracking = cal.active
+    near = cal.near_copies if cal.near_copies is not None else np.zeros((n_modes, n_modes), dtype=bool)
     chunk = max(1, CHUNK_VALUES // max(n_modes, 1))
     g = 0
-    mid_lo, mid_hi = MID_STRIDE
+    mid_lo, mid_hi = cal.params.mid_stride
     run = compiled.run_steps  # one thread: the rows' results do not depend on it; run recordings side by side instead
     while g < g_total:
         track = _track_state(estimator) if tracking else np.zeros(0)
@@ -208,7 +203,8 @@ def _match(estimator: Estimator, grid_t: np.ndarray, grid_x: np.ndarray) -> dict
             mt._e, mt._kernels, mt._ksq, mt.lengths, mt._ring, mt._ring_sq,
             mt._psum_ring, mt._psum, count, d, sq, g, stop,
             mt._decay, mt._lam, mt._lam_w, mt._wsum, mt._wsums,
-            mt._offset, mt._mu, mt._mu_seg, mt._tau, mt._scratch, mt.normalize, mt.n_scales, mt._scale_allowed,
+            mt._offset, mt._mu, mt._mu_seg, mt._tau, mt._scratch, mt._one_pass, mt.normalize, mt.n_scales,
+            mt._scale_allowed,
             mt._active, mt._out_col, mt._out_score,
             sse, phases, best, variant, column, window, scratch_v, scratch_c, scratch_w,
             track, near, mid_lo, mid_hi, mt.max_window,
@@ -217,23 +213,23 @@ def _match(estimator: Estimator, grid_t: np.ndarray, grid_x: np.ndarray) -> dict
         ready[g:done] = count + 1 + np.arange(done - g) >= mt.max_window
         if mt._resync_every and mt._count % mt._resync_every == 0:
             mt._resync()
-        if tracking:
+        if tracking:  # the tracker's state after the last step (before it, when that one ended a stride)
             _store_track(estimator, track)
         if ended:
-            _calibrate(estimator, grid_t, sse, phases, best, variant, column, window, ready, done - 1)
+            _observe(estimator, grid_t, sse, phases, best, variant, column, window, ready, done - 1)
         g = done
     return _supervised(estimator, grid_t, sse, phases, best, variant, window, ready)
 
 
 def _track_state(estimator: Estimator) -> np.ndarray:
-    last = estimator._calib_last
+    last = estimator.calibration._last
     if last is None:
         return np.zeros(5)
     return np.array([1.0, last.mode, last.phase, float(last.passed_mid), float(last.began_in_mode)])
 
 
 def _store_track(estimator: Estimator, track: np.ndarray) -> None:
-    estimator._calib_last = (
+    estimator.calibration._last = (
         _StrideTrack(int(track[1]), float(track[2]), bool(track[3] > 0), bool(track[4] > 0)) if track[0] > 0 else None
     )
 
@@ -256,28 +252,28 @@ def _fit_rms(estimator: Estimator, err: np.ndarray, window: np.ndarray) -> np.nd
     return np.sqrt(per_sample / sup.active_channels)
 
 
-def _calibrate(
+def _observe(
     estimator: Estimator, grid_t: np.ndarray, sse: np.ndarray, phases: np.ndarray, best: np.ndarray,
     variant: np.ndarray, column: np.ndarray, window: np.ndarray, ready: np.ndarray, g: int,
 ) -> None:
     """At a heel strike ending a whole stride (step g, the matcher's latest): the walking
-    calibrations, by the estimator's own code, if the stride was confident."""
+    calibrations' own ``observe`` with that step's estimate (it tests the stride's confidence)."""
     b = int(best[g])
     conf = float(_confidence(sse[g : g + 1], best[g : g + 1])[0])
-    near = estimator._near_copies
-    if (conf if near is None else _margin_over(sse[g], b, ~near[b])) < CALIBRATION_CONFIDENCE:
-        return
     fit = float(_fit_rms(estimator, sse[g : g + 1, b], window[g : g + 1])[0])
     mt = estimator.matcher
     var = np.zeros(mt.n_modes, dtype=np.int64)
     var[b] = variant[g]
     col = np.zeros(mt.n_modes, dtype=np.int64)
     col[b] = column[g]
-    result = StepResult(b, estimator.mode_names[b], float(phases[g, b]), sse[g], phases[g], bool(ready[g]),
-                        np.zeros(mt.n_modes, dtype=np.int64), var if mt.n_scales > 1 else None, col)
-    est = Estimate(float(grid_t[g]), b, estimator.mode_names[b], float(phases[g, b]), bool(ready[g]), sse[g], phases[g],
-                   b, conf, fit, False, math.nan)
-    estimator._calibrate_stride(est, result)
+    win = np.zeros(mt.n_modes, dtype=np.int64)
+    win[b] = window[g]
+    name = estimator.mode_names[b]
+    result = StepResult(b, name, float(phases[g, b]), sse[g], phases[g], bool(ready[g]), win,
+                        var if mt.n_scales > 1 else None, col)
+    est = Estimate(float(grid_t[g]), b, name, float(phases[g, b]), bool(ready[g]), sse[g], phases[g], b, conf, fit,
+                   False, math.nan)
+    estimator.calibration.observe(est, result)
 
 
 def _supervised(

@@ -59,8 +59,8 @@ def step_rows(
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
     decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
-    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray, normalize: bool,
-    n_scales: int, allowed: np.ndarray, active: np.ndarray,
+    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray, one_pass: bool,
+    normalize: bool, n_scales: int, allowed: np.ndarray, active: np.ndarray,
     out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
@@ -76,7 +76,9 @@ def step_rows(
     age-weighted window sums, updated in place; offset: apply the offset penalty (mu (R, 4)
     kernel means, mu_seg (R, 4, Nmax) per-shift age-weighted means of the kernel with age
     weights, tau (2, 4): tolerances and sensor offsets; with decay the window's weight W_a and
-    age-weighted sums stand for W and the sums; scratch (R, Nmax): room for per-shift scores);
+    age-weighted sums stand for W and the sums; scratch (R, Nmax): room for per-shift scores, or
+    one_pass: none, the per-shift scores and their minimum in one pass, the faster once the rows
+    no longer fit the caches, the same results);
     normalize: divide by the window's weight;
     allowed (n_scales,) bool: the time scales a mode may be read at (at least one); active: the
     rows updated and read out (those at allowed scales, or all); the others keep their sums.
@@ -144,19 +146,31 @@ def step_rows(
             t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
             f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
             m0, m1, m2, m3 = mu_seg[r, 0], mu_seg[r, 1], mu_seg[r, 2], mu_seg[r, 3]
-            sr = scratch[r]
-            for j in range(n):  # no loop-carried dependence: vectorised
-                x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
-                g0 = max(abs(x0 - f0) - t0, 0.0)
-                g1 = max(abs(x1 - f1) - t1, 0.0)
-                g2 = max(abs(x2 - f2) - t2, 0.0)
-                g3 = max(abs(x3 - f3) - t3, 0.0)
-                sr[j] = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
-            for j in range(n):
-                v = sr[j]
-                if v < best:
-                    best = v
-                    bj = j
+            if one_pass:  # memory-bound: read mu_seg and e once, write nothing
+                for j in range(n):
+                    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+                    g0 = max(abs(x0 - f0) - t0, 0.0)
+                    g1 = max(abs(x1 - f1) - t1, 0.0)
+                    g2 = max(abs(x2 - f2) - t2, 0.0)
+                    g3 = max(abs(x3 - f3) - t3, 0.0)
+                    v = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
+                    if v < best:
+                        best = v
+                        bj = j
+            else:
+                sr = scratch[r]
+                for j in range(n):  # no loop-carried dependence: vectorised
+                    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+                    g0 = max(abs(x0 - f0) - t0, 0.0)
+                    g1 = max(abs(x1 - f1) - t1, 0.0)
+                    g2 = max(abs(x2 - f2) - t2, 0.0)
+                    g3 = max(abs(x3 - f3) - t3, 0.0)
+                    sr[j] = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
+                for j in range(n):
+                    v = sr[j]
+                    if v < best:
+                        best = v
+                        bj = j
         else:
             for j in range(n):
                 v = er[j]
@@ -247,49 +261,10 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
     return s0, s1, s2, s3
 
 
-@njit(cache=True, nogil=True)
-def reader_step(  # pragma: no cover - compiled
-    err, flat, starts, lengths, scales, steps, x, offset, join, weights, bias, joins
-):
-    """One sample of the stride-start reader (``stride_reader.py``), in place on ``err``
-    (M, S * J): add every (mode, scale, join fraction) row's weighted squared error against its
-    kernel start joined to the heel-strike pose; return the mode whose best row plus ``bias`` is
-    lowest."""
-    best_mode = 0
-    best_value = np.inf
-    nj = joins.shape[0]
-    for m in range(err.shape[0]):
-        n = lengths[m]
-        first = starts[m]
-        mode_min = np.inf
-        for s in range(scales.shape[0]):
-            pos = steps / scales[s]
-            whole = np.floor(pos)
-            f = pos - whole
-            i0 = first + int(whole) % n
-            i1 = first + (int(whole) + 1) % n
-            phi = pos / n
-            for q in range(nj):
-                jf = joins[q]
-                w = 0.5 * (1.0 + np.cos(np.pi * phi / jf)) if phi < jf else 0.0
-                total = 0.0
-                for c in range(4):
-                    r = x[c] - (1.0 - f) * flat[i0, c] - f * flat[i1, c] - offset[c] - w * join[m, c]
-                    total += weights[c] * r * r
-                value = err[m, s * nj + q] + total
-                err[m, s * nj + q] = value
-                if value < mode_min:
-                    mode_min = value
-        if mode_min + bias[m] < best_value:
-            best_value = mode_min + bias[m]
-            best_mode = m
-    return best_mode
-
-
 def run_steps(  # pragma: no cover - compiled
     e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
     decay, lam, lam_w, wsum, wsums,
-    offset, mu, mu_seg, tau, scratch, normalize, n_scales, allowed, active, out_col, out_score,
+    offset, mu, mu_seg, tau, scratch, one_pass, normalize, n_scales, allowed, active, out_col, out_score,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
@@ -298,16 +273,16 @@ def run_steps(  # pragma: no cover - compiled
     samples on. Per step: every mode's score and phase into out_sse/out_phase (G, M), the best
     mode and its variant, column and window.
 
-    The walking calibrations' stride tracker (``Estimator._confident_stride_end`` without its
-    confidence test) runs along on the best mode and its phase: ``track`` = (valid, mode, phase,
+    The walking calibrations' stride tracker (``WalkingCalibration._confident_stride_end`` without
+    its confidence test) runs along on the best mode and its phase: ``track`` = (valid, mode, phase,
     passed_mid, began_in_mode) as floats, ``near`` (M, M) the near copies; the steps stop after a
-    heel strike that ends a whole stride, where the calibrations may act. Returns the step after
-    the last done and whether it ended such a stride."""
+    heel strike that ends a whole stride, where the calibrations may act, with ``track`` as it was
+    before that step. Returns the step after the last done and whether it ended such a stride."""
     for g in range(start, stop):
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
         b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
-                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, tau, scratch, normalize,
+                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, tau, scratch, one_pass, normalize,
                  n_scales, allowed, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
         best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
         if track.shape[0] == 0:
@@ -318,14 +293,14 @@ def run_steps(  # pragma: no cover - compiled
         passed_mid = same and track[3] > 0.0
         whole = same and track[4] > 0.0
         midway = (mid_lo <= phase < mid_hi) or (passed_mid and not wrapped)
+        if wrapped and whole and passed_mid:  # the tracker's state stays the one before this step
+            return g + 1, True
         if i + 1 >= ready_from:
             track[0], track[1], track[2] = 1.0, b, phase
             track[3] = 1.0 if midway else 0.0
             track[4] = 1.0 if wrapped or whole else 0.0
         else:
             track[0] = 0.0
-        if wrapped and whole and passed_mid:
-            return g + 1, True
     return stop, False
 
 

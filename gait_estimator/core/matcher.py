@@ -115,9 +115,8 @@ class IncrementalMatcher(_MatcherBase):
         self.parallel = large and cpus > 1
         if large:  # beyond the caches the step is memory-bound: stream float32 kernels, half the traffic
             self._kernels = self._kernels.astype(np.float32)
-        if compiled.AVAILABLE:
-            self._compiled_step = compiled.step_rows_parallel if self.parallel else compiled.step_rows
         self._active = self._rows  # rows the compiled step updates (the scale band's)
+        self._choose_step()
         self._synced = np.zeros(r, dtype=np.int64)  # outside the band: the step count its sums are exact at
         self._ring_sq = np.zeros(self.max_window)
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
@@ -143,6 +142,11 @@ class IncrementalMatcher(_MatcherBase):
         self.reset()
         if self.backend == "numba":  # compile (or load the cached code) now, not at the first sample
             self._step_numba(0.0, 0.0, 0.0, 0.0, 0.0)
+            if self.parallel:  # and the one-thread step that a narrow scale band uses
+                self._compiled_step, chosen = compiled.step_rows, self._compiled_step
+                self.reset()
+                self._step_numba(0.0, 0.0, 0.0, 0.0, 0.0)
+                self._compiled_step = chosen
             self.reset()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
@@ -174,7 +178,16 @@ class IncrementalMatcher(_MatcherBase):
         now[active] = True
         self._synced[was & ~now] = self._count  # rows leaving the band are exact now
         self._active = active
+        self._choose_step()
         self._rebuild(np.flatnonzero(now & ~was))
+
+    def _choose_step(self) -> None:
+        """Threads, and the one-pass read-out, only for as many rows as make them pay (beyond the
+        caches); the step's results do not depend on either."""
+        many = self._active.size >= PARALLEL_MIN_ROWS
+        self._one_pass = many
+        if compiled.AVAILABLE:
+            self._compiled_step = compiled.step_rows_parallel if self.parallel and many else compiled.step_rows
 
     def _sync_rows(self, rows: np.ndarray) -> None:
         """Bring those of ``rows`` outside the scale band (which the compiled step does not
@@ -233,7 +246,7 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self.normalize,
+            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self._one_pass, self.normalize,
             self.n_scales, self._scale_allowed, self._active,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )

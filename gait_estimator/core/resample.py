@@ -5,27 +5,26 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-SNAP = 0.01
-"""Fraction of the grid interval within which a grid point takes the sample as it is."""
-
 
 class UniformResampler:
     """Linear interpolation of a time-stamped stream onto t0 + k / rate_hz.
 
     The first sample after construction or ``reset`` starts the grid (t0 = its stamp); every
     later sample emits the grid points in (previous stamp, its stamp]. A grid point within
-    ``SNAP`` grid intervals of a sample's stamp is that sample itself (value and stamp), so a
+    ``snap`` grid intervals of a sample's stamp is that sample itself (value and stamp), so a
     stream already at the rate (up to stamp rounding, e.g. to nanoseconds) passes through
     unchanged.
 
     Args:
         rate_hz: Output rate (Hz), e.g. the kernel library's sample rate.
+        snap: Fraction of the grid interval within which a grid point takes the sample as it is.
     """
 
-    def __init__(self, rate_hz: float) -> None:
+    def __init__(self, rate_hz: float, snap: float = 0.01) -> None:
         if not (math.isfinite(rate_hz) and rate_hz > 0):
             raise ValueError(f"resampling rate must be a positive number of Hz, got {rate_hz!r}")
         self.rate_hz = float(rate_hz)
+        self.snap = float(snap)
         self.reset()
 
     def reset(self) -> None:
@@ -46,7 +45,7 @@ class UniformResampler:
         if time_s <= self._prev_t:
             raise ValueError(f"stamps must increase: {time_s} after {self._prev_t}")
         out = []
-        snap = SNAP / self.rate_hz
+        snap = self.snap / self.rate_hz
         while True:
             t = self._t0 + self._k / self.rate_hz
             if t > time_s + snap:

@@ -10,10 +10,11 @@ estimate:
    candidate; fit quality = RMS error per sample and channel, degrees;
 3. hold: below ``min_confidence`` the last confident mode stays reported, flagged ``held``;
 4. dwell (hysteresis): a new mode is reported only after it has been the candidate for
-   ``min_dwell_samples`` consecutive samples and ``min_dwell_s`` seconds;
+   ``min_dwell_s`` seconds;
 5. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
 
-Every option off (the defaults) reports the matcher's choice unchanged.
+``Supervisor.decide`` is the one place where the reported mode and phase are decided. Every option
+off (the defaults) reports the matcher's choice unchanged.
 """
 
 from __future__ import annotations
@@ -66,6 +67,19 @@ class Estimate:
     phase_rate: float
     cadence_ratio: float = math.nan
 
+    def at(self, time_s: float) -> Estimate:
+        """This estimate carried forward to a later ``time_s`` (seconds): the phase advanced by the
+        phase rate over the time since (within one resampling interval), wrapped to [0, 1)."""
+        dt = time_s - self.time_s
+        if dt <= 0.0:
+            return self
+        phase = self.phase
+        if self.ready and math.isfinite(self.phase_rate):
+            phase = (phase + self.phase_rate * dt) % 1.0
+            if phase >= 1.0:
+                phase = 0.0
+        return self.restamped(time_s, phase)
+
     def restamped(self, time_s: float, phase: float) -> Estimate:
         """This estimate at another time with another reported phase (dataclasses.replace is
         several times slower, and this runs for every input sample between grid points)."""
@@ -112,17 +126,31 @@ def transitions_matrix(table: Mapping[str, Sequence[str]], mode_names: Sequence[
     return allowed
 
 
+@dataclass(frozen=True)
+class SupervisorParams:
+    """Supervision settings (the options of the same names).
+
+    Attributes:
+        min_confidence: Hold the last confident mode below this margin; 0 = off.
+        min_dwell_s: Seconds a new mode must win before it is reported; 0 = off.
+        transitions: YAML file of allowed transitions; '' = any.
+        phase_rate_tau_s: Time constant of the phase-rate smoothing, seconds.
+    """
+
+    min_confidence: float = 0.0
+    min_dwell_s: float = 0.0
+    transitions: str = ""
+    phase_rate_tau_s: float = 0.2
+
+
 class Supervisor:
     """Turns matcher results into reported estimates (see the module docstring).
 
     Args:
         mode_names: The library's mode names.
+        params: Confidence, dwell, transitions and phase-rate settings.
+        allowed: (M, M) allowed[from, to] matrix; None = read ``params.transitions`` (if set).
         active_channels: Channels with non-zero weight (for the RMS fit quality).
-        min_confidence: Hold the last confident mode below this margin; 0 = off.
-        min_dwell_samples: Samples a new mode must win before it is reported; <= 1 = off.
-        min_dwell_s: Seconds a new mode must win before it is reported; 0 = off.
-        allowed: (M, M) allowed[from, to] matrix, or None for no restriction.
-        phase_rate_tau_s: Time constant of the phase-rate smoothing, seconds.
         normalized: The matcher's errors are per window sample (not SSE).
         time_scales: The matcher's time scales (for the cadence ratio).
     """
@@ -130,22 +158,21 @@ class Supervisor:
     def __init__(
         self,
         mode_names: Sequence[str],
-        active_channels: int = 4,
-        min_confidence: float = 0.0,
-        min_dwell_samples: int = 0,
-        min_dwell_s: float = 0.0,
+        params: SupervisorParams = SupervisorParams(),
         allowed: np.ndarray | None = None,
-        phase_rate_tau_s: float = 0.2,
+        active_channels: int = 4,
         normalized: bool = False,
         time_scales: Sequence[float] | np.ndarray = (1.0,),
     ) -> None:
         self.mode_names = list(mode_names)
-        self.active_channels = active_channels
-        self.min_confidence = float(min_confidence)
-        self.min_dwell_samples = int(min_dwell_samples)
-        self.min_dwell_s = float(min_dwell_s)
+        self.params = params
+        if allowed is None and params.transitions:
+            allowed = load_transitions(params.transitions, self.mode_names)
         self.allowed = allowed
-        self.phase_rate_tau_s = float(phase_rate_tau_s)
+        self.active_channels = active_channels
+        self.min_confidence = float(params.min_confidence)
+        self.min_dwell_s = float(params.min_dwell_s)
+        self.phase_rate_tau_s = float(params.phase_rate_tau_s)
         self.normalized = bool(normalized)
         self._inverse_scales: list[float] = (1.0 / np.asarray(time_scales, dtype=np.float64)).tolist()
         self.reset()
@@ -153,13 +180,13 @@ class Supervisor:
     def reset(self) -> None:
         self._current: int | None = None
         self._pending: int | None = None
-        self._pending_count = 0
         self._pending_since = 0.0
         self._last: tuple[float, int, float] | None = None  # time, mode, phase
         self._rate = math.nan
 
-    def update(self, time_s: float, result: StepResult) -> Estimate:
-        """Supervise one matcher result at ``time_s`` (seconds)."""
+    def decide(self, time_s: float, result: StepResult) -> Estimate:
+        """The reported mode and phase for one matcher result at ``time_s`` (seconds): the
+        allowed candidate, held while unconfident or dwelling, with that mode's phase."""
         sse = result.sse
         values = sse.tolist()  # Python floats from here on: per-sample numpy calls are costly when cold
         candidate = result.mode_index
@@ -209,9 +236,8 @@ class Supervisor:
             self._pending = None
             return candidate, False
         if candidate != self._pending:
-            self._pending, self._pending_count, self._pending_since = candidate, 0, time_s
-        self._pending_count += 1
-        if self._pending_count >= self.min_dwell_samples and time_s - self._pending_since >= self.min_dwell_s - 1e-9:
+            self._pending, self._pending_since = candidate, time_s
+        if time_s - self._pending_since >= self.min_dwell_s - 1e-9:
             self._current, self._pending = candidate, None
             return candidate, False
         return self._current, True

@@ -17,6 +17,8 @@ samples exactly as the live node turns them into samples (``stream.py``):
 
 A bag path is a rosbag2 directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3``
 storage file, which is read on its own (its own schema/topic tables; no metadata.yaml needed).
+A cut or damaged bag is read as far as it goes (``bag_recover.py``, through ``open_bag``);
+``bag_records`` gives any topic's raw CDR records, for readers of other message types.
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ import numpy as np
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
+from . import bag_recover
+from .bag_recover import STORAGE_SUFFIXES, RawRecord
 from .recording import Recording
 from .stream import UNITS, SampleRejected, StreamGuard, angles_from_array, angles_from_named
 
@@ -43,7 +47,6 @@ INPUT_MSGTYPES = {"joint_state": JOINT_STATE, "float64_multi_array": FLOAT64_MUL
 
 DEFAULT_TOPIC = "/segment_angles"
 DEFAULT_MAX_GAP_S = 0.5
-STORAGE_SUFFIXES = (".mcap", ".db3")
 
 UNDECODABLE = "undecodable"
 """Skip reason for a message whose serialized data cannot be decoded as its declared type."""
@@ -108,6 +111,8 @@ class BagRecording(Recording):
     stamp_fallbacks: int = 0
     resets: int = 0
     max_gap_s: float = DEFAULT_MAX_GAP_S
+    recovered: str = ""
+    """One line on what was recovered from a damaged bag ('' for an intact bag)."""
 
     @property
     def notes(self) -> list[str]:
@@ -141,6 +146,7 @@ class BagRecording(Recording):
             stamp_fallbacks=self.stamp_fallbacks,
             resets=self.resets,
             max_gap_s=self.max_gap_s,
+            recovered=self.recovered,
         )
 
 
@@ -157,24 +163,35 @@ def is_bag_path(p: Path) -> bool:
 
 
 @contextmanager
-def open_bag(path: str | Path, topic: str | None = None) -> Iterator[Any]:
+def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = False) -> Iterator[Any]:
     """Open a bag with rosbags; every failure (while opening or reading inside the ``with``
-    block) becomes a one-line RecordingError naming the bag and the topic asked for."""
+    block) becomes a one-line RecordingError naming the bag and the topic asked for.
+
+    A damaged bag (``bag_recover.damage``: an mcap file cut before its summary, a .db3 with an
+    unfinished transaction, a directory whose metadata.yaml is missing or disagrees with its
+    files) yields a ``bag_recover.RecoveredBag`` instead, with the same reader interface, after
+    one warning line on stderr saying what was recovered; RecordingError if nothing was.
+    ``all_topics``: errors name the bag only (for readers of every topic, e.g. ``repair``)."""
     from rosbags.rosbag2 import Reader
 
     p = Path(path)
-    where = f"{p} (topic {topic or DEFAULT_TOPIC + ' by default'})"
-    if p.is_dir() and not (p / "metadata.yaml").is_file():
-        files = sorted(f.name for f in p.iterdir() if f.suffix in STORAGE_SUFFIXES)
-        hint = f"; to read a storage file on its own, pass it instead: {p / files[0]}" if files else ""
-        raise RecordingError(f"{where}: missing metadata.yaml, not a complete rosbag2 directory{hint}")
+    where = str(p) if all_topics else f"{p} (topic {topic or DEFAULT_TOPIC + ' by default'})"
+    reader: Any = None
     try:
-        reader = Reader(p)
-        reader.open()
-    except RecordingError:
-        raise
+        if reason := bag_recover.damage(p):
+            reader = bag_recover.open_recovered(p, reason)
+        else:
+            reader = Reader(p)
+            reader.open()
+            if reason := bag_recover.count_disagreement(reader):
+                reader.close()
+                reader = bag_recover.open_recovered(p, reason)
+    except RecordingError as exc:
+        raise RecordingError(f"{where}: {str(exc).removeprefix(f'{p}: ')}") from None
     except Exception as exc:  # rosbags raises many kinds for damaged files
         raise RecordingError(f"{where}: cannot open bag, truncated or corrupt? ({_one_line(exc)})") from None
+    if isinstance(reader, bag_recover.RecoveredBag):
+        bag_recover.report(reader.recovery)
     try:
         yield reader
     except (RecordingError, KeyboardInterrupt):
@@ -184,6 +201,24 @@ def open_bag(path: str | Path, topic: str | None = None) -> Iterator[Any]:
     finally:
         with suppress(Exception):  # closing a damaged bag may fail again; reported above
             reader.close()
+
+
+def bag_records(path: str | Path, topics: Sequence[str] | None = None) -> Iterator[RawRecord]:
+    """Every message on ``topics`` (default: all topics) of an intact or damaged bag as
+    ``RawRecord(topic, msgtype, log_time_ns, data)``, CDR bytes undecoded, in the bag's order
+    (a damaged bag: file order, after the one warning line of ``open_bag``).
+
+    Raises:
+        RecordingError: one line (a topic missing, nothing readable, a corrupt bag).
+    """
+    wanted = [normalize_topic(t) for t in topics] if topics else []
+    with open_bag(path, ", ".join(wanted) or None, all_topics=not wanted) as reader:
+        conns = [c for c in reader.connections if not wanted or c.topic in wanted]
+        missing = sorted(set(wanted) - {c.topic for c in conns})
+        if missing:
+            raise RecordingError(f"{path}: no topic {', '.join(missing)}; {format_topics(bag_topics(reader))}")
+        for conn, log_ns, data in reader.messages(connections=conns):
+            yield RawRecord(conn.topic, conn.msgtype, int(log_ns), bytes(data))
 
 
 def _one_line(exc: BaseException) -> str:
@@ -277,7 +312,10 @@ def read_bag(
             )
         conns = [c for c in reader.connections if c.topic == name]
         try:
-            return _read_samples(p, name, msgtype, reader.messages(connections=conns), names, input_units, max_gap)
+            rec = _read_samples(p, name, msgtype, reader.messages(connections=conns), names, input_units, max_gap)
+            recovery = getattr(reader, "recovery", None)
+            rec.recovered = recovery.line() if recovery else ""
+            return rec
         except (RecordingError, KeyboardInterrupt):
             raise
         except Exception as exc:

@@ -27,6 +27,7 @@ import yaml
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import LibraryError
 from ..core.kernels import KernelLibrary, KernelMode, make_mode
+from .atomic import atomic_write_text, atomic_write_with
 
 FORMAT_TAG = "gait_estimator/kernel_library"
 FORMAT_VERSION = 1
@@ -97,15 +98,21 @@ def load_library(path: str | Path) -> KernelLibrary:
 
 
 def save_library(lib: KernelLibrary, path: str | Path) -> Path:
-    """Write ``lib`` as project YAML (``.yaml``/``.yml``) or NPZ (``.npz``), by suffix."""
+    """Write ``lib`` as project YAML (``.yaml``/``.yml``) or NPZ (``.npz``), by suffix.
+
+    Atomic (``atomic.py``): the file is written beside ``path`` under a temporary name, fsynced
+    and renamed over ``path``, so ``path`` holds the old or the new library, never a part."""
     p = Path(path)
     suffix = p.suffix.lower()
     doc = library_to_doc(lib, samples=False)
     if suffix == ".npz":
         samples = np.concatenate([m.samples for m in lib.modes])
-        np.savez_compressed(p, meta=np.array(json.dumps(doc)), samples=samples, lengths=lib.lengths)
+        meta = np.array(json.dumps(doc))
+        atomic_write_with(
+            p, lambda f: np.savez_compressed(f, meta=meta, samples=samples, lengths=lib.lengths), binary=True
+        )
     elif suffix in (".yaml", ".yml"):
-        p.write_text(_yaml_header(lib) + _yaml_body(doc, lib), encoding="utf-8")
+        atomic_write_text(p, _yaml_header(lib) + _yaml_body(doc, lib))
     else:
         raise LibraryError(f"{p}: cannot write format '{suffix}' (use .yaml or .npz)")
     return p

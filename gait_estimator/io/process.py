@@ -8,9 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.errors import missing_extra
 from ..core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator
 from ..core.kernels import KernelLibrary
+from .atomic import atomic_open
+from .library_io import load_library
+from .readers import read_recording
 from .recording import Recording
+from .resources import DEFAULT_LIBRARY
 
 
 @dataclass(frozen=True)
@@ -42,6 +47,27 @@ def predict(recording: Recording, library: KernelLibrary, config: EstimatorConfi
     return Predictions(trace.time_s, trace.sample, trace, est.adapted_library() if est.adapter else None)
 
 
+def run_recording(source: str | Path | Recording, kernels: str | Path | KernelLibrary = DEFAULT_LIBRARY,
+                  config: EstimatorConfig | None = None) -> EstimateTrace:
+    """Run a fresh Estimator over a whole recording: one estimate per input sample.
+
+    Args:
+        source: A recording (project or reference CSV, rosbag2 directory/.mcap/.db3) or a
+            ``Recording``; sources without time stamps are timed at the library's rate.
+        kernels: Kernel library: a file, a directory, a bundled name or a ``KernelLibrary``.
+        config: Estimator options; None = the ``default`` preset.
+
+    Raises:
+        GaitEstimatorError: an unreadable recording or library (one line naming it).
+    """
+    lib = kernels if isinstance(kernels, KernelLibrary) else load_library(kernels)
+    try:
+        rec = source if isinstance(source, Recording) else read_recording(source, rate_hz=lib.sample_rate_hz)
+    except ImportError as exc:  # a bag without the 'bags' extra
+        raise missing_extra(exc) or exc from None
+    return predict(rec, lib, config).trace
+
+
 PREDICTION_COLUMNS = ("time_s", "sample", "mode", "phase", "ready")
 """First columns of the predictions CSV; then sse_<mode> per mode, then EXTRA_COLUMNS."""
 EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio")
@@ -50,11 +76,12 @@ EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", 
 def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
     """Write ``time_s, sample, mode, phase, ready, sse_<mode>..., confidence, fit_rms_deg, held,
     phase_rate, raw_mode, cadence_ratio`` (match error in deg^2, or deg^2 per sample with
-    ``normalize_error``; fit in deg; phase rate in strides/s; cadence ratio nan with one time scale)."""
+    ``normalize_error``; fit in deg; phase rate in strides/s; cadence ratio nan with one time scale),
+    atomically (the old file or the new one, never a part)."""
     p = Path(path)
     tr = pred.trace
     names = np.asarray(tr.mode_names, dtype=object)
-    with p.open("w", encoding="utf-8", newline="") as f:
+    with atomic_open(p, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow([*PREDICTION_COLUMNS, *(f"sse_{m}" for m in tr.mode_names), *EXTRA_COLUMNS])
         for i in range(len(pred.time_s)):

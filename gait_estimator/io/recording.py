@@ -23,6 +23,7 @@ import numpy as np
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
+from .atomic import atomic_open
 
 
 @dataclass
@@ -232,14 +233,15 @@ def _drop_non_finite(rec: Recording) -> Recording:
 
 
 def write_project_csv(rec: Recording, path: str | Path) -> Path:
-    """Write ``rec`` as a project CSV (degrees), including labels, heel strikes and extra columns."""
+    """Write ``rec`` as a project CSV (degrees), including labels, heel strikes and extra columns
+    (atomically: the old file or the new one, never a part)."""
     p = Path(path)
     header = ["time_s", *ANGLE_COLUMNS_DEG, *rec.extra]
     if rec.labels is not None:
         header.append("mode")
     if rec.heel_strike is not None:
         header.append("heel_strike")
-    with p.open("w", encoding="utf-8", newline="") as f:
+    with atomic_open(p, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(header)
         for i in range(len(rec)):

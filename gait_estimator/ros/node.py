@@ -34,28 +34,23 @@ This module needs rclpy at import time; the offline tools (``gait-estimator``) d
 
 from __future__ import annotations
 
-import array
 import gc
 import math
 import sys
 import time
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time as TimeMsg
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.exceptions import InvalidHandle, ParameterException
-from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.exceptions import InvalidHandle
+from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import deserialize_message
@@ -63,13 +58,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 from std_srvs.srv import Trigger
 
-from ..core.channels import CHANNELS, N_CHANNELS, Sample
+from ..core.channels import Sample
 from ..core.errors import GaitEstimatorError
-from ..core.estimator import GAP_OPTIONS, OPTIONS, PRESETS, Estimator, EstimatorConfig
+from ..core.estimator import Estimator, EstimatorConfig
 from ..core.kernels import KernelLibrary
 from ..core.supervisor import Estimate
 from ..io.cdr import CdrError, Stamp, read_joint_state
-from ..io.library_io import load_library, save_library
+from ..io.library_io import save_library
 from ..io.outputs import (
     ESTIMATE_TOPIC,
     INPUT_TOPIC,
@@ -80,47 +75,28 @@ from ..io.outputs import (
     estimate_values,
     sse_label,
 )
-from ..io.resources import DEFAULT_LIBRARY
-from ..io.stream import (
-    INPUT_TYPES,
-    MALFORMED,
-    REASONS,
-    UNITS,
-    AngleExtractor,
-    SampleRejected,
-    StreamGuard,
-    restart_threshold,
+from ..io.stream import MALFORMED, REASONS, AngleExtractor, SampleRejected, StreamGuard, restart_threshold
+from .diagnostics import (  # noqa: F401  (PROFILE_COLUMNS: re-exported for the bench-node client)
+    DIAGNOSTICS_PERIOD_S,
+    DIAGNOSTICS_TOPIC,
+    MAX_PROFILE_ROWS,
+    PROFILE_COLUMNS,
+    PROFILE_TOPIC,
+    NodeDiagnostics,
+    double_array,
 )
-from .priority import MAX_PRIORITY, process_priority, set_process_priority
+from .executors import make_executor, spin
+from .parameters import DEFAULTS, DESCRIPTIONS, NodeParameters, StartupError, one_line  # noqa: F401
 from .serialized import SerializedJointState
 
 NODE_NAME = "estimator_node"
 SAVE_LIBRARY_SERVICE = "~/save_library"
 RESET_CALIBRATION_SERVICE = "~/reset_calibration"
-DIAGNOSTICS_TOPIC = "/diagnostics"
-DIAGNOSTICS_PERIOD_S = 1.0
 WARN_THROTTLE_S = 2.0
 """Minimum wall time (s) between two warnings about dropped samples of the same reason."""
-RATE_TOLERANCE = 0.2
-"""Relative deviation of the input stamp rate from the library rate that raises a WARN."""
 MAX_BATCH = 50
 """Most input messages handled per executor wake-up (see ``EstimatorNode._on_input``) under a
 wait-set executor; ``main`` sets ``EstimatorNode.max_batch`` to 1 under the EventsExecutor."""
-EXECUTORS = ("events", "single_threaded")
-"""Values of the ``executor`` parameter: rclpy.experimental.EventsExecutor, SingleThreadedExecutor."""
-SPIN_PERIOD_S = 0.25
-"""``main`` spins with this timeout, never without one: rclpy 7.1's EventsExecutor runs no
-callback at all in ``spin()`` or ``spin_once()`` without a timeout (it busy-waits instead)."""
-PROFILE_TOPIC = "~/profile"
-PROFILE_COLUMNS = ("stamp_sec", "stamp_nanosec", "start_sec", "start_nanosec", "estimator_ns", "publish_ns")
-"""``~/profile`` rows, one per accepted sample: the input stamp; when the node began handling the
-message (system clock; the message was taken from DDS just before); the time spent on angle
-extraction, checks and the estimator update; the time spent publishing. The layout's dim[1]
-label lists the columns. (The message info with the DDS arrival time is not available to the
-callback under rclpy 7.1's EventsExecutor, so the arrival itself is not recorded.)"""
-MAX_PROFILE_ROWS = 20_000
-"""Most ``~/profile`` rows kept per diagnostics period (later samples are not profiled)."""
-
 INPUT_QOS = QoSProfile(
     reliability=ReliabilityPolicy.BEST_EFFORT,
     history=HistoryPolicy.KEEP_LAST,
@@ -133,72 +109,8 @@ depth is 100 rather than 5 because the matcher needs every sample: a short stall
 OUTPUT_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=10)
 DIAGNOSTICS_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=10)
 
-OPTION_NAMES = tuple(o.name for o in OPTIONS)
-_CONFIG_FIELDS = {f.name for f in fields(EstimatorConfig)}
-assert set(OPTION_NAMES) <= _CONFIG_FIELDS
 
-DEFAULTS: dict[str, Any] = {
-    "kernels": DEFAULT_LIBRARY,
-    "joint_names": list(CHANNELS),
-    "input_units": "rad",
-    "input_type": "joint_state",
-    "executor": "events",
-    "thread_priority": 0,
-    "adapted_library_path": "",
-    "preset": "default",
-    **{o.name: o.default for o in OPTIONS},
-}
-"""Parameter defaults, in declaration order; ``config/estimator.yaml`` holds the same values."""
-
-DESCRIPTIONS: dict[str, str] = {
-    "kernels": "Kernel library: a file (.yaml, .npz, reference .csv or per-mode .yaml) or directory, or a "
-    "bundled name (able_bodied, prosthesis). Changing it at run time reloads it and restarts the window.",
-    "joint_names": "JointState names of right_thigh, left_thigh, right_shank, left_shank, in that order "
-    "(4 distinct names; other joints in the message are ignored, message order does not matter).",
-    "input_units": "Units of the input angles: rad (REP 103) or deg.",
-    "input_type": "Input message type on segment_angles (read-only): joint_state (sensor_msgs/JointState) or "
-    "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]).",
-    "executor": "Executor of the estimator_node process (read-only): events (rclpy's EventsExecutor, lower "
-    "latency) or single_threaded (rclpy's SingleThreadedExecutor).",
-    "thread_priority": "Real-time priority of the node: 1-99 runs every thread of its process under SCHED_FIFO at "
-    "that priority (as ros2_control's controller_manager runs its loop; needs CAP_SYS_NICE or an rtprio limit, "
-    "otherwise the node warns and runs on); 0 leaves the scheduling the process started with (e.g. under chrt).",
-    "adapted_library_path": "Where the save_library service writes the personalised kernels (.yaml or .npz); '' = "
-    "~/.ros/gait_estimator/<library>_adapted.yaml.",
-    "preset": "Values the estimator options start from (read-only): default (robust for a new wearer: resampling, "
-    "time-scaled kernels, offset tolerance and calibration) or paper (the paper's algorithm, reproduces the reference "
-    "implementation). Options set explicitly (command line, params file) override it.",
-    **{
-        o.name: o.description[0].upper() + o.description[1:]
-        + ("" if o.name in GAP_OPTIONS else ". Changing it at run time restarts the window.")
-        for o in OPTIONS
-    },
-}
-READ_ONLY = frozenset({"input_type", "executor", "preset"})
-DYNAMIC_TYPING = frozenset({"resample"})  # auto | on | off, or a boolean
-
-
-class StartupError(GaitEstimatorError):
-    """The node cannot start (bad parameter, unreadable library): reported in one line."""
-
-
-def _double_array(values: np.ndarray) -> array.array:
-    """float64 numpy -> array('d') without a per-element Python loop (the fast message setter)."""
-    out = array.array("d")
-    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
-    return out
-
-
-def _config_value(value: Any) -> Any:
-    """A parameter value as EstimatorConfig wants it (lists become tuples)."""
-    return tuple(value) if isinstance(value, (list, tuple, array.array)) else value
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
-
-
-class EstimatorNode(Node):
+class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
     """The estimator pipeline on a stream of segment angles; see the module docstring.
 
     Args:
@@ -213,43 +125,7 @@ class EstimatorNode(Node):
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self._library: KernelLibrary | None = None
-        self._config = EstimatorConfig()
-        self._config_preset = "default"
-        self._pending: tuple[KernelLibrary | None, EstimatorConfig, Estimator | None] | None = None
-        self._last_rejection = ""
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        try:
-            for name, default in DEFAULTS.items():
-                self._last_rejection = ""
-                if name in OPTION_NAMES:  # the preset's value unless overridden
-                    default = PRESETS[self._config_preset][name]
-                self.declare_parameter(
-                    name,
-                    default,
-                    ParameterDescriptor(
-                        description=DESCRIPTIONS[name],
-                        read_only=name in READ_ONLY,
-                        # `-p resample:=on` and params files parse on/off as booleans (YAML 1.1)
-                        dynamic_typing=name in DYNAMIC_TYPING,
-                    ),
-                )
-                # Declaring validated the value (kernels: loaded it); keep it for the next ones.
-                if self._pending is not None:
-                    self._library, self._config = self._pending[0] or self._library, self._pending[1]
-                self._pending = None
-                if name == "preset":
-                    self._config_preset = self.get_parameter("preset").value
-                    self._config = EstimatorConfig.preset(self._config_preset)
-            assert self._library is not None
-            self._set_estimator(self._new_estimator(self._library, self._config))
-        except ParameterException as exc:
-            reason = self._last_rejection or ": " + _one_line(exc)
-            self.destroy_node()
-            raise StartupError(f"invalid parameter {reason}") from None
-        except (GaitEstimatorError, ValueError) as exc:
-            self.destroy_node()
-            raise StartupError(_one_line(exc)) from None
+        self._declare_parameters()  # raises StartupError
 
         self._joint_names: tuple[str, ...] = tuple(self.get_parameter("joint_names").value)
         self._units: str = self.get_parameter("input_units").value
@@ -320,130 +196,6 @@ class EstimatorNode(Node):
             self._set_priority(priority)
 
     # -----------------------------------------------------------------------------------------
-    # Parameters
-
-    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """on-set callback: reject invalid values with a reason; stash what they would build."""
-        lib = self._library
-        values: dict[str, Any] = {}
-        for p in params:
-            reason = ""
-            if p.name == "kernels":
-                reason, loaded = self._check_kernels(p.value)
-                lib = loaded or lib
-            elif p.name in OPTION_NAMES:
-                values[p.name] = _config_value(p.value)
-            else:
-                reason = self._check_input_parameter(p)
-            if reason:
-                return self._reject_parameter(f"{p.name}: {reason}")
-        try:
-            config = self._config.with_options(**values) if values else self._config
-        except (ValueError, TypeError) as exc:
-            names = ", ".join(values)
-            return self._reject_parameter(f"{names}: {_one_line(exc)}")
-        estimator = None
-        if lib is not None and (values or lib is not self._library):
-            try:
-                estimator = self._new_estimator(lib, config)  # also reads a transitions file
-            except (GaitEstimatorError, ValueError, OSError) as exc:
-                return self._reject_parameter(f"{', '.join(p.name for p in params)}: {_one_line(exc)}")
-        self._pending = (lib if lib is not self._library else None, config, estimator)
-        return SetParametersResult(successful=True)
-
-    def _reject_parameter(self, reason: str) -> SetParametersResult:
-        self._last_rejection = reason
-        return SetParametersResult(successful=False, reason=reason)
-
-    @staticmethod
-    def _check_kernels(value: Any) -> tuple[str, KernelLibrary | None]:
-        if not isinstance(value, str) or not value.strip():
-            return "must be a library path or bundled name, got an empty value", None
-        try:
-            return "", load_library(value)
-        except (GaitEstimatorError, OSError, ValueError) as exc:
-            return _one_line(exc), None
-
-    @staticmethod
-    def _check_input_parameter(p: Parameter) -> str:
-        """Why an input parameter value is invalid, or '' (also for parameters not ours)."""
-        v = p.value
-        if p.name == "joint_names":
-            names = list(v or [])
-            if len(names) != N_CHANNELS:
-                return f"needs {N_CHANNELS} names ({', '.join(CHANNELS)}), got {len(names)}"
-            if any(not n.strip() for n in names):
-                return "names must not be empty"
-            if len(set(names)) != len(names):
-                return f"names must be distinct, got {names}"
-        elif p.name == "input_units" and v not in UNITS:
-            return f"must be one of {', '.join(UNITS)}, got {v!r}"
-        elif p.name == "input_type" and v not in INPUT_TYPES:
-            return f"must be one of {', '.join(INPUT_TYPES)}, got {v!r}"
-        elif p.name == "thread_priority" and not 0 <= v <= MAX_PRIORITY:
-            return f"must be in 0..{MAX_PRIORITY} (0 = the scheduling the process started with), got {v}"
-        elif p.name == "executor" and v not in EXECUTORS:
-            return f"must be one of {', '.join(EXECUTORS)}, got {v!r}"
-        elif p.name == "preset" and v not in PRESETS:
-            return f"must be one of {', '.join(PRESETS)}, got {v!r}"
-        elif p.name == "adapted_library_path" and v and Path(v).suffix.lower() not in (".yaml", ".yml", ".npz"):
-            return f"must end in .yaml or .npz (or be empty for the default), got {v!r}"
-        return ""
-
-    def _apply_parameters(self, params: list[Parameter]) -> None:
-        """post-set callback: apply values that passed validation."""
-        pending, self._pending = self._pending, None
-        names = {p.name for p in params}
-        for p in params:
-            if p.name == "joint_names":
-                self._joint_names = tuple(p.value)
-            elif p.name == "input_units":
-                self._units = p.value
-            elif p.name == "thread_priority":
-                self._set_priority(p.value)
-        if names & {"joint_names", "input_units"}:
-            self._extract = AngleExtractor(self._joint_names, self._units)
-        if pending is None:
-            return
-        lib, config, estimator = pending
-        if lib is not None:
-            self._library = lib
-        self._config = config
-        self._guard.restart_back_s = restart_threshold(config.max_gap_s)
-        restart = "kernels" in names or bool((names & set(OPTION_NAMES)) - GAP_OPTIONS)
-        if restart and estimator is not None:
-            self._resets_before += self._estimator.resets
-            kept = ""
-            if "kernels" not in names:  # same kernels, same sensors: keep what was learnt
-                estimator.adopt_calibration(self._estimator)
-                strides = estimator.adopt_adaptation(self._estimator)
-                if strides:
-                    kept = (f"; personalised kernels ({strides} strides) kept" if estimator.adapter is not None
-                            else f"; personalised kernels ({strides} strides) dropped: adapt_rate is 0")
-            self._set_estimator(estimator)
-            lib = self._library
-            self.get_logger().info(
-                f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: {self._options_summary()}: "
-                "window restarted" + kept
-            )
-        elif names & GAP_OPTIONS:
-            self._estimator.config = config  # only gap thresholds changed: keep the window
-
-    def _set_priority(self, priority: int) -> None:
-        """Apply ``thread_priority`` to every thread of the process; a refusal is a warning (the
-        node runs on at the priority it has), as in ros2_control."""
-        try:
-            self.get_logger().info(f"thread_priority {priority}: {set_process_priority(priority)}")
-        except OSError as exc:
-            self.get_logger().warn(f"thread_priority {priority}: {exc}; running with {process_priority()} scheduling")
-
-    def _new_estimator(self, library: KernelLibrary, config: EstimatorConfig) -> Estimator:
-        """An estimator for this node's input: JointState carries stamps (``resample: auto``
-        resamples it), Float64MultiArray is timed on arrival (not resampled unless ``on``)."""
-        input_type = self.get_parameter("input_type").value if self.has_parameter("input_type") else "joint_state"
-        return Estimator(library, config, stamped=input_type == "joint_state")
-
-    # -----------------------------------------------------------------------------------------
     # Services
 
     def _save_library(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -460,7 +212,7 @@ class EstimatorNode(Node):
             lib = est.adapted_library()
             out = save_library(lib, Path(path).expanduser())
         except (GaitEstimatorError, OSError, ValueError) as exc:
-            response.success, response.message = False, f"{path}: {_one_line(exc)}"
+            response.success, response.message = False, f"{path}: {one_line(exc)}"
             return response
         strides = lib.provenance["adaptation"]["accepted_strides"]
         response.success = True
@@ -488,11 +240,6 @@ class EstimatorNode(Node):
         # serialised once per library; every estimate patches its stamp and values (estimate_values)
         self._estimate_msg = SerializedJointState(estimate_names(names))
         self._last_estimate: Estimate | None = None
-
-    def _options_summary(self) -> str:
-        changed = self._config.changed_from(self._config_preset)
-        return f"preset {self._config_preset}" + (
-            " with " + ", ".join(f"{k}={v}" for k, v in changed.items()) if changed else "")
 
     # -----------------------------------------------------------------------------------------
     # Input
@@ -643,7 +390,7 @@ class EstimatorNode(Node):
                 self._phase_msg.data = e.phase
                 self._phase_pub.publish(self._phase_msg)
             if self._sse_pub.get_subscription_count():
-                self._sse_msg.data = _double_array(e.sse)
+                self._sse_msg.data = double_array(e.sse)
                 self._sse_pub.publish(self._sse_msg)
         if self._estimate_pub.get_subscription_count():
             msg = self._estimate_msg
@@ -706,137 +453,6 @@ class EstimatorNode(Node):
         """Window restarts caused by the input stream: gaps > max_gap_s and jumps back."""
         return self._resets_before + self._estimator.resets + self._guard.restarts
 
-    def diagnostics_status(self) -> DiagnosticStatus:
-        """The node's status; rates and processing times cover the time since the previous call."""
-        now = time.monotonic()
-        elapsed = max(now - self._period_start, 1e-9)
-        lib = self.library
-        m = self._estimator.matcher
-        e = self._last_estimate
-        shown = e is not None and e.ready
-        input_rate = self._period_received / elapsed
-        stamp_rate = math.nan
-        first, last = self._period_first_stamp, self._period_last_stamp
-        if self._period_accepted >= 2 and first is not None and last is not None and last > first:
-            stamp_rate = (self._period_accepted - 1) / (last - first)
-        mean_ms = 1e3 * self._proc_sum / self._proc_count if self._proc_count else 0.0
-        values = {
-            "ready": "true" if m.ready else "false",
-            "window": f"{min(m.steps, m.max_window)}/{m.max_window}",
-            "mode": e.mode if shown else "",
-            "phase": f"{e.phase:.4f}" if shown else "",
-            "confidence": f"{e.confidence:.4g}" if shown else "",
-            "held": ("true" if e.held else "false") if shown else "",
-            "library": lib.name,
-            "library_path": lib.path,
-            "modes": str(len(lib)),
-            "mode_names": ",".join(lib.mode_names),
-            "library_rate_hz": f"{lib.sample_rate_hz:g}",
-            "estimator_options": self._options_summary(),
-            "input_topic": self._sub.topic_name,
-            "input_type": self._input_type,
-            "input_units": self._units,
-            "input_rate_hz": f"{input_rate:.1f}",
-            "stamp_rate_hz": "" if math.isnan(stamp_rate) else f"{stamp_rate:.1f}",
-            "processing_time_mean_ms": f"{mean_ms:.4f}",
-            "processing_time_max_ms": f"{1e3 * self._proc_max:.4f}",
-            "samples_received": str(self._received),
-            "samples_accepted": str(self._guard.accepted),
-            "samples_rejected": str(self._guard.rejected_total),
-            **{f"rejected_{reason}": str(n) for reason, n in self.rejected.items()},
-            "window_resets": str(self.window_resets),
-            "stream_restarts": str(self._guard.restarts),
-            "max_gap_s": f"{self._config.max_gap_s:g}",
-            "scheduling": process_priority(),
-            "cadence_ratio": f"{e.cadence_ratio:.3f}" if shown and math.isfinite(e.cadence_ratio) else "",
-            "sensor_offset_deg": ",".join(f"{v:.2f}" for v in self._estimator.sensor_offset_deg),
-            "cadence_scale": f"{self._estimator.cadence_scale:.3f}" if math.isfinite(self._estimator.cadence_scale) else "",
-            "adapted_strides": str(int(self._estimator.adapter.accepted.sum())) if self._estimator.adapter else "",
-        }
-        problems = []
-        if self._period_received == 0:
-            problems.append(f"no input on {self._sub.topic_name}")
-        if self._period_rejected:
-            problems.append(f"{self._period_rejected} sample(s) rejected")
-        if (
-            not math.isnan(stamp_rate)
-            and self._estimator.resampler is None
-            and abs(stamp_rate / lib.sample_rate_hz - 1.0) > RATE_TOLERANCE
-        ):
-            problems.append(
-                f"input stamp rate {stamp_rate:.0f} Hz differs from the library's {lib.sample_rate_hz:g} Hz "
-                "(set resample: on)"
-            )
-        if problems:
-            level, message = DiagnosticStatus.WARN, "; ".join(problems)
-        elif shown and e is not None:
-            level, message = DiagnosticStatus.OK, f"ready: {e.mode} phase {e.phase:.2f}"
-        else:
-            level, message = DiagnosticStatus.OK, f"filling window {values['window']}"
-        self._period_start = now
-        self._period_received = self._period_rejected = self._period_accepted = 0
-        self._period_first_stamp = self._period_last_stamp = None
-        self._proc_sum = self._proc_max = 0.0
-        self._proc_count = 0
-        return DiagnosticStatus(
-            level=level,
-            name=f"{self.get_fully_qualified_name()}: gait estimator",
-            message=message,
-            hardware_id="",
-            values=[KeyValue(key=k, value=v) for k, v in values.items()],
-        )
-
-    def _publish_diagnostics(self) -> None:
-        try:
-            msg = DiagnosticArray()
-            msg.header.stamp = self.get_clock().now().to_msg()
-            msg.status = [self.diagnostics_status()]
-            self._diag_pub.publish(msg)
-            self._publish_profile()
-        except (RuntimeError, InvalidHandle):
-            if self.context.ok():
-                raise  # (a timer event can still be dispatched after the context shut down)
-
-    def _publish_profile(self) -> None:
-        """Publish the period's ``~/profile`` rows; record the next period's only while
-        something subscribes (no cost otherwise)."""
-        rows, self._profile = self._profile, [] if self._profile_pub.get_subscription_count() else None
-        if rows:
-            msg = Float64MultiArray()
-            n, k = len(rows), len(PROFILE_COLUMNS)
-            msg.layout.dim = [
-                MultiArrayDimension(label="samples", size=n, stride=n * k),
-                MultiArrayDimension(label=",".join(PROFILE_COLUMNS), size=k, stride=k),
-            ]
-            msg.data = _double_array(np.array(rows, dtype=np.float64).reshape(n, k))
-            self._profile_pub.publish(msg)
-
-
-def make_executor(kind: str, context: Any = None) -> Executor:
-    """An rclpy executor by ``executor`` parameter value (EXECUTORS)."""
-    if kind == "events":
-        from rclpy.experimental import EventsExecutor
-
-        return EventsExecutor(context=context)
-    if kind == "single_threaded":
-        return SingleThreadedExecutor(context=context)
-    raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {kind!r}")
-
-
-def spin(node: Node, executor: Executor) -> None:
-    """Run ``node``'s callbacks until its context shuts down (SIGINT/SIGTERM, rclpy.shutdown).
-
-    Always with a finite timeout (SPIN_PERIOD_S): rclpy 7.1's EventsExecutor dispatches nothing
-    from ``spin()`` or ``spin_once()`` without one (it busy-waits on the clock instead; timers
-    and subscriptions never run). That, not the steady-clock diagnostics timer, is why an earlier
-    attempt with ``rclpy.spin(node, EventsExecutor())`` published no diagnostics.
-    """
-    executor.add_node(node)
-    try:
-        while node.context.ok():
-            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
-    finally:
-        executor.remove_node(node)
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -1,0 +1,69 @@
+"""The first stage of the estimator: checks each sample and its stamp, and tells the pipeline when
+a gap in the stamps restarts the window or forgets what the walking calibrations learnt."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from .channels import Sample
+
+
+@dataclass(frozen=True)
+class GapParams:
+    """Gap thresholds (the options of the same names).
+
+    Attributes:
+        max_gap_s: A longer gap (s) between stamps restarts the window; 0 = never.
+        calibration_reset_gap_s: A longer gap (s) also forgets the learnt sensor offsets and
+            cadence (the sensors may have been re-donned); 0 = never.
+    """
+
+    max_gap_s: float = 0.5
+    calibration_reset_gap_s: float = 5.0
+
+
+class GapVerdict(NamedTuple):
+    restart_window: bool
+    reset_calibration: bool
+
+
+NO_GAP = GapVerdict(False, False)
+
+
+class GapCheck:
+    """Rejects non-finite samples and stamps that do not increase, and measures the gap since the
+    previous accepted stamp.
+
+    Args:
+        params: Gap thresholds; may be replaced at any sample (``params`` attribute).
+    """
+
+    def __init__(self, params: GapParams) -> None:
+        self.params = params
+        self.last_time: float | None = None
+
+    def reset(self) -> None:
+        """Forget the previous stamp: the next sample starts a stream."""
+        self.last_time = None
+
+    def admit(self, time_s: float, x: Sample) -> GapVerdict:
+        """Accept sample ``x`` (degrees) stamped ``time_s`` (seconds).
+
+        Raises ValueError for a non-finite sample or stamp, or a stamp not after the previous
+        one; the state is then unchanged.
+        """
+        if not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]) and math.isfinite(x[3])
+                and math.isfinite(time_s)):
+            raise ValueError(f"non-finite sample {list(x)} at {time_s}")
+        last = self.last_time
+        if last is not None and time_s <= last:
+            raise ValueError(f"stamp {time_s} is not after the previous {last}")
+        self.last_time = time_s
+        if last is None:
+            return NO_GAP
+        gap = time_s - last
+        p = self.params
+        restart, recalibrate = 0 < p.max_gap_s < gap, 0 < p.calibration_reset_gap_s < gap
+        return GapVerdict(restart, recalibrate) if restart or recalibrate else NO_GAP

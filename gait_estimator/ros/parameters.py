@@ -1,0 +1,283 @@
+"""The parameters of ``estimator_node``: names, defaults, descriptions, validation at set time and
+how a change is applied (``NodeParameters``, a mixin of ``EstimatorNode``).
+
+Estimator options are parameters of the same name; the expert ones (``OPTIONS`` entries flagged
+advanced) are ``advanced.<name>`` (in a params file: an ``advanced:`` mapping under
+``ros__parameters``). ``config/estimator.yaml`` holds the same defaults (``yaml_defaults``).
+"""
+
+from __future__ import annotations
+
+import array
+from pathlib import Path
+from typing import Any
+
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterException
+from rclpy.parameter import Parameter
+
+from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.errors import GaitEstimatorError
+from ..core.estimator import Estimator
+from ..core.kernels import KernelLibrary
+from ..core.options import GAP_OPTIONS, OPTIONS, PRESETS, EstimatorConfig
+from ..io.library_io import load_library
+from ..io.resources import DEFAULT_LIBRARY
+from ..io.stream import INPUT_TYPES, UNITS, AngleExtractor, restart_threshold
+from .priority import MAX_PRIORITY, process_priority, set_process_priority
+
+ADVANCED_PREFIX = "advanced."
+EXECUTORS = ("events", "single_threaded")
+"""Values of the ``executor`` parameter: rclpy.experimental.EventsExecutor, SingleThreadedExecutor."""
+REMOVED_OPTIONS = ("window_fraction", "subsample_phase", "switch_evidence_deg2s", "min_dwell_samples")
+"""Options that left the product (docs/options.md); a params file still setting one gets a warning."""
+
+OPTION_OF_PARAMETER: dict[str, str] = {(ADVANCED_PREFIX if o.advanced else "") + o.name: o.name for o in OPTIONS}
+"""Node parameter name -> estimator option name."""
+PARAMETER_OF_OPTION = {v: k for k, v in OPTION_OF_PARAMETER.items()}
+
+DEFAULTS: dict[str, Any] = {
+    "kernels": DEFAULT_LIBRARY,
+    "joint_names": list(CHANNELS),
+    "input_units": "rad",
+    "input_type": "joint_state",
+    "executor": "events",
+    "thread_priority": 0,
+    "adapted_library_path": "",
+    "preset": "default",
+    **{PARAMETER_OF_OPTION[o.name]: o.default for o in OPTIONS},
+}
+"""Parameter defaults, in declaration order; ``config/estimator.yaml`` holds the same values."""
+
+DESCRIPTIONS: dict[str, str] = {
+    "kernels": "Kernel library: a file (.yaml, .npz, reference .csv or per-mode .yaml) or directory, or a "
+    "bundled name (able_bodied, prosthesis). Changing it at run time reloads it and restarts the window.",
+    "joint_names": "JointState names of right_thigh, left_thigh, right_shank, left_shank, in that order "
+    "(4 distinct names; other joints in the message are ignored, message order does not matter).",
+    "input_units": "Units of the input angles: rad (REP 103) or deg.",
+    "input_type": "Input message type on segment_angles (read-only): joint_state (sensor_msgs/JointState) or "
+    "float64_multi_array (std_msgs/Float64MultiArray [right_thigh, left_thigh, right_shank, left_shank]).",
+    "executor": "Executor of the estimator_node process (read-only): events (rclpy's EventsExecutor, lower "
+    "latency) or single_threaded (rclpy's SingleThreadedExecutor).",
+    "thread_priority": "Real-time priority of the node: 1-99 runs every thread of its process under SCHED_FIFO at "
+    "that priority (as ros2_control's controller_manager runs its loop; needs CAP_SYS_NICE or an rtprio limit, "
+    "otherwise the node warns and runs on); 0 leaves the scheduling the process started with (e.g. under chrt).",
+    "adapted_library_path": "Where the save_library service writes the personalised kernels (.yaml or .npz); '' = "
+    "~/.ros/gait_estimator/<library>_adapted.yaml.",
+    "preset": "Values the estimator options start from (read-only): default (robust for a new wearer: resampling, "
+    "time-scaled kernels, offset tolerance and calibration) or paper (the paper's algorithm, reproduces the reference "
+    "implementation). Options set explicitly (command line, params file) override it.",
+    **{
+        PARAMETER_OF_OPTION[o.name]: o.description[0].upper() + o.description[1:]
+        + ("" if o.name in GAP_OPTIONS else ". Changing it at run time restarts the window.")
+        for o in OPTIONS
+    },
+}
+READ_ONLY = frozenset({"input_type", "executor", "preset"})
+DYNAMIC_TYPING = frozenset({"resample"})  # auto | on | off, or a boolean
+
+
+class StartupError(GaitEstimatorError):
+    """The node cannot start (bad parameter, unreadable library): reported in one line."""
+
+
+def yaml_defaults() -> dict[str, Any]:
+    """DEFAULTS as a params file holds them: ``advanced.<name>`` under an ``advanced`` mapping."""
+    out: dict[str, Any] = {}
+    for name, value in DEFAULTS.items():
+        if name.startswith(ADVANCED_PREFIX):
+            out.setdefault("advanced", {})[name[len(ADVANCED_PREFIX):]] = value
+        else:
+            out[name] = value
+    return out
+
+
+def one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def config_value(value: Any) -> Any:
+    """A parameter value as EstimatorConfig wants it (lists become tuples)."""
+    return tuple(value) if isinstance(value, (list, tuple, array.array)) else value
+
+
+def check_kernels(value: Any) -> tuple[str, KernelLibrary | None]:
+    """(why ``kernels`` is invalid or '', the library it names)."""
+    if not isinstance(value, str) or not value.strip():
+        return "must be a library path or bundled name, got an empty value", None
+    try:
+        return "", load_library(value)
+    except (GaitEstimatorError, OSError, ValueError) as exc:
+        return one_line(exc), None
+
+
+def check_input_parameter(name: str, v: Any) -> str:
+    """Why the value ``v`` of a non-estimator parameter is invalid, or '' (also for parameters not ours)."""
+    if name == "joint_names":
+        names = list(v or [])
+        if len(names) != N_CHANNELS:
+            return f"needs {N_CHANNELS} names ({', '.join(CHANNELS)}), got {len(names)}"
+        if any(not n.strip() for n in names):
+            return "names must not be empty"
+        if len(set(names)) != len(names):
+            return f"names must be distinct, got {names}"
+    elif name == "input_units" and v not in UNITS:
+        return f"must be one of {', '.join(UNITS)}, got {v!r}"
+    elif name == "input_type" and v not in INPUT_TYPES:
+        return f"must be one of {', '.join(INPUT_TYPES)}, got {v!r}"
+    elif name == "thread_priority" and not 0 <= v <= MAX_PRIORITY:
+        return f"must be in 0..{MAX_PRIORITY} (0 = the scheduling the process started with), got {v}"
+    elif name == "executor" and v not in EXECUTORS:
+        return f"must be one of {', '.join(EXECUTORS)}, got {v!r}"
+    elif name == "preset" and v not in PRESETS:
+        return f"must be one of {', '.join(PRESETS)}, got {v!r}"
+    elif name == "adapted_library_path" and v and Path(v).suffix.lower() not in (".yaml", ".yml", ".npz"):
+        return f"must end in .yaml or .npz (or be empty for the default), got {v!r}"
+    return ""
+
+
+class NodeParameters:
+    """Parameter handling of EstimatorNode (a mixin of it: uses rclpy.node.Node's methods)."""
+
+    _library: KernelLibrary | None
+    _config: EstimatorConfig
+    _config_preset: str
+    _estimator: Estimator
+
+    def _declare_parameters(self) -> None:
+        """Declare every parameter (the estimator options at the preset's values unless
+        overridden), validating each; raises StartupError."""
+        self._library = None
+        self._config = EstimatorConfig()
+        self._config_preset = "default"
+        self._pending: tuple[KernelLibrary | None, EstimatorConfig, Estimator | None] | None = None
+        self._last_rejection = ""
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        try:
+            for name, default in DEFAULTS.items():
+                self._last_rejection = ""
+                if name in OPTION_OF_PARAMETER:  # the preset's value unless overridden
+                    default = PRESETS[self._config_preset][OPTION_OF_PARAMETER[name]]
+                self.declare_parameter(name, default, ParameterDescriptor(
+                    description=DESCRIPTIONS[name], read_only=name in READ_ONLY,
+                    # `-p resample:=on` and params files parse on/off as booleans (YAML 1.1)
+                    dynamic_typing=name in DYNAMIC_TYPING))
+                # Declaring validated the value (kernels: loaded it); keep it for the next ones.
+                if self._pending is not None:
+                    self._library, self._config = self._pending[0] or self._library, self._pending[1]
+                self._pending = None
+                if name == "preset":
+                    self._config_preset = self.get_parameter("preset").value
+                    self._config = EstimatorConfig.preset(self._config_preset)
+            assert self._library is not None
+            self._set_estimator(self._new_estimator(self._library, self._config))
+        except ParameterException as exc:
+            reason = self._last_rejection or ": " + one_line(exc)
+            self.destroy_node()
+            raise StartupError(f"invalid parameter {reason}") from None
+        except (GaitEstimatorError, ValueError) as exc:
+            self.destroy_node()
+            raise StartupError(one_line(exc)) from None
+        self._warn_stale_overrides()
+
+    def _warn_stale_overrides(self) -> None:
+        """One warning per override (params file, -p) of an option by a name it no longer has."""
+        for name in getattr(self, "_parameter_overrides", {}):
+            if name in REMOVED_OPTIONS:
+                self.get_logger().warn(f"parameter {name} ignored: the option was removed (docs/options.md)")
+            elif name in PARAMETER_OF_OPTION and PARAMETER_OF_OPTION[name] != name:
+                self.get_logger().warn(f"parameter {name} ignored: it is {PARAMETER_OF_OPTION[name]} now")
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """on-set callback: reject invalid values with a reason; stash what they would build."""
+        lib = self._library
+        values: dict[str, Any] = {}
+        for p in params:
+            reason = ""
+            if p.name == "kernels":
+                reason, loaded = check_kernels(p.value)
+                lib = loaded or lib
+            elif p.name in OPTION_OF_PARAMETER:
+                values[OPTION_OF_PARAMETER[p.name]] = config_value(p.value)
+            else:
+                reason = check_input_parameter(p.name, p.value)
+            if reason:
+                return self._reject_parameter(f"{p.name}: {reason}")
+        try:
+            config = self._config.with_options(**values) if values else self._config
+        except (ValueError, TypeError) as exc:
+            names = ", ".join(PARAMETER_OF_OPTION[v] for v in values)
+            return self._reject_parameter(f"{names}: {one_line(exc)}")
+        estimator = None
+        if lib is not None and (values or lib is not self._library):
+            try:
+                estimator = self._new_estimator(lib, config)  # also reads a transitions file
+            except (GaitEstimatorError, ValueError, OSError) as exc:
+                return self._reject_parameter(f"{', '.join(p.name for p in params)}: {one_line(exc)}")
+        self._pending = (lib if lib is not self._library else None, config, estimator)
+        return SetParametersResult(successful=True)
+
+    def _reject_parameter(self, reason: str) -> SetParametersResult:
+        self._last_rejection = reason
+        return SetParametersResult(successful=False, reason=reason)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        """post-set callback: apply values that passed validation."""
+        pending, self._pending = self._pending, None
+        names = {p.name for p in params}
+        self._apply_input_parameters(params)
+        if pending is None:
+            return
+        lib, config, estimator = pending
+        if lib is not None:
+            self._library = lib
+        self._config = config
+        self._guard.restart_back_s = restart_threshold(config.max_gap_s)
+        options = {OPTION_OF_PARAMETER[n] for n in names if n in OPTION_OF_PARAMETER}
+        if ("kernels" in names or options - GAP_OPTIONS) and estimator is not None:
+            self._resets_before += self._estimator.resets
+            kept = ""
+            if "kernels" not in names:  # same kernels, same sensors: keep what was learnt
+                estimator.adopt_calibration(self._estimator)
+                strides = estimator.adopt_adaptation(self._estimator)
+                if strides:
+                    kept = (f"; personalised kernels ({strides} strides) kept" if estimator.adapter is not None
+                            else f"; personalised kernels ({strides} strides) dropped: adapt_rate is 0")
+            self._set_estimator(estimator)
+            lib = self._library
+            self.get_logger().info(
+                f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: {self._options_summary()}: "
+                "window restarted" + kept
+            )
+        elif options & GAP_OPTIONS:
+            self._estimator.set_gap_options(config)  # only gap thresholds changed: keep the window
+
+    def _apply_input_parameters(self, params: list[Parameter]) -> None:
+        for p in params:
+            if p.name == "joint_names":
+                self._joint_names = tuple(p.value)
+            elif p.name == "input_units":
+                self._units = p.value
+            elif p.name == "thread_priority":
+                self._set_priority(p.value)
+        if {p.name for p in params} & {"joint_names", "input_units"}:
+            self._extract = AngleExtractor(self._joint_names, self._units)
+
+    def _set_priority(self, priority: int) -> None:
+        """Apply ``thread_priority`` to every thread of the process; a refusal is a warning (the
+        node runs on at the priority it has), as in ros2_control."""
+        try:
+            self.get_logger().info(f"thread_priority {priority}: {set_process_priority(priority)}")
+        except OSError as exc:
+            self.get_logger().warn(f"thread_priority {priority}: {exc}; running with {process_priority()} scheduling")
+
+    def _new_estimator(self, library: KernelLibrary, config: EstimatorConfig) -> Estimator:
+        """An estimator for this node's input: JointState carries stamps (``resample: auto``
+        resamples it), Float64MultiArray is timed on arrival (not resampled unless ``on``)."""
+        input_type = self.get_parameter("input_type").value if self.has_parameter("input_type") else "joint_state"
+        return Estimator(library, config, stamped=input_type == "joint_state")
+
+    def _options_summary(self) -> str:
+        changed = self._config.changed_from(self._config_preset)
+        return f"preset {self._config_preset}" + (
+            " with " + ", ".join(f"{PARAMETER_OF_OPTION[k]}={v}" for k, v in changed.items()) if changed else "")

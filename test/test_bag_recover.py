@@ -1,0 +1,369 @@
+"""Cut and damaged bags (a recording that ended with the battery): every complete message up to
+the cut is read, one warning line says what was recovered, ``repair`` writes a complete copy.
+
+No ROS needed: bags are written and checked with rosbags; cuts are made by truncating copies.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import Reader
+
+from gait_estimator.cli.app import main
+from gait_estimator.core.errors import RecordingError
+from gait_estimator.io.bag import BagRecording, bag_records, read_bag
+from gait_estimator.io.bag_recover import damage, open_recovered
+from gait_estimator.io.bag_write import write_input_bag
+from gait_estimator.io.mcap_scan import MAGIC
+from gait_estimator.io.readers import read_recording
+from gait_estimator.ros.player import load_playlist
+
+START_NS = 1_700_000_000_000_000_000
+
+
+@pytest.fixture(scope="module")
+def ms_mcap(multispeed_csv: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The bundled Multispeed recording as an mcap bag, converted by the CLI (three chunks)."""
+    out = tmp_path_factory.mktemp("ms") / "ms"
+    assert main(["convert", str(multispeed_csv), "--out-bag", str(out), "--start-time", "1700000000"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def ms_full(ms_mcap: Path) -> BagRecording:
+    return read_bag(ms_mcap)
+
+
+@pytest.fixture(scope="module")
+def message_ends(ms_mcap: Path) -> np.ndarray:
+    """File offset just after each message of the uncut mcap file: where its CDR bytes, as
+    rosbags reads them, end in the file (found by search, independent of the scanner)."""
+    data = _storage(ms_mcap).read_bytes()
+    ends, pos = [], 0
+    with Reader(ms_mcap) as reader:
+        for _, _, raw in reader.messages():
+            pos = data.index(bytes(raw), pos)
+            ends.append(pos + len(raw))
+    return np.array(ends)
+
+
+@pytest.fixture(scope="module")
+def ramp_sqlite(swge: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    rec = read_recording(swge / "recordings" / "LG_2_Ramp_AB_Sample.csv").slice(0, 3000)
+    return write_input_bag(rec, tmp_path_factory.mktemp("sq") / "ramp", storage="sqlite3", start_ns=START_NS)
+
+
+def _storage(bag: Path) -> Path:
+    return next(f for f in bag.iterdir() if f.suffix in (".mcap", ".db3"))
+
+
+def _cut_copy(bag: Path, dest: Path, size: int, keep_metadata: bool = True) -> Path:
+    """A copy of ``bag`` whose storage file keeps only its first ``size`` bytes."""
+    shutil.copytree(bag, dest)
+    f = _storage(dest)
+    data = f.read_bytes()
+    f.write_bytes(data[:size])
+    if not keep_metadata:
+        (dest / "metadata.yaml").unlink()
+    return dest
+
+
+def _same_rows(part: BagRecording, full: BagRecording) -> None:
+    """``part`` holds exactly the first rows of ``full``."""
+    n = len(part)
+    assert 0 < n <= len(full)
+    np.testing.assert_array_equal(part.angles_deg, full.angles_deg[:n])
+    np.testing.assert_array_equal(part.stamp_ns, full.stamp_ns[:n])
+    np.testing.assert_array_equal(part.log_time_ns, full.log_time_ns[:n])
+    np.testing.assert_array_equal(part.time_s, full.time_s[:n])
+
+
+def _digest(path: Path) -> dict[str, str]:
+    return {f.name: hashlib.sha256(f.read_bytes()).hexdigest() for f in sorted(path.iterdir())}
+
+
+def _warning(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert err.startswith("warning: ") and "recovered" in err
+    return err
+
+
+# ---------------------------------------------------------------------------------------------
+# mcap cut at many places
+
+
+def _cuts(ends: np.ndarray, size: int, header_end: int) -> dict[str, int]:
+    mid = len(ends) // 2
+    return {
+        "inside a message record": int(ends[mid] - 7),
+        "right after a message": int(ends[mid]),
+        "inside the first chunk": int(ends[100] + 3),
+        "inside the last message": int(ends[-1] - 1),
+        "inside the summary": size - 50,
+        "half of the bytes": size // 2,
+    }
+
+
+@pytest.mark.parametrize(
+    "where",
+    ["inside a message record", "right after a message", "inside the first chunk", "inside the last message",
+     "inside the summary", "half of the bytes"],
+)
+def test_cut_mcap_gives_every_complete_message(tmp_path, ms_mcap, ms_full, message_ends, where, capsys):
+    size = _storage(ms_mcap).stat().st_size
+    cut = _cuts(message_ends, size, 0)[where]
+    bag = _cut_copy(ms_mcap, tmp_path / "cut", cut)
+    before = _digest(bag)
+    rec = read_bag(bag)
+    expected = int(np.count_nonzero(message_ends <= cut))
+    assert len(rec) == expected and rec.messages == expected
+    _same_rows(rec, ms_full)
+    err = _warning(capsys)
+    assert f"recovered {expected} message(s)" in err and f"ends at byte {cut}" in err
+    assert rec.recovered and rec.recovered in err
+    assert _digest(bag) == before  # the original is never modified
+
+
+@pytest.mark.parametrize("where", ["zero-length file", "inside the magic", "right after the header"])
+def test_cut_mcap_without_a_message_is_an_error(tmp_path, ms_mcap, where, capsys):
+    data = _storage(ms_mcap).read_bytes()
+    header_end = 8 + 9 + int.from_bytes(data[9:17], "little")
+    cut = {"zero-length file": 0, "inside the magic": 5, "right after the header": header_end}[where]
+    assert data[:8] == MAGIC and data[8] == 0x01
+    bag = _cut_copy(ms_mcap, tmp_path / "cut", cut)
+    with pytest.raises(RecordingError, match="no complete message could be read"):
+        read_bag(bag)
+    assert main(["process", str(bag)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("gait-estimator: error: ") and str(bag) in err
+
+
+def test_cut_mcap_file_on_its_own_and_without_metadata(tmp_path, ms_mcap, ms_full, message_ends, capsys):
+    cut = int(message_ends[5000] + 10)
+    bag = _cut_copy(ms_mcap, tmp_path / "cut", cut, keep_metadata=False)
+    for path in (bag, _storage(bag)):
+        rec = read_bag(path)
+        assert len(rec) == 5001
+        _same_rows(rec, ms_full)
+        err = _warning(capsys)
+        assert ("no metadata.yaml" in err) == (path == bag)
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+def test_cut_compressed_chunks_give_their_complete_blocks(tmp_path, ms_full, compression, capsys):
+    """ros2 bag record (libmcap) compresses chunks with zstd by default: a cut chunk yields the
+    messages of its complete compressed blocks."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2 import storage_mcap as sm
+
+    from gait_estimator.io.bag import typestore
+
+    compress = {"zstd": sm.zstd.compress, "lz4": __import__("lz4.frame").frame.compress}[compression]
+    bag = tmp_path / "z"
+    with Writer(bag, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        writer.storage.compression, writer.storage.compressor = compression, compress
+        conn = writer.add_connection("/segment_angles", "sensor_msgs/msg/JointState", typestore=typestore())
+        with Reader(ms_full.bag) as reader:
+            for _, log_ns, raw in reader.messages():
+                writer.write(conn, log_ns, raw)
+    f = _storage(bag)
+    assert f.read_bytes().count(compression.encode()) >= 3
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    rec = read_bag(bag)
+    _same_rows(rec, ms_full)
+    assert len(rec) >= 5000  # two complete chunks of the three, and blocks of the cut one
+    _warning(capsys)
+
+
+# ---------------------------------------------------------------------------------------------
+# sqlite3
+
+
+@pytest.mark.parametrize("where", ["half", "nine tenths", "a byte short", "header page only", "zero-length file"])
+def test_cut_sqlite_gives_what_the_database_holds(tmp_path, ramp_sqlite, where, capsys):
+    full = read_bag(ramp_sqlite)
+    size = _storage(ramp_sqlite).stat().st_size
+    cut = {"half": size // 2, "nine tenths": size * 9 // 10, "a byte short": size - 1, "header page only": 4096,
+           "zero-length file": 0}[where]
+    bag = _cut_copy(ramp_sqlite, tmp_path / "cut", cut)
+    before = _digest(bag)
+    if where in ("header page only", "zero-length file"):
+        with pytest.raises(RecordingError, match="no complete message could be read"):
+            read_bag(bag)
+        return
+    rec = read_bag(bag)
+    _same_rows(rec, full)
+    assert len(rec) >= {"half": 0.4, "nine tenths": 0.8, "a byte short": 0.9}[where] * len(full)
+    assert "recovered" in _warning(capsys)
+    assert _digest(bag) == before
+
+
+def _kill_during(db: Path, script: str) -> None:
+    """Run ``script`` on ``db`` (sqlite3 connection ``con``) in a child that SIGKILLs itself."""
+    code = f"import os, signal, sqlite3\ncon = sqlite3.connect({str(db)!r}, isolation_level=None)\n{script}\n" \
+           "os.kill(os.getpid(), signal.SIGKILL)\n"
+    proc = subprocess.run([sys.executable, "-c", code], check=False)
+    assert proc.returncode == -signal.SIGKILL
+
+
+def test_sqlite_unfinished_transaction_is_rolled_back(tmp_path, ramp_sqlite, capsys):
+    """The recorder died inside a transaction that had already spilled pages into the .db3:
+    the -journal left beside it restores the last committed state (in a copy)."""
+    bag = shutil.copytree(ramp_sqlite, tmp_path / "bag")
+    db = _storage(bag)
+    _kill_during(db, "con.execute('PRAGMA cache_size=2')\ncon.execute('BEGIN')\n"
+                     "con.execute('UPDATE messages SET data = zeroblob(length(data))')\n"
+                     "con.execute('INSERT INTO messages(topic_id, timestamp, data) SELECT topic_id, timestamp, data "
+                     "FROM messages')")
+    journal = db.with_name(db.name + "-journal")
+    assert journal.stat().st_size > 0
+    assert "last transaction unfinished" in damage(bag)
+    before = _digest(bag)
+    rec = read_bag(bag)
+    full = read_bag(ramp_sqlite)
+    assert len(rec) == len(full)
+    _same_rows(rec, full)
+    _warning(capsys)
+    assert _digest(bag) == before  # the journal and database are left as they were
+
+
+def test_sqlite_committed_wal_frames_are_read(tmp_path, ramp_sqlite, capsys):
+    """A write-ahead-log bag (ros2 bag's 'resilient' preset): committed transactions still in
+    the -wal are read, the unfinished one is not."""
+    bag = shutil.copytree(ramp_sqlite, tmp_path / "bag")
+    db = _storage(bag)
+    _kill_during(db, "con.execute('PRAGMA journal_mode=WAL')\ncon.execute('PRAGMA wal_autocheckpoint=0')\n"
+                     "con.execute('INSERT INTO messages(topic_id, timestamp, data) SELECT topic_id, timestamp + 1000000000000, "
+                     "data FROM messages WHERE id <= 100')\n"
+                     "con.execute('BEGIN')\ncon.execute('DELETE FROM messages')")
+    assert "-wal left beside it" in damage(bag)
+    with open_recovered(bag, damage(bag)) as recovered:
+        records = list(recovered.records())
+    with Reader(ramp_sqlite) as reader:
+        original = [(t, bytes(raw)) for _, t, raw in reader.messages()]
+    assert [(r.log_time_ns, r.data) for r in records] == original + [(t + 10**12, d) for t, d in original[:100]]
+    assert {r.topic for r in records} == {"/segment_angles"}
+
+
+# ---------------------------------------------------------------------------------------------
+# metadata.yaml missing or wrong
+
+
+@pytest.mark.parametrize("damaged", ["missing", "unreadable", "wrong count", "wrong file name"])
+def test_metadata_that_disagrees_with_the_files(tmp_path, ms_mcap, ms_full, damaged, capsys):
+    bag = shutil.copytree(ms_mcap, tmp_path / "bag")
+    meta = bag / "metadata.yaml"
+    if damaged == "missing":
+        meta.unlink()
+    elif damaged == "unreadable":
+        meta.write_text("rosbag2_bagfile_information: [\n")
+    elif damaged == "wrong count":
+        doc = yaml.safe_load(meta.read_text())
+        doc["rosbag2_bagfile_information"]["message_count"] = 99
+        meta.write_text(yaml.safe_dump(doc))
+    else:
+        _storage(bag).rename(bag / "renamed_0.mcap")
+    rec = read_bag(bag)
+    assert len(rec) == len(ms_full)
+    _same_rows(rec, ms_full)
+    err = _warning(capsys)
+    why = {"missing": "no metadata.yaml", "unreadable": "metadata.yaml is unreadable",
+           "wrong count": "metadata.yaml says 99 message(s), its files hold 14170", "wrong file name": "not in the directory"}
+    assert why[damaged] in err and "every storage file reads to its end" in err
+
+
+# ---------------------------------------------------------------------------------------------
+# every command, and repair
+
+
+def test_commands_read_a_cut_bag(tmp_path, ms_mcap, ms_full, message_ends, capsys):
+    cut = int(message_ends[6000] - 1)
+    bag = _cut_copy(ms_mcap, tmp_path / "cut", cut)
+    assert main(["convert", str(bag), "--out", str(tmp_path / "x.csv")]) == 0
+    _warning(capsys)
+    assert len(read_recording(tmp_path / "x.csv")) == 6000
+    playlist = load_playlist(bag)  # play (ROS-free part)
+    assert len(playlist) == 6000
+    _warning(capsys)
+    assert main(["train", str(bag), "--mode", "Slow", "--out", str(tmp_path / "lib.yaml")]) == 0
+    _warning(capsys)
+
+
+def test_acceptance_multispeed_cut_at_half(tmp_path, ms_mcap, message_ends, capsys):
+    """Issue 31: process recovers >= 95 % of the messages before a cut at 50 % of the bytes,
+    warns in one line and exits 0; repair writes a bag rosbags reads as an ordinary bag."""
+    size = _storage(ms_mcap).stat().st_size
+    bag = _cut_copy(ms_mcap, tmp_path / "cut", size // 2)
+    before_cut = int(np.count_nonzero(message_ends <= size // 2))
+    assert main(["process", str(bag), "--out", str(tmp_path / "pred.csv")]) == 0
+    err = _warning(capsys)
+    n = int(re.search(r"recovered (\d+) message", err).group(1))
+    assert len(read_bag(bag)) == n
+    capsys.readouterr()
+    print(f"messages before the cut {before_cut}, recovered {n} ({100 * n / before_cut:.1f} %)")
+    assert n >= 0.95 * before_cut
+    original = _digest(bag)
+    assert main(["repair", str(bag)]) == 0
+    out = tmp_path / "cut_repaired"
+    assert f"wrote {out} (mcap, {n} messages" in capsys.readouterr().out
+    assert _digest(bag) == original
+    with AnyReader([out]) as reader:
+        assert reader.message_count == n
+        assert sum(1 for _ in reader.messages()) == n
+    assert damage(out) == ""
+    with Reader(ms_mcap) as full, Reader(out) as rep:
+        assert [bytes(r) for _, _, r in rep.messages()] == [bytes(r) for _, _, r in full.messages()][:n]
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_repair_writes_a_complete_bag_and_never_overwrites(tmp_path, ms_mcap, ramp_sqlite, storage, capsys):
+    src = ms_mcap if storage == "mcap" else ramp_sqlite
+    bag = _cut_copy(src, tmp_path / "cut", _storage(src).stat().st_size * 2 // 3)
+    out = tmp_path / "fixed"
+    assert main(["repair", str(bag), "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert next(out.glob("*.db3" if storage == "sqlite3" else "*.mcap"))
+    assert (out / "metadata.yaml").is_file() and damage(out) == ""
+    rec, part = read_bag(out), read_bag(bag)
+    capsys.readouterr()
+    np.testing.assert_array_equal(rec.angles_deg, part.angles_deg)
+    np.testing.assert_array_equal(rec.log_time_ns, part.log_time_ns)
+    before = _digest(out)
+    assert main(["repair", str(bag), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"gait-estimator: error: {out}: already exists; repair writes a new bag directory"
+    assert _digest(out) == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no staging left
+
+
+def test_repair_of_a_bag_without_messages_is_an_error(tmp_path, ms_mcap, capsys):
+    bag = _cut_copy(ms_mcap, tmp_path / "cut", 30)
+    assert main(["repair", str(bag)]) == 2
+    assert "no complete message could be read" in capsys.readouterr().err
+    assert not (tmp_path / "cut_repaired").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cut"]
+
+
+def test_bag_records_gives_raw_messages_of_intact_and_cut_bags(tmp_path, ms_mcap, message_ends, capsys):
+    """The layer below topic decoding (for other readers, e.g. IMU topics): raw CDR records."""
+    full = list(bag_records(ms_mcap))
+    assert len(full) == 14170 and capsys.readouterr().err == ""
+    bag = _cut_copy(ms_mcap, tmp_path / "cut", int(message_ends[999]))
+    part = list(bag_records(bag, ["segment_angles"]))
+    assert part == full[:1000]
+    assert part[0].topic == "/segment_angles" and part[0].msgtype == "sensor_msgs/msg/JointState"
+    _warning(capsys)
+    with pytest.raises(RecordingError, match="no topic /imu"):
+        list(bag_records(bag, ["/imu"]))
