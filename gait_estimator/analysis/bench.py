@@ -237,12 +237,14 @@ def bench(
             results.append({"modes": m, "impl": f"incremental ({backend})", "preset": "default", "rows": inc.n_rows,
                             **time_steps(inc, xd, inc.max_window), "state_bytes": inc.state_bytes()})
         results.extend(time_presets(lib, m, steps, backend))
-        if m == min(modes):  # the default preset without numba (the fallback), too
+        if m == min(modes):  # the default preset without numba (the fallback), too, timed as time_presets does
             for other in backends[1:]:
+                walk = synthetic_walk(lib, 4000 + steps)
+                start = calibrated_after(lib, walk, other)
                 est = Estimator(lib, EstimatorConfig.preset("default"), backend=other)
-                xd = synthetic_walk(lib, est.matcher.max_window + steps)
                 results.append({"modes": m, "impl": f"estimator ({other})", "preset": "default",
-                                **time_updates(est, xd, lib.sample_rate_hz, est.matcher.max_window)})
+                                "timed_from_sample": start,
+                                **time_updates(est, walk[: start + steps], lib.sample_rate_hz, start)})
         if m <= process_max_modes and compiled.AVAILABLE:
             results.extend(process_throughput(lib, m, calibrated_after(lib, synthetic_walk(lib, 4000)) + steps))
     by_key = {(r["modes"], r["impl"], r["preset"]): r for r in results}
