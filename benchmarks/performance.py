@@ -2,7 +2,7 @@
 """Matcher and estimator timing tables from the JSON reports of ``gait-estimator bench``.
 
     python benchmarks/performance.py          # tables only (part of `make docs`)
-    python benchmarks/performance.py --run    # first rerun bench.json (both cores, about 2 min)
+    python benchmarks/performance.py --run    # first rerun bench.json (both cores, about 10 min)
 
 Reads, in benchmarks/results/performance/ (a missing report leaves its section out):
 
@@ -53,7 +53,7 @@ def results_table(report: dict[str, Any]) -> str:
     lines = ["| modes M | what | median per step | p99 per step | state memory | offline throughput |",
              "|---|---|---|---|---|---|"]
     for r in report["results"]:
-        if "stride-start reader" in r["impl"]:  # an option no longer in the product
+        if "stride-start reader" in r["impl"] or "step_us_median" not in r:  # a retired option; throughput rows
             continue
         state = f"{r['state_bytes'] / 1e6:.2f} MB" if "state_bytes" in r else "—"
         offline = f"{r['offline_samples_per_s']:,.0f} samples/s" if "offline_samples_per_s" in r else "—"
@@ -83,9 +83,26 @@ def two_cores(report: dict[str, Any]) -> str:
                          "compiled step")
         est = {p: by.get((m, "estimator (numba)", p)) for p in ("paper", "default")}
         if all(est.values()):
+            d, p = est["default"], est["paper"]
+            after = (f" on the same samples, from sample {d['timed_from_sample']:,} on (the default preset's walking "
+                     "calibrations have acted)" if "timed_from_sample" in d else "")
             notes.append(f"M = {m}: a whole `Estimator.update` (resampling, matcher, supervisor, calibration) takes "
-                         f"{est['default']['step_us_median']:,.1f} µs with the default preset and "
-                         f"{est['paper']['step_us_median']:,.1f} µs with the paper preset (median)")
+                         f"{d['step_us_median']:,.1f} µs with the default preset and {p['step_us_median']:,.1f} µs with "
+                         f"the paper preset (median; {d['step_us_median'] / p['step_us_median']:.2f}×; p99 "
+                         f"{d['step_us_p99']:,.1f} and {p['step_us_p99']:,.1f} µs, {d['step_us_p99'] / p['step_us_p99']:.2f}×)"
+                         + after)
+        calibrating = by.get((m, "estimator (numba), calibrating", "default"))
+        if calibrating:
+            notes.append(f"M = {m}: while the default preset calibrates (samples {calibrating['timed_from_sample']:,}–"
+                         f"{calibrating['timed_from_sample'] + calibrating['steps_timed']:,}: every time scale) an update "
+                         f"takes {calibrating['step_us_median']:,.1f} µs (median), p99 {calibrating['step_us_p99']:,.1f} µs")
+        for preset in ("paper", "default"):
+            proc = by.get((m, "process", preset))
+            if proc:
+                notes.append(f"M = {m}: offline processing (`run_estimator`, behind `process`), {preset} preset: "
+                             f"{proc['samples_per_s']:,.0f} samples/s in bulk, {proc['streaming_samples_per_s']:,.0f} "
+                             f"sample by sample ({proc['speedup']:.1f}×; {proc['samples']:,} samples, calibrations "
+                             "included" + ("" if proc["same_estimates"] else "; DIFFERENT ESTIMATES") + ")")
         fallback = by.get((m, "estimator (numpy)", "default"))
         if fallback and est["default"]:
             notes.append(f"M = {m}: without numba (the numpy fallback) a whole default-preset update takes "
@@ -101,7 +118,7 @@ def two_cores(report: dict[str, Any]) -> str:
                      + " and ".join(f"{r['load_s']:.3f} s from {r['format']}" for r in loads))
     return ("## Two cores\n\n"
             f"`gait-estimator bench --modes 7,70,700 --drift-steps 1000000 --json benchmarks/results/performance/bench.json` "
-            f"on the quiet development machine ({machine(report)}).\n\n"
+            f"on the {report.get('machine_note', 'quiet development machine')} ({machine(report)}).\n\n"
             + "\n".join(f"* {n}." for n in notes) + "\n\n## Two cores: every row\n\n" + results_table(report) + "\n")
 
 
@@ -118,28 +135,34 @@ def one_core(report: dict[str, Any]) -> str:
         lines.append(f"M = {m}: {label}, {cost:,.1f} µs median ({budget})")
     return ("## One core (`taskset -c 0`)\n\n"
             "`taskset -c 0 gait-estimator bench --modes 7,70,700 --json benchmarks/results/performance/bench_one_core.json` "
-            f"on the quiet development machine ({machine(report)}), a stand-in for a Raspberry Pi-class "
+            f"on the {report.get('machine_note', 'quiet development machine')} ({machine(report)}), a stand-in for a "
+            "Raspberry Pi-class "
             "computer.\n\n" + "\n".join(f"* {n}." for n in lines) + "\n\n## One core: every row\n\n"
             + results_table(report) + "\n")
 
 
-def run_bench() -> None:
-    """Rerun bench.json: ``gait-estimator bench --modes 7,70,700 --drift-steps 1000000 --json``."""
+def run_bench(note: str | None = None) -> None:
+    """Rerun bench.json: ``gait-estimator bench --modes 7,70,700 --drift-steps 1000000 --json``;
+    ``note`` describes the machine's state (default: quiet development machine)."""
     DIR.mkdir(parents=True, exist_ok=True)
     path = DIR / "bench.json"
     subprocess.run([sys.executable, "-m", "gait_estimator.cli", "bench", "--modes", "7,70,700", "--drift-steps", "1000000",
                     "--json", str(path)], cwd=ROOT, check=True)
     report = json.loads(path.read_text(encoding="utf-8"))
     report["date"] = datetime.datetime.now(datetime.timezone.utc).date().isoformat()
+    if note:
+        report["machine_note"] = note
     path.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--run", action="store_true", help="rerun bench.json first (about 2 min), then the tables")
+    ap.add_argument("--run", action="store_true", help="rerun bench.json first (about 10 min), then the tables")
+    ap.add_argument("--note", help="with --run: the machine's state, e.g. 'development machine, shared with other "
+                    "jobs' (default: quiet development machine)")
     args = ap.parse_args(argv)
     if args.run:
-        run_bench()
+        run_bench(args.note)
     parts = []
     for name, fn in (("bench.json", two_cores), ("bench_one_core.json", one_core)):
         report = load(name)

@@ -165,18 +165,29 @@ def test_summary_lists_mode_segments(multispeed_csv: Path, capsys) -> None:
 
 def test_bench_command_times_every_implementation(tmp_path: Path) -> None:
     """`gait-estimator bench` (short run, no naive matcher): the paper matcher with each backend,
-    the default preset's matcher and whole updates, and at the smallest M the default preset's
-    update without numba too; every median and p99 positive."""
+    the default preset's matcher, both presets' whole updates at every M with their ratio (the
+    default preset also while it calibrates), at the smallest M the default preset's update
+    without numba too, and the offline process throughput of both presets, in bulk with the same
+    estimates as sample by sample; every median and p99 positive."""
     from gait_estimator.core import compiled
 
     report = tmp_path / "bench.json"
-    assert cli_main(["bench", "--modes", "7,14", "--steps", "200", "--naive-max-modes", "0", "--json", str(report)]) == 0
+    assert cli_main(["bench", "--modes", "7,14", "--steps", "200", "--naive-max-modes", "0", "--preset-max-modes", "7",
+                     "--process-max-modes", "7", "--json", str(report)]) == 0
     rows = {(r["modes"], r["impl"], r["preset"]): r for r in json.loads(report.read_text())["results"]}
     first = "numba" if compiled.AVAILABLE else "numpy"
     expected = {(7, f"estimator ({first})", "default"), (14, f"estimator ({first})", "paper"),
-                (14, f"incremental ({first})", "default")}
+                (14, f"estimator ({first})", "default"), (14, f"estimator ({first}), calibrating", "default"),
+                (7, f"incremental ({first})", "default")}
     if compiled.AVAILABLE:
-        expected |= {(7, "estimator (numpy)", "default"), (7, "incremental (numpy)", "paper")}
-        assert (14, "estimator (numpy)", "default") not in rows
+        expected |= {(7, "estimator (numpy)", "default"), (7, "incremental (numpy)", "paper"), (7, "process", "paper"),
+                     (7, "process", "default")}
+        assert (14, "estimator (numpy)", "default") not in rows and (14, "process", "default") not in rows
+        for preset in ("paper", "default"):
+            proc = rows[(7, "process", preset)]
+            assert proc["bulk"] and proc["same_estimates"] and proc["samples_per_s"] > 0
     assert expected <= set(rows) and not any(k[1] == "naive" for k in rows)
-    assert all(r["step_us_median"] > 0 and r["step_us_p99"] >= r["step_us_median"] for r in rows.values())
+    assert (14, f"incremental ({first})", "default") not in rows
+    assert rows[(14, f"estimator ({first})", "default")]["median_ratio_to_paper"] > 0
+    timed = [r for r in rows.values() if "step_us_median" in r]
+    assert all(r["step_us_median"] > 0 and r["step_us_p99"] >= r["step_us_median"] for r in timed)

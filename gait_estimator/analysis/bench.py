@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from ..core import compiled
-from ..core.estimator import Estimator, EstimatorConfig
+from ..core.batch import batch_supported
+from ..core.estimator import Estimator, EstimatorConfig, run_estimator
 from ..core.kernels import KernelLibrary
 from ..core.matcher import IncrementalMatcher, NaiveMatcher
 from ..io.library_io import load_library, save_library
@@ -108,7 +109,7 @@ def matcher_options(preset: str) -> dict[str, Any]:
 
 def time_updates(estimator: Estimator, samples: np.ndarray, rate_hz: float, warmup: int) -> dict[str, float]:
     """Like ``time_steps`` for ``Estimator.update`` with stamps at ``rate_hz``: resampling,
-    matcher, supervisor, calibration, everything a node or ``process`` runs per input sample."""
+    matcher, supervisor, calibration, everything a node runs per input sample."""
     t = np.arange(len(samples)) / rate_hz
     for i in range(min(warmup, len(samples))):
         estimator.update(float(t[i]), samples[i])
@@ -124,6 +125,67 @@ def time_updates(estimator: Estimator, samples: np.ndarray, rate_hz: float, warm
             "step_us_mean": float(us.mean()), "step_us_max": float(us.max()), "steps_timed": len(us)}
 
 
+def calibrated_after(library: KernelLibrary, samples: np.ndarray, backend: str = "auto") -> int:
+    """Input samples a fresh default-preset estimator needs before its walking calibrations have
+    read the strides after which they narrow the scale band (and recency weighting starts), or
+    the matcher's window if that is longer; len(samples) if they never do."""
+    est = Estimator(library, EstimatorConfig.preset("default"), backend=backend)
+    t = np.arange(len(samples)) / library.sample_rate_hz
+    for i in range(len(samples)):
+        est.update(float(t[i]), samples[i])
+        cal = est.calibration
+        if cal.strides >= max(cal.params.cadence_min_strides, cal.params.recency_after_strides):
+            return max(i + 1, est.matcher.max_window)
+    return len(samples)
+
+
+def time_presets(library: KernelLibrary, m: int, steps: int, backend: str) -> list[dict[str, Any]]:
+    """``Estimator.update`` of the default and the paper preset at M = m on one synthetic walk:
+    both timed on the same ``steps`` samples after the default preset's walking calibrations have
+    acted (its steady state; the paper preset warmed up on the same samples), and the default
+    preset also while it calibrates (from a full window to then)."""
+    walk = synthetic_walk(library, 4000 + steps)
+    start = calibrated_after(library, walk, backend)
+    x = walk[: start + steps]
+    rows = []
+    for preset in ("paper", "default"):
+        est = Estimator(library, EstimatorConfig.preset(preset), backend=backend)
+        rows.append({"modes": m, "impl": f"estimator ({backend})", "preset": preset, "timed_from_sample": start,
+                     **time_updates(est, x, library.sample_rate_hz, start)})
+    est = Estimator(library, EstimatorConfig.preset("default"), backend=backend)
+    first = est.matcher.max_window
+    if start > first + 10:
+        rows.append({"modes": m, "impl": f"estimator ({backend}), calibrating", "preset": "default",
+                     "timed_from_sample": first, **time_updates(est, x[:start], library.sample_rate_hz, first)})
+    return rows
+
+
+def process_throughput(library: KernelLibrary, m: int, samples: int) -> list[dict[str, Any]]:
+    """Offline ``process`` throughput (``run_estimator``, the code behind it, from a fresh
+    estimator over a synthetic walk of ``samples`` samples stamped at the library rate, walking
+    calibrations included) in bulk and, for comparison, sample by sample (``Estimator.update``),
+    for both presets; checks that the two give the same modes and phases."""
+    x = synthetic_walk(library, samples)
+    t = np.arange(len(x)) / library.sample_rate_hz
+    rows = []
+    for preset in ("paper", "default"):
+        cfg = EstimatorConfig.preset(preset)
+        bulk = Estimator(library, cfg)
+        t0 = time.perf_counter()
+        trace = run_estimator(bulk, t, x)
+        bulk_s = time.perf_counter() - t0
+        one = Estimator(library, cfg)
+        t0 = time.perf_counter()
+        ests = [one.update(float(t[i]), x[i]) for i in range(len(x))]
+        stream_s = time.perf_counter() - t0
+        same = bool(np.array_equal(trace.mode_index, [e.mode_index for e in ests])
+                    and np.array_equal(trace.phase, [e.phase for e in ests]))
+        rows.append({"modes": m, "impl": "process", "preset": preset, "samples": len(x),
+                     "bulk": batch_supported(bulk), "samples_per_s": len(x) / bulk_s,
+                     "streaming_samples_per_s": len(x) / stream_s, "speedup": stream_s / bulk_s, "same_estimates": same})
+    return rows
+
+
 def bench(
     library: KernelLibrary,
     modes: list[int],
@@ -132,12 +194,15 @@ def bench(
     naive_steps: int = 100,
     backends: list[str] | None = None,
     preset_max_modes: int = 70,
+    process_max_modes: int = 70,
 ) -> dict[str, Any]:
-    """Per-step time at each M in ``modes``: the paper's incremental matcher with each backend
-    (``numba``, ``numpy``; numba only if installed), the naive matcher (M <= naive_max_modes), and
-    for M <= preset_max_modes the default preset's matcher (all its time-scaled rows) and the whole
-    default-preset ``Estimator.update`` (and the paper preset's, for the ratio; at the smallest M
-    also the default preset's with the other backends), all in one run."""
+    """Per-step time at each M in ``modes``, all in one run: the paper's incremental matcher with
+    each backend (``numba``, ``numpy``; numba only if installed), the naive matcher (M <=
+    naive_max_modes); the whole ``Estimator.update`` of the default preset next to the paper
+    preset's at every M (``time_presets``); for M <= preset_max_modes the default preset's bare
+    matcher (all its time-scaled rows, every step) and at the smallest M the default preset's
+    update with the other backends; for M <= process_max_modes the offline ``process``
+    throughput of both presets (``process_throughput``)."""
     backends = backends or ["numba", "numpy"]
     backends = [b for b in backends if b != "numba" or compiled.AVAILABLE]
     if not backends:
@@ -165,27 +230,31 @@ def bench(
             xn = x[: warmup + naive_steps]
             results.append({"modes": m, "impl": "naive", "preset": "paper", **time_steps(naive, xn, warmup),
                             "state_bytes": naive.state_bytes()})
+        backend = backends[0]
         if m <= preset_max_modes:
-            backend = backends[0]
             inc = IncrementalMatcher(lib, backend=backend, **matcher_options("default"))
             xd = synthetic_walk(lib, inc.max_window + steps)
             results.append({"modes": m, "impl": f"incremental ({backend})", "preset": "default", "rows": inc.n_rows,
                             **time_steps(inc, xd, inc.max_window), "state_bytes": inc.state_bytes()})
-            for preset in ("paper", "default"):
-                est = Estimator(lib, EstimatorConfig.preset(preset), backend=backend)
-                warmup = est.matcher.max_window
-                results.append({"modes": m, "impl": f"estimator ({backend})", "preset": preset,
-                                **time_updates(est, xd, lib.sample_rate_hz, warmup)})
-            if m == min(modes):  # the default preset without numba (the fallback), too
-                for other in backends[1:]:
-                    est = Estimator(lib, EstimatorConfig.preset("default"), backend=other)
-                    results.append({"modes": m, "impl": f"estimator ({other})", "preset": "default",
-                                    **time_updates(est, xd, lib.sample_rate_hz, est.matcher.max_window)})
+        results.extend(time_presets(lib, m, steps, backend))
+        if m == min(modes):  # the default preset without numba (the fallback), too, timed as time_presets does
+            for other in backends[1:]:
+                walk = synthetic_walk(lib, 4000 + steps)
+                start = calibrated_after(lib, walk, other)
+                est = Estimator(lib, EstimatorConfig.preset("default"), backend=other)
+                results.append({"modes": m, "impl": f"estimator ({other})", "preset": "default",
+                                "timed_from_sample": start,
+                                **time_updates(est, walk[: start + steps], lib.sample_rate_hz, start)})
+        if m <= process_max_modes and compiled.AVAILABLE:
+            results.extend(process_throughput(lib, m, calibrated_after(lib, synthetic_walk(lib, 4000)) + steps))
     by_key = {(r["modes"], r["impl"], r["preset"]): r for r in results}
     for (m, impl, preset), r in by_key.items():
         paper = by_key.get((m, impl, "paper"))
-        if preset == "default" and paper is not None:
+        if preset == "default" and paper is not None and "step_us_median" in r:
             r["median_ratio_to_paper"] = r["step_us_median"] / paper["step_us_median"]
+            r["p99_ratio_to_paper"] = r["step_us_p99"] / paper["step_us_p99"]
+        if preset == "default" and paper is not None and "samples_per_s" in r:
+            r["throughput_ratio_to_paper"] = r["samples_per_s"] / paper["samples_per_s"]
         first = by_key.get((m, f"incremental ({backends[0]})", "paper"))
         if impl in ("naive", "incremental (numpy)") and first is not None and r is not first:
             r[f"median_ratio_to_{backends[0]}"] = r["step_us_median"] / first["step_us_median"]

@@ -138,7 +138,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         prepare_output(args.json, "--json")
     try:
         report = bench(lib, args.modes, steps=args.steps, naive_max_modes=args.naive_max_modes, backends=args.backends,
-                       preset_max_modes=args.preset_max_modes)
+                       preset_max_modes=args.preset_max_modes, process_max_modes=args.process_max_modes)
     except ValueError as exc:
         raise GaitEstimatorError(f"--backends: {exc}") from None
     report["library_load"] = load_times(lib, max(args.modes))
@@ -154,10 +154,17 @@ def cmd_bench(args: argparse.Namespace) -> int:
           f"numpy {mach['numpy']}, numba {mach['numba'] or 'not installed'}")
     for r in report["results"]:
         what = f"{r['impl']}, {r['preset']}" + (f" ({r['rows']} rows)" if "rows" in r else "")
+        if "samples_per_s" in r:  # offline process throughput
+            print(f"M={r['modes']:<5} {what:<42} {r['samples_per_s']:9.0f} samples/s in bulk, "
+                  f"{r['streaming_samples_per_s']:9.0f} sample by sample ({r['speedup']:.1f}x)"
+                  + ("" if r["same_estimates"] else "  DIFFERENT ESTIMATES"))
+            continue
         print(
             f"M={r['modes']:<5} {what:<42} median {r['step_us_median']:9.1f} us  p99 {r['step_us_p99']:9.1f} us"
             + (f"  state {r['state_bytes'] / 1e6:7.2f} MB" if "state_bytes" in r else "")
             + (f"  offline {r['offline_samples_per_s']:9.0f} samples/s" if "offline_samples_per_s" in r else "")
+            + (f"  x{r['median_ratio_to_paper']:.2f} paper (p99 x{r['p99_ratio_to_paper']:.2f})"
+               if "p99_ratio_to_paper" in r else "")
         )
     for r in report["library_load"]:
         print(f"load {r['modes']}-mode library from {r['format']:<4}: {r['load_s']:.3f} s ({r['file_bytes'] / 1e6:.1f} MB)")
@@ -222,7 +229,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--backends", type=choice_list(("numba", "numpy")), default=["numba", "numpy"],
                    help="matcher step implementations to time, e.g. numba,numpy (default; numba only if installed)")
     b.add_argument("--preset-max-modes", type=int, default=70,
-                   help="also time the default preset's matcher and Estimator.update up to this M (default 70)")
+                   help="also time the default preset's bare matcher (every row, every step) up to this M (default "
+                   "70); Estimator.update of both presets is timed at every M")
+    b.add_argument("--process-max-modes", type=int, default=70,
+                   help="also time offline processing (bulk and sample by sample) up to this M (default 70)")
     b.add_argument("--compare-reference", metavar="CMD",
                    help="also time this command (a reference implementation you built; never built here) as a black "
                    "box, e.g. 'ref/swge_bench data.csv'; needs --reference-samples")

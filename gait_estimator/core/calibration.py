@@ -130,7 +130,7 @@ class WalkingCalibration:
         self.matcher.set_scale_band(None)
         self._last: _StrideTrack | None = None
         if self.recency_waits:
-            self.matcher.start_uniform()  # the weighted sums are kept alongside: the switch costs nothing
+            self.matcher.start_uniform()  # until the switch, which rebuilds the weighted sums from the window
 
     def adopt(self, other: WalkingCalibration) -> None:
         """Start from what ``other`` has learnt (same sensors and wearer, new options)."""

@@ -55,47 +55,45 @@ def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover
 
 
 def step_rows(
-    e: np.ndarray, kern: np.ndarray, ksq: np.ndarray, lens: np.ndarray, wins: np.ndarray,
+    e: np.ndarray, kern: np.ndarray, ksq: np.ndarray, lens: np.ndarray,
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
     decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
-    pend: bool, e2: np.ndarray, plam: np.ndarray, plam_w: np.ndarray, ws2: np.ndarray,
-    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray,
-    normalize: bool, subsample: bool, n_scales: int,
-    allowed: np.ndarray, out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
+    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray, one_pass: bool,
+    normalize: bool, n_scales: int, allowed: np.ndarray, active: np.ndarray,
+    out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
-    """One matcher step over every row; returns the best mode. See the module docstring.
+    """One matcher step over the rows ``active``; returns the best mode. See the module docstring.
 
     e (R, Nmax): running sums, updated in place; kern (R, 4, Nmax) float64 or float32; ksq (R, Nmax) = ||k_j||^2;
-    lens/wins (R,); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and their squared
-    norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,) the prefix
-    sum before this sample; count: samples before this one; d0..d3: the (weighted) sample, as
-    scalars (the caller builds no array), dsq = ||d||^2; decay: recency weighting, with per row
-    lam (R,) the weight factor per sample of age, lam_w = lam^W, wsum the weight sum of a full
-    window (W without decay) and wsums (R, 4) the age-weighted window sums, updated in place;
-    pend: also keep the running sums e2 (R, Nmax) and age-weighted sums ws2 (R, 4) of other
-    (pending) age weights plam, plam_w = plam^N (whole-stride windows), not read out;
-    offset: apply the offset penalty (mu (R, 4) kernel means, mu_seg (R, 4, Nmax) per-shift
-    (age-weighted) means of the window's kernel part when W < N or with decay, tau (2, 4):
-    tolerances and sensor offsets; with decay the window's weight W_a and age-weighted sums stand
-    for W and the sums; scratch (R, Nmax): room for per-shift scores); normalize: divide by the
-    window's weight;
-    allowed (n_scales,) bool: the time scales a mode may be read at (at least one); rows at other
-    scales are updated but not read out (out_score inf).
-    Writes per row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
+    lens (R,): row lengths (= windows); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and
+    their squared norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,)
+    the prefix sum before this sample; count: samples before this one; d0..d3: the (weighted)
+    sample, as scalars (the caller builds no array), dsq = ||d||^2; decay: the matcher keeps
+    age-weighted window sums, with per row lam (R,) the weight factor per sample of age, lam_w =
+    lam^N, wsum the weight sum of a full window (N without decay) and wsums (R, 4) the
+    age-weighted window sums, updated in place; offset: apply the offset penalty (mu (R, 4)
+    kernel means, mu_seg (R, 4, Nmax) per-shift age-weighted means of the kernel with age
+    weights, tau (2, 4): tolerances and sensor offsets; with decay the window's weight W_a and
+    age-weighted sums stand for W and the sums; scratch (R, Nmax): room for per-shift scores, or
+    one_pass: none, the per-shift scores and their minimum in one pass, the faster once the rows
+    no longer fit the caches, the same results);
+    normalize: divide by the window's weight;
+    allowed (n_scales,) bool: the time scales a mode may be read at (at least one); active: the
+    rows updated and read out (those at allowed scales, or all); the others keep their sums.
+    Writes per active row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
-    n_rows = lens.shape[0]
     wmax = ring.shape[0]
     i = count
     p0, p1, p2, p3 = psum[0] + d0, psum[1] + d1, psum[2] + d2, psum[3] + d3
-    for r in prange(n_rows):  # rows are independent (threads in step_rows_parallel)
+    for a in prange(active.shape[0]):  # rows are independent (threads in step_rows_parallel)
+        r = active[a]
         n = lens[r]
-        w = wins[r]
-        full = i >= w
+        full = i >= n
         r0 = r1 = r2 = r3 = rsq = 0.0
         if full:
-            s = (i - w) % wmax
+            s = (i - n) % wmax
             r0, r1, r2, r3, rsq = ring[s, 0], ring[s, 1], ring[s, 2], ring[s, 3], ring_sq[s]
         lw = lam_w[r]  # weight of the sample leaving the window (1 without decay)
         o0, o1, o2, o3, osq = r0 * lw, r1 * lw, r2 * lw, r3 * lw, rsq * lw
@@ -105,56 +103,38 @@ def step_rows(
         last = er[n - 1]
         # In place, from the last column down: e[j] takes the old e[j-1] before it is overwritten.
         aged = decay and lam[r] < 1.0  # age weights in effect (lam = 1: uniform, the paper's update)
-        if w == n and full and not aged:
+        if full and not aged:
             # e[j] = e[j-1] + ||d||^2 - ||old||^2 - 2 k_j . (d - old)
             c0, c1, c2, c3 = -2.0 * (d0 - o0), -2.0 * (d1 - o1), -2.0 * (d2 - o2), -2.0 * (d3 - o3)
             for j in range(n - 1, 0, -1):
                 er[j] = er[j - 1] + base + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
             er[0] = last + base + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
-        elif w == n and full:
+        elif full:
             _aged_update(er, n, lam[r], lw, base, d0 - o0, d1 - o1, d2 - o2, d3 - o3, k0, k1, k2, k3, ksq[r])
         else:
-            # e[j] = lam e[j-1] + ||d - k_j||^2 - [full] lam^W ||old - k_{j-W}||^2   (lam = 1 without decay)
+            # filling: nothing leaves the window; e[j] = lam e[j-1] + ||d - k_j||^2   (lam = 1 without decay)
             c0, c1, c2, c3 = -2.0 * d0, -2.0 * d1, -2.0 * d2, -2.0 * d3
-            a = lam[r]
+            g = lam[r]
             kq = ksq[r]
             for j in range(n - 1, -1, -1):
                 prev = er[j - 1] if j > 0 else last
-                v = a * prev + base + kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
-                if full:
-                    lag = j - w
-                    if lag < 0:
-                        lag += n
-                    v += 2.0 * (o0 * k0[lag] + o1 * k1[lag] + o2 * k2[lag] + o3 * k3[lag]) - lw * kq[lag]
-                er[j] = v
+                er[j] = g * prev + base + kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
 
-        if pend:  # the pending weights' sums (whole-stride windows; nothing leaves until full)
-            lw2 = plam_w[r] if full else 0.0
-            q0, q1, q2, q3 = r0 * lw2, r1 * lw2, r2 * lw2, r3 * lw2
-            _aged_update(e2[r], n, plam[r], lw2, dsq - rsq * lw2, d0 - q0, d1 - q1, d2 - q2, d3 - q3,
-                         k0, k1, k2, k3, ksq[r])
-            _age_sums(ws2, r, plam[r], d0 - q0, d1 - q1, d2 - q2, d3 - q3)
-
-        if decay:  # the weighted window sums age too: S = lam S + d - lam^W old
+        if decay:  # the weighted window sums age too: S = lam S + d - lam^N old
             _age_sums(wsums, r, lam[r], d0 - o0, d1 - o1, d2 - o2, d3 - o3)
 
-        # Read-out of row r: score = (e - offset penalty) / window weight, its argmin over j; only
-        # for rows in the scale band (out_score of the others: inf).
-        if not allowed[r % n_scales]:
-            out_col[r] = 0
-            out_score[r] = np.inf
-            continue
-        filled = i + 1 >= w
+        # Read-out of row r: score = (e - offset penalty) / window weight, its argmin over j.
+        filled = i + 1 >= n
         if aged:
             weff = wsum[r] if filled else (1.0 - lam[r] ** (i + 1)) / (1.0 - lam[r])
         else:
-            weff = float(w if filled else i + 1)
+            weff = float(n if filled else i + 1)
         scale = 1.0 / weff if normalize else 1.0
         use_offset = offset and filled
         s0 = s1 = s2 = s3 = 0.0
         if use_offset:
-            s0, s1, s2, s3 = _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w)
-        per_shift = _per_shift_row(offset, i, w, n, aged)
+            s0, s1, s2, s3 = _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, n)
+        per_shift = use_offset and aged  # the kernel part's weighted mean depends on the shift
         wp = wsum[r]
         const = 0.0
         if use_offset and not per_shift:
@@ -166,19 +146,31 @@ def step_rows(
             t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
             f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
             m0, m1, m2, m3 = mu_seg[r, 0], mu_seg[r, 1], mu_seg[r, 2], mu_seg[r, 3]
-            sr = scratch[r]
-            for j in range(n):  # no loop-carried dependence: vectorised
-                x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
-                g0 = max(abs(x0 - f0) - t0, 0.0)
-                g1 = max(abs(x1 - f1) - t1, 0.0)
-                g2 = max(abs(x2 - f2) - t2, 0.0)
-                g3 = max(abs(x3 - f3) - t3, 0.0)
-                sr[j] = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
-            for j in range(n):
-                v = sr[j]
-                if v < best:
-                    best = v
-                    bj = j
+            if one_pass:  # memory-bound: read mu_seg and e once, write nothing
+                for j in range(n):
+                    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+                    g0 = max(abs(x0 - f0) - t0, 0.0)
+                    g1 = max(abs(x1 - f1) - t1, 0.0)
+                    g2 = max(abs(x2 - f2) - t2, 0.0)
+                    g3 = max(abs(x3 - f3) - t3, 0.0)
+                    v = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
+                    if v < best:
+                        best = v
+                        bj = j
+            else:
+                sr = scratch[r]
+                for j in range(n):  # no loop-carried dependence: vectorised
+                    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+                    g0 = max(abs(x0 - f0) - t0, 0.0)
+                    g1 = max(abs(x1 - f1) - t1, 0.0)
+                    g2 = max(abs(x2 - f2) - t2, 0.0)
+                    g3 = max(abs(x3 - f3) - t3, 0.0)
+                    sr[j] = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
+                for j in range(n):
+                    v = sr[j]
+                    if v < best:
+                        best = v
+                        bj = j
         else:
             for j in range(n):
                 v = er[j]
@@ -190,7 +182,7 @@ def step_rows(
         out_score[r] = best * scale
 
     # Per mode: the time scale (row) with the lowest score; phase of its best column.
-    n_modes = n_rows // n_scales
+    n_modes = lens.shape[0] // n_scales
     best_mode = 0
     for m in range(n_modes):
         r0 = m * n_scales
@@ -200,31 +192,14 @@ def step_rows(
                 rb = r
         n = lens[rb]
         j = out_col[rb]
-        pos = float(j + 1)
-        if subsample:
-            w = wins[rb]
-            shifted = _per_shift_row(offset, i, w, n, decay and lam[rb] < 1.0)
-            s0, s1, s2, s3 = _row_sums(decay, wsums, rb, p0, p1, p2, p3, psum_ring, i, w)
-            wp = wsum[rb]
-            a = _row_score(e, rb, j - 1 if j > 0 else n - 1, shifted, mu_seg, s0, s1, s2, s3, wp, tau)
-            b = _row_score(e, rb, j + 1 if j < n - 1 else 0, shifted, mu_seg, s0, s1, s2, s3, wp, tau)
-            center = _row_score(e, rb, j, shifted, mu_seg, s0, s1, s2, s3, wp, tau)
-            curv = a - 2.0 * center + b
-            if curv > 0.0:
-                off = 0.5 * (a - b) / curv
-                if off > 0.5:
-                    off = 0.5
-                elif off < -0.5:
-                    off = -0.5
-                pos += off
-        ph = (pos % n) / n
+        ph = (float(j + 1) % n) / n
         if ph >= 1.0:
             ph = 0.0
         out_sse[m] = out_score[rb]
         out_phase[m] = ph
         out_variant[m] = rb - r0
         out_column[m] = j
-        out_window[m] = wins[rb] if i + 1 >= wins[rb] else i + 1
+        out_window[m] = n if i + 1 >= n else i + 1
         if out_score[rb] < out_sse[best_mode]:
             best_mode = m
 
@@ -237,20 +212,15 @@ def step_rows(
     return best_mode
 
 
-# Two compiled copies of step_rows: serial (prange runs as range) and with the rows spread over
-# numba's threads. The parallel copy is a function object of its own name so that the two
-# caches do not collide.
-_parallel = types.FunctionType(step_rows.__code__, step_rows.__globals__, "step_rows_parallel")
-_parallel.__qualname__ = "step_rows_parallel"
-step_rows_parallel = njit(cache=True, nogil=True, parallel=True)(_parallel)
-step_rows = njit(cache=True, nogil=True)(step_rows)
+def _serial_and_parallel(fn, name):  # type: ignore[no-untyped-def]
+    """Two compiled copies of ``fn``: serial (prange runs as range) and with the rows spread over
+    numba's threads, a function object of its own name so that the two caches do not collide."""
+    twin = types.FunctionType(fn.__code__, fn.__globals__, name)
+    twin.__qualname__ = name
+    return njit(cache=True, nogil=True)(fn), njit(cache=True, nogil=True, parallel=True)(twin)
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _per_shift_row(offset, i, w, n, aged):  # pragma: no cover - compiled
-    """True when a row's scores carry a per-shift offset penalty: offset on, window full after
-    this sample, and the kernel part's mean depends on the shift (W < N, or age weights)."""
-    return offset and i + 1 >= w and (w < n or aged)
+step_rows, step_rows_parallel = _serial_and_parallel(step_rows, "step_rows_parallel")
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -291,50 +261,70 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
     return s0, s1, s2, s3
 
 
-@njit(cache=True, nogil=True)
-def _row_score(e, r, j, per_shift, mu_seg, s0, s1, s2, s3, wp, tau):  # pragma: no cover - compiled
-    """e[r, j] minus the per-shift offset penalty if any (for the parabola of ``subsample``;
-    constant penalties and the 1/W scale do not move its vertex)."""
-    v = e[r, j]
-    if per_shift:
-        v -= _offset_penalty(s0, s1, s2, s3, wp, mu_seg[r, 0, j], mu_seg[r, 1, j], mu_seg[r, 2, j], mu_seg[r, 3, j], tau)
-    return v
-
-
-@njit(cache=True, nogil=True)
-def reader_step(  # pragma: no cover - compiled
-    err, flat, starts, lengths, scales, steps, x, offset, join, weights, bias, joins
+def run_steps(  # pragma: no cover - compiled
+    e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
+    decay, lam, lam_w, wsum, wsums,
+    offset, mu, mu_seg, tau, scratch, one_pass, normalize, n_scales, allowed, active, out_col, out_score,
+    out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
+    track, near, mid_lo, mid_hi, ready_from,
 ):
-    """One sample of the stride-start reader (``stride_reader.py``), in place on ``err``
-    (M, S * J): add every (mode, scale, join fraction) row's weighted squared error against its
-    kernel start joined to the heel-strike pose; return the mode whose best row plus ``bias`` is
-    lowest."""
-    best_mode = 0
-    best_value = np.inf
-    nj = joins.shape[0]
-    for m in range(err.shape[0]):
-        n = lengths[m]
-        first = starts[m]
-        mode_min = np.inf
-        for s in range(scales.shape[0]):
-            pos = steps / scales[s]
-            whole = np.floor(pos)
-            f = pos - whole
-            i0 = first + int(whole) % n
-            i1 = first + (int(whole) + 1) % n
-            phi = pos / n
-            for q in range(nj):
-                jf = joins[q]
-                w = 0.5 * (1.0 + np.cos(np.pi * phi / jf)) if phi < jf else 0.0
-                total = 0.0
-                for c in range(4):
-                    r = x[c] - (1.0 - f) * flat[i0, c] - f * flat[i1, c] - offset[c] - w * join[m, c]
-                    total += weights[c] * r * r
-                value = err[m, s * nj + q] + total
-                err[m, s * nj + q] = value
-                if value < mode_min:
-                    mode_min = value
-        if mode_min + bias[m] < best_value:
-            best_value = mode_min + bias[m]
-            best_mode = m
-    return best_mode
+    """Matcher steps ``start`` .. ``stop`` - 1 of ``samples`` (G, 4) (weighted; ``squares`` their
+    squared norms) through step_rows, on one thread, the matcher's state in place from ``count``
+    samples on. Per step: every mode's score and phase into out_sse/out_phase (G, M), the best
+    mode and its variant, column and window.
+
+    The walking calibrations' stride tracker (``WalkingCalibration._confident_stride_end`` without
+    its confidence test) runs along on the best mode and its phase: ``track`` = (valid, mode, phase,
+    passed_mid, began_in_mode) as floats, ``near`` (M, M) the near copies; the steps stop after a
+    heel strike that ends a whole stride, where the calibrations may act, with ``track`` as it was
+    before that step. Returns the step after the last done and whether it ended such a stride."""
+    for g in range(start, stop):
+        i = count + g - start
+        d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
+        b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
+                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, tau, scratch, one_pass, normalize,
+                 n_scales, allowed, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
+        best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
+        if track.shape[0] == 0:
+            continue
+        phase = out_phase[g, b]
+        same = track[0] > 0.0 and (int(track[1]) == b or near[int(track[1]), b])
+        wrapped = same and phase < track[2] - 0.5
+        passed_mid = same and track[3] > 0.0
+        whole = same and track[4] > 0.0
+        midway = (mid_lo <= phase < mid_hi) or (passed_mid and not wrapped)
+        if wrapped and whole and passed_mid:  # the tracker's state stays the one before this step
+            return g + 1, True
+        if i + 1 >= ready_from:
+            track[0], track[1], track[2] = 1.0, b, phase
+            track[3] = 1.0 if midway else 0.0
+            track[4] = 1.0 if wrapped or whole else 0.0
+        else:
+            track[0] = 0.0
+    return stop, False
+
+
+run_steps = njit(cache=True, nogil=True)(run_steps)
+
+
+@njit(cache=True, nogil=True)
+def phase_rates(time_s, mode, phase, ready, alpha, state, out):  # pragma: no cover - compiled
+    """``Supervisor._phase_rate`` over a run of steps: ``state`` = (has_last, last time, last
+    mode, last phase, rate), in place; ``alpha`` per step the smoothing weight for the time since
+    the previous ready step (precomputed with math.exp); nan while not ready."""
+    for g in range(time_s.shape[0]):
+        if not ready[g]:
+            out[g] = np.nan
+            continue
+        t, m, p = time_s[g], mode[g], phase[g]
+        has, lt, lm, lp = state[0] > 0.0, state[1], int(state[2]), state[3]
+        state[0], state[1], state[2], state[3] = 1.0, t, m, p
+        if has and lm == m and t > lt:
+            dt = t - lt
+            dphi = (p - lp + 0.5) % 1.0 - 0.5
+            inst = dphi / dt
+            if np.isnan(state[4]):
+                state[4] = inst
+            else:
+                state[4] += alpha[g] * (inst - state[4])
+        out[g] = state[4]

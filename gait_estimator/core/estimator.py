@@ -214,8 +214,15 @@ class EstimateTrace:
 def run_estimator(
     estimator: Estimator, time_s: np.ndarray, angles_deg: np.ndarray, index: np.ndarray | None = None
 ) -> EstimateTrace:
-    """Stream a whole recording through ``estimator`` (fresh or not) and collect the estimates."""
+    """Stream a whole recording through ``estimator`` (fresh or not) and collect the estimates:
+    in bulk (``core/batch.py``: the same results, without a Python step per sample) where the
+    options allow it, else by ``Estimator.update`` sample by sample."""
     idx = np.arange(len(time_s)) if index is None else np.asarray(index)
+    from .batch import run_batch
+
+    columns = run_batch(estimator, time_s, angles_deg)
+    if columns is not None:
+        return EstimateTrace(mode_names=list(estimator.mode_names), sample=idx.astype(np.int64), **columns)
     rows = [(int(idx[i]), estimator.update(float(time_s[i]), angles_deg[i])) for i in range(len(time_s))]
     return trace_from_estimates(estimator.mode_names, rows)
 

@@ -1,52 +1,7 @@
-"""Mode and phase matching: the paper's Algorithms 1 (naive) and 2 (incremental).
+"""The matchers: the paper's Algorithms 1 (naive) and 2 (incremental).
 
-Every step takes one sample d_i (4 angles, degrees, CHANNELS order). The matcher keeps one *row*
-per mode m and time scale s: the mode's kernel stretched to n = round(s N_m) samples (s = 1: the
-kernel itself). For every row r and every column j (0-based) it keeps the running SSE
-
-    e[r, j] = sum_{t=0}^{W-1} || d_{i-t} - k^r_{(j-t) mod n} ||^2        (deg^2)
-
-where W = min(samples seen, W_r): the window ends at the newest sample, aligned with column j.
-Until W = W_r for every row (``ready``) the sums run over the samples seen so far, as in the
-reference implementation, whose running sums start from zero.
-
-Read-out, per row: score[r, j] = e[r, j] (the paper), minus an offset penalty and divided by the
-window length if asked (below); best column j* = argmin_j score. Per mode: the row (time scale)
-with the lowest score. The best mode is argmin_m of that (ties: the earlier mode, then the
-smaller scale, then the earlier column); its best column gives the phase ((j* + 1) mod n) / n in
-[0, 1). That is the paper's phi = j*/N with its 1-based j*, and the reference implementation's
-output, except that we wrap its 1.0 to 0.0.
-
-Options (the defaults are the paper, which reproduces the reference exactly):
-
-* ``window_fraction`` f in (0, 1]: match only the newest W_r = max(2, round(f n)) samples against
-  the corresponding part of every kernel shift (shorter delay after a mode change);
-* ``channel_weights`` w (4,), >= 0: e = sum_c w_c (d_c - k_c)^2, so 0 drops a channel (e.g.
-  unilateral sensing with the prosthesis-side thigh and shank only); implemented by scaling
-  kernels and samples by sqrt(w);
-* ``subsample``: parabolic interpolation of the score around j* for a phase finer than 1/n;
-* ``time_scales`` (S,): stretch factors of the kernels' stride duration; a wearer whose strides
-  last s times the kernel's is matched by the rows of scale s (cadence ratio 1/s);
-* ``offset_tolerance_deg`` tau >= 0: per channel, a difference of up to tau degrees between the
-  window's mean and the mean of the kernel part it is compared with costs nothing (sensor
-  mounting); larger differences cost only their excess. With x_c that mean difference the score
-  is e - W sum_c (x_c^2 - max(|x_c| - tau, 0)^2): every SSE splits exactly into the shape part
-  and W x_c^2 per channel. tau = inf matches shapes only; 0 is the paper;
-* ``normalize``: compare modes and scales by mean squared error per window sample, score / W,
-  instead of SSE (needed when rows of different lengths compete: the paper's SSE favours shorter
-  kernels);
-* ``recency_half_life`` h >= 0 (strides; needs ``window_fraction`` 1): weight the window's samples
-  by their age, a sample t samples old by a_t = lambda_r^t with lambda_r = 2^(-1 / (h n_r)) (its
-  weight halves every h strides): e[r, j] = sum_t a_t || d_{i-t} - k^r_{(j-t) mod n} ||^2, updated
-  as e[r, j] <- lambda e[r, j-1] + ||d_i - k_j||^2 - lambda^n ||d_{i-n} - k_j||^2. The newest part
-  of the stride counts most, so a mode change shows sooner. The offset penalty and ``normalize``
-  use the weighted window: its weight W_a = sum_t a_t for W, the weighted window mean, and the
-  weighted mean of the kernel part at each shift (precomputed, (R, 4, N)); the penalty is then
-  the exact minimum of the weighted SSE over offsets within tau, as above. 0 = uniform weights
-  (the paper); ``set_recency_half_life`` changes it at any sample;
-* ``set_scale_band``: the time scales a mode may be read at (all by default). The estimator's
-  cadence calibration narrows them to the wearer's learnt cadence; every row keeps its running
-  sums, so the band may change at any sample.
+Row layout, options and the read-out are documented in ``matching.py`` (their shared part); the
+incremental step's compiled form is in ``compiled.py``.
 """
 
 from __future__ import annotations
@@ -54,13 +9,26 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from . import compiled
-from .channels import N_CHANNELS, Sample, sample_values
-from .kernels import KernelLibrary, resample_stride
+from .channels import N_CHANNELS
+from .kernels import KernelLibrary
+from .matching import (
+    MatchTrace,
+    StepResult,
+    _MatcherBase,
+    check_channel_weights,
+    check_offset_tolerance,
+    check_recency_half_life,
+    check_time_scales,
+)
+
+__all__ = [
+    "BACKENDS", "PARALLEL_MIN_ROWS", "IncrementalMatcher", "MatchTrace", "NaiveMatcher", "StepResult",
+    "check_channel_weights", "check_offset_tolerance", "check_recency_half_life", "check_time_scales",
+]
 
 BACKENDS = ("auto", "numba", "numpy")
 """Incremental step implementations: ``numba`` (compiled), ``numpy``; ``auto`` = numba if installed."""
@@ -68,493 +36,6 @@ PARALLEL_MIN_ROWS = 256
 """From this many rows (modes x time scales) on, the compiled step reads the kernels as float32
 (the same values: every path uses float32-representable kernel values) and spreads the rows over
 threads (numba's ``parallel``) when the process may use more than one CPU."""
-
-
-@dataclass(frozen=True)
-class StepResult:
-    """The estimate after one sample.
-
-    Attributes:
-        mode_index: Index of the best mode in the library.
-        mode: Name of the best mode.
-        phase: Gait phase of the best mode, [0, 1), 0 = right heel strike.
-        sse: Per-mode match error (the score of the mode's best row and shift), shape (M,): SSE
-            in deg^2 (the paper), or deg^2 per window sample with ``normalize``; channel-weighted.
-        phases: Per-mode phase at that mode's best shift, shape (M,).
-        ready: True once the window of every row is full.
-        window: Samples in each mode's comparison window so far (of its best row), shape (M,).
-        variant: Per mode, index of the best time scale in ``matcher.time_scales``, shape (M,);
-            None when the matcher has only one scale.
-        column: Per mode, the best kernel column j* of that row, shape (M,); None if not kept.
-    """
-
-    mode_index: int
-    mode: str
-    phase: float
-    sse: np.ndarray
-    phases: np.ndarray
-    ready: bool
-    window: np.ndarray
-    variant: np.ndarray | None = None
-    column: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class MatchTrace:
-    """Step results for a whole sequence of samples (T steps, M modes)."""
-
-    mode_names: list[str]
-    mode_index: np.ndarray  # (T,) int64
-    phase: np.ndarray  # (T,) float64
-    sse: np.ndarray  # (T, M) float64, deg^2 (per window sample with normalize)
-    phases: np.ndarray  # (T, M) float64
-    ready: np.ndarray  # (T,) bool
-
-    @property
-    def modes(self) -> list[str]:
-        return [self.mode_names[i] for i in self.mode_index]
-
-
-def check_window_fraction(value: float) -> float:
-    """Validate ``window_fraction``: a number in (0, 1]."""
-    f = float(value)
-    if not (0.0 < f <= 1.0):
-        raise ValueError(f"window_fraction must be in (0, 1], got {value!r}")
-    return f
-
-
-def check_channel_weights(value: Sequence[float] | None) -> np.ndarray:
-    """Validate ``channel_weights``: 4 finite numbers >= 0, not all 0 (None = all 1)."""
-    if value is None:
-        return np.ones(N_CHANNELS)
-    w = np.asarray(value, dtype=np.float64).reshape(-1)
-    if w.size != N_CHANNELS:
-        raise ValueError(f"channel_weights needs {N_CHANNELS} values (CHANNELS order), got {w.size}")
-    if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
-        raise ValueError(f"channel_weights must be finite, >= 0 and not all 0, got {w.tolist()}")
-    return w
-
-
-def check_time_scales(value: Sequence[float] | None) -> np.ndarray:
-    """Validate ``time_scales``: distinct numbers in [0.5, 2], sorted (None = (1.0,))."""
-    if value is None:
-        return np.ones(1)
-    s = np.asarray(value, dtype=np.float64).reshape(-1)
-    if s.size == 0 or not np.all(np.isfinite(s)) or np.any((s < 0.5) | (s > 2.0)):
-        raise ValueError(f"time_scales must be one or more numbers in [0.5, 2], got {s.tolist()}")
-    if np.unique(s).size != s.size:
-        raise ValueError(f"time_scales must be distinct, got {s.tolist()}")
-    return np.sort(s)
-
-
-def check_recency_half_life(value: float, window_fraction: float = 1.0) -> float:
-    """Validate ``recency_half_life``: a finite number >= 0 (strides; 0 = uniform weights), > 0
-    only with the whole-stride window (``window_fraction`` 1)."""
-    h = float(value)
-    if not (math.isfinite(h) and h >= 0):
-        raise ValueError(f"recency_half_life must be a finite number >= 0 (strides; 0 = off), got {value!r}")
-    if h > 0 and window_fraction != 1.0:
-        raise ValueError(f"recency_half_life {h} needs window_fraction 1.0 (got {window_fraction}); set one of them off")
-    return h
-
-
-def check_offset_tolerance(value: float) -> float:
-    """Validate ``offset_tolerance_deg``: a number >= 0 (inf allowed)."""
-    t = float(value)
-    if math.isnan(t) or t < 0:
-        raise ValueError(f"offset_tolerance_deg must be >= 0 (inf: any offset), got {value!r}")
-    return t
-
-
-class _MatcherBase:
-    """Shared state: the rows (padded kernels), the ring buffer of recent samples, the read-out.
-
-    Args:
-        library: The kernels to match against (degrees).
-        window_fraction: Fraction of each stride compared, (0, 1]; 1.0 = the paper.
-        channel_weights: Weight of each channel (CHANNELS order), >= 0, not all 0; None = all 1.
-        subsample: Refine the phase between kernel columns by parabolic interpolation.
-        time_scales: Stride-duration factors of the kernel variants; None = (1.0,), the paper.
-        offset_tolerance_deg: Per-channel mean offset that costs nothing, degrees; 0 = the paper.
-        normalize: Compare by mean squared error per window sample instead of SSE.
-        recency_half_life: Age (strides) at which a sample's weight in the window halves; 0 =
-            uniform weights, the paper.
-    """
-
-    _pending: _Pending | None = None  # running sums kept alongside for other weights (start_uniform)
-
-    def __init__(
-        self,
-        library: KernelLibrary,
-        window_fraction: float = 1.0,
-        channel_weights: Sequence[float] | None = None,
-        subsample: bool = False,
-        time_scales: Sequence[float] | None = None,
-        offset_tolerance_deg: float = 0.0,
-        normalize: bool = False,
-        recency_half_life: float = 0.0,
-    ) -> None:
-        self.library = library
-        self.mode_names = library.mode_names
-        self.n_modes = len(library)
-        self.window_fraction = check_window_fraction(window_fraction)
-        self.channel_weights = check_channel_weights(channel_weights)
-        self.time_scales = check_time_scales(time_scales)
-        self.offset_tolerance_deg = check_offset_tolerance(offset_tolerance_deg)
-        self.subsample = bool(subsample)
-        self.normalize = bool(normalize)
-        self.recency_half_life = check_recency_half_life(recency_half_life, self.window_fraction)
-        self.n_scales = int(self.time_scales.size)
-        self.active_channels = int(np.count_nonzero(self.channel_weights))
-        self._scale = np.sqrt(self.channel_weights)
-        self._scale_values: Sample = sample_values(self._scale)
-        self._unscale = np.divide(1.0, self._scale, out=np.zeros(N_CHANNELS), where=self._scale > 0)  # dropped: 0
-        self._weighted = bool(np.any(self.channel_weights != 1.0))
-        # row 0: tolerance, row 1: sensor offset (set_sensor_offset), in the weighted units of d and k
-        tolerance = np.where(self._scale > 0, self.offset_tolerance_deg, 0.0) * self._scale  # dropped channel: 0, not inf * 0
-        self._tau = np.stack([tolerance, np.zeros(N_CHANNELS)])
-        self._offset = self.offset_tolerance_deg > 0
-        base = library.lengths
-        # Rows are mode-major: row m * S + s is mode m at time scale s.
-        self.lengths = np.maximum(2, np.rint(np.outer(base, self.time_scales))).astype(np.int64).reshape(-1)
-        self.windows = np.minimum(
-            np.maximum(2, np.rint(self.window_fraction * self.lengths)).astype(np.int64), self.lengths
-        )
-        self.n_rows = int(self.lengths.size)
-        self.max_length = int(self.lengths.max())
-        self.max_window = int(self.windows.max())
-        self._partial = bool(np.any(self.windows < self.lengths))
-        self._decay = self.recency_half_life > 0  # age weights possible (set_recency_half_life)
-        self._set_weights(self.recency_half_life)
-        self._per_shift = self._partial or self._decay  # the kernel part's (weighted) mean depends on the shift
-        self._rows = np.arange(self.n_rows)
-        self._all = np.arange(self.n_modes)
-        self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
-        self._scale_allowed = np.ones(self.n_scales, dtype=np.bool_)
-        self._band_rows = np.arange(self.n_rows)  # the rows at those scales, mode-major
-        self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
-        self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
-        self._mu = np.zeros((self.n_rows, N_CHANNELS))
-        # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
-        self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._per_shift else 1))
-        for m in range(self.n_modes):
-            self._set_rows(m, library.modes[m].samples)
-        self._ring = np.zeros((self.max_window, N_CHANNELS))
-        self._count = 0
-
-    # -----------------------------------------------------------------------------------------
-    # Rows
-
-    def _set_rows(self, mode: int, samples: np.ndarray) -> None:
-        """(Re)build the rows of ``mode`` from its kernel ``samples`` (N_m, 4), degrees."""
-        for r in range(mode * self.n_scales, (mode + 1) * self.n_scales):
-            n = int(self.lengths[r])
-            # float32-representable values: the compiled step streams a float32 copy (half the
-            # memory traffic); every path computes with exactly these values, in float64
-            k = (resample_stride(samples, n) * self._scale).astype(np.float32).astype(np.float64)  # (n, 4)
-            self._kernels[r] = 0.0
-            self._kernels[r, :, :n] = k.T
-            self._mu[r] = k.mean(axis=0)
-            if self._mu_seg.shape[2] > 1:
-                self._mu_seg[r, :, :n] = self._shift_means(k, r)
-
-    def _set_weights(self, half_life: float) -> None:
-        """Per row: the weight factor per sample of age lambda, lambda^W (the weight of the sample
-        leaving the window) and the weight sum of a full window W_a (lambda = 1: W)."""
-        self.recency_half_life = half_life
-        if half_life > 0:
-            self._lam = 2.0 ** (-1.0 / (half_life * self.lengths))
-            self._lam_w = self._lam ** self.windows
-            self._wsum = (1.0 - self._lam_w) / (1.0 - self._lam)
-        else:
-            self._lam = np.ones(self.lengths.size)
-            self._lam_w = np.ones(self.lengths.size)
-            self._wsum = self.windows.astype(np.float64)
-
-    def set_recency_half_life(self, half_life: float) -> None:
-        """Change ``recency_half_life`` (strides; 0 = uniform weights) at any sample, keeping the
-        window: the running sums are recomputed from the buffered samples, so the next step
-        continues as if the weights had always been these. Only for a matcher made with
-        ``recency_half_life`` > 0 (its state holds the per-shift means the weights need)."""
-        h = check_recency_half_life(half_life, self.window_fraction)
-        if not self._decay:
-            raise ValueError("set_recency_half_life needs a matcher made with recency_half_life > 0")
-        if h == self.recency_half_life:
-            return
-        if self._switch_to_pending(h):
-            return
-        self._pending = None  # sums kept for other weights are of no use now
-        self._set_weights(h)
-        if h > 0:  # mu_seg: the means of the weights in use (uniform weights use the kernel means)
-            for r in range(self.n_rows):
-                n = int(self.lengths[r])
-                self._mu_seg[r, :, :n] = self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r)
-        self._reweighted()
-
-    def _switch_to_pending(self, half_life: float) -> bool:
-        """Adopt running sums kept alongside for ``half_life`` (start_uniform), if any."""
-        return False
-
-    def _reweighted(self) -> None:
-        """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
-
-    def _shift_means(self, k: np.ndarray, r: int) -> np.ndarray:
-        """Per column j, the (weighted) mean of the kernel part row ``r``'s window is compared with
-        at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (4, n) (a_t = 1 without recency weighting); ``k``
-        (n, 4)."""
-        n, w = k.shape[0], int(self.windows[r])
-        pending = self._pending  # mu_seg holds the means of the weights kept alongside
-        lam, wsum = (pending.lam, pending.wsum) if pending is not None else (self._lam, self._wsum)
-        if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
-            c = np.cumsum(np.concatenate([k, k]), axis=0)
-            j = np.arange(n) + n
-            return ((c[j] - c[j - w]) / w).T
-        weights = np.zeros(n)
-        weights[:w] = lam[r] ** np.arange(w)
-        conv = np.fft.irfft(np.fft.rfft(k.T, n=n) * np.fft.rfft(weights), n=n)  # circular: sum_t w_t k_{j-t}
-        return conv / wsum[r]
-
-    def row_kernel(self, row: int) -> np.ndarray:
-        """The kernel of ``row`` (n, 4), degrees (unweighted channels as given)."""
-        n = int(self.lengths[row])
-        return self._kernels[row, :, :n].T.astype(np.float64) * self._unscale
-
-    @property
-    def sensor_offset_deg(self) -> np.ndarray:
-        """The sensor offset assumed by the offset penalty (4,), degrees; zeros by default."""
-        return self._tau[1] * self._unscale
-
-    def set_sensor_offset(self, offset_deg: Sequence[float] | np.ndarray) -> None:
-        """Assume the sensors read ``offset_deg`` (4,) degrees more than the kernels' (CHANNELS
-        order): the offset penalty then measures window-vs-kernel mean differences from it. The
-        running sums are untouched (the penalty is applied at read-out), so this may change at
-        any sample; non-zero turns the penalty on even with ``offset_tolerance_deg`` 0."""
-        o = np.asarray(offset_deg, dtype=np.float64).reshape(N_CHANNELS)
-        if not np.all(np.isfinite(o)):
-            raise ValueError(f"sensor offset must be finite, got {o.tolist()}")
-        self._tau[1] = o * self._scale
-        self._offset = self._offset or bool(np.any(o != 0.0))
-
-    @property
-    def scale_band(self) -> np.ndarray:
-        """Per time scale, whether a mode may be read at it (S,) bool; a copy."""
-        return self._scale_allowed.copy()
-
-    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
-        """Read every mode only at the time scales flagged in ``allowed`` (S,) (``time_scales``
-        order; None = all). The running sums of every row are kept, so this may change at any
-        sample."""
-        a = np.ones(self.n_scales, dtype=np.bool_) if allowed is None else np.asarray(allowed, dtype=np.bool_).reshape(-1)
-        if a.size != self.n_scales or not a.any():
-            raise ValueError(f"scale band needs {self.n_scales} flags, at least one true, got {a.tolist()}")
-        self._scale_allowed[:] = a
-        self._band_rows = (np.arange(self.n_modes)[:, None] * self.n_scales + np.flatnonzero(a)[None, :]).ravel()
-
-    def mode_row_scores(self, mode: int) -> np.ndarray:
-        """The best score of every row (time scale) of ``mode`` at the last step, (S,), whatever
-        the scale band."""
-        s = self.n_scales
-        return self._row_score[mode * s : (mode + 1) * s]
-
-    def best_scale_index(self, mode: int) -> int:
-        """Index in ``time_scales`` of the row of ``mode`` that scored best at the last step,
-        whatever the scale band."""
-        return int(self.mode_row_scores(mode).argmin())
-
-    def best_log_scale(self, mode: int) -> float:
-        """Natural log of the time scale at which ``mode`` fits best at the last step, between the
-        grid's scales: the vertex of the parabola through the best row's score and its two
-        neighbours' (in log scale), whatever the scale band; the grid scale itself at either end."""
-        s = self.n_scales
-        scores = self.mode_row_scores(mode)
-        b = int(scores.argmin())
-        if b == 0 or b == s - 1:
-            return math.log(self.time_scales[b])
-        x0, x1, x2 = (math.log(v) for v in self.time_scales[b - 1 : b + 2])
-        y0, y1, y2 = (float(v) for v in scores[b - 1 : b + 2])
-        a, c = x1 - x0, x1 - x2
-        den = a * (y1 - y2) - c * (y1 - y0)
-        if den == 0.0:  # flat: no side is better
-            return x1
-        return x1 - 0.5 * (a * a * (y1 - y2) - c * c * (y1 - y0)) / den
-
-    # -----------------------------------------------------------------------------------------
-    # State
-
-    @property
-    def steps(self) -> int:
-        """Samples consumed since construction or the last reset()."""
-        return self._count
-
-    @property
-    def ready(self) -> bool:
-        """True once every row's window holds W_r samples (W_r = n_r by default)."""
-        return self._count >= self.max_window
-
-    def reset(self) -> None:
-        """Forget all samples; the next step starts a fresh (incomplete) window."""
-        self._ring[:] = 0.0
-        self._count = 0
-
-    def _weighted_values(self, sample: Sequence[float] | np.ndarray) -> tuple[float, float, float, float, float]:
-        """The sample (4 angles, degrees) times sqrt(channel weight), as floats, and its squared
-        norm; ValueError if it is not four finite numbers."""
-        d0, d1, d2, d3 = sample_values(sample)
-        dsq = d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3
-        if not math.isfinite(dsq):  # also catches overflow of ||d||^2, i.e. |angle| > 1e154
-            raise ValueError(f"sample has non-finite values: {[d0, d1, d2, d3]}")
-        if self._weighted:
-            s0, s1, s2, s3 = self._scale_values
-            d0, d1, d2, d3 = d0 * s0, d1 * s1, d2 * s2, d3 * s3
-            dsq = d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3
-        return d0, d1, d2, d3, dsq
-
-    def _window_data(self) -> np.ndarray:
-        """The buffered samples newest first: row t is d_{i-t}, (Wmax, 4) (weighted)."""
-        w = self.max_window
-        return self._ring[(self._count - 1 - np.arange(w)) % w]
-
-    def window_sums(self) -> np.ndarray:
-        """Per row, the sum of the samples in its current window, (R, 4) (channel-weighted)."""
-        data = self._window_data()
-        cum = np.concatenate([np.zeros((1, N_CHANNELS)), np.cumsum(data, axis=0)])
-        return cum[np.minimum(self._count, self.windows)]
-
-    def age_weighted_sums(self) -> np.ndarray:
-        """Per row, sum_t a_t d_{i-t} over its current window, (R, 4) (a_t: ``recency_half_life``'s
-        age weights, 1 without it)."""
-        seen = np.arange(self.max_window)[None, :] < np.minimum(self._count, self.windows)[:, None]
-        age = np.where(seen, self._lam[:, None] ** np.arange(self.max_window)[None, :], 0.0)  # (R, Wmax)
-        return age @ self._window_data()
-
-    def window_weight(self) -> np.ndarray:
-        """Per row, the weight of its current window (R,): the number of samples in it, or with
-        ``recency_half_life`` the sum of their age weights."""
-        if self._count >= self.max_window:  # every window full
-            return self._wsum
-        seen = np.minimum(self._count, self.windows)
-        if self.recency_half_life > 0:
-            return (1.0 - self._lam ** seen) / (1.0 - self._lam)
-        return seen.astype(np.float64)
-
-    # -----------------------------------------------------------------------------------------
-    # Read-out (numpy): shared by the naive matcher and the numpy incremental step
-
-    def _scores(self, e: np.ndarray, sums: np.ndarray | None, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """score[r, j] of ``rows`` (default: all) from their running sums e (r, Nmax) and window
-        sums (r, 4), age-weighted with recency weighting; see the module docstring."""
-        score = e
-        if self._offset:
-            filled = self._count >= self.windows[rows]
-            w = self._wsum[rows]
-            per_shift = self._partial or self.recency_half_life > 0  # mu_seg: the active weights' means
-            if per_shift:
-                x = sums[:, :, None] / w[:, None, None] - self._mu_seg[rows]  # (r, 4, Nmax)
-                w_ = w[:, None]
-                tol, off = self._tau[0, :, None], self._tau[1, :, None]
-            else:
-                x = sums / w[:, None] - self._mu[rows]  # (r, 4)
-                w_ = w
-                tol, off = self._tau
-            excess = np.maximum(np.abs(x - off) - tol, 0.0)
-            penalty = w_ * (x * x - excess * excess).sum(axis=1)
-            penalty = np.where(filled[:, None] if per_shift else filled, penalty, 0.0)
-            score = e - (penalty if per_shift else penalty[:, None])
-        if self.normalize:
-            score = score / self.window_weight()[rows][:, None]
-        return score
-
-    def _result(self, score: np.ndarray) -> StepResult:
-        cols = score.argmin(axis=1)
-        best = score[self._rows, cols]
-        self._row_score = best
-        s = self.n_scales
-        if s > 1:
-            per_mode = best.reshape(self.n_modes, s)
-            if not self._scale_allowed.all():
-                per_mode = np.where(self._scale_allowed, per_mode, np.inf)
-            variant = per_mode.argmin(axis=1)
-            rows = self._all * s + variant
-        else:
-            variant, rows = None, self._all
-        cols, sse = cols[rows], best[rows]
-        lens = self.lengths[rows]
-        if self.subsample:
-            before = score[rows, (cols - 1) % lens]
-            after = score[rows, (cols + 1) % lens]
-            curvature = before - 2.0 * sse + after
-            with np.errstate(divide="ignore", invalid="ignore"):
-                offset = np.where(curvature > 0, 0.5 * (before - after) / curvature, 0.0)
-            position = cols + 1 + np.clip(offset, -0.5, 0.5)
-            phases = np.mod(position, lens) / lens
-            phases[phases >= 1.0] = 0.0
-        else:
-            phases = ((cols + 1) % lens) / lens
-        b = int(sse.argmin())
-        window = np.minimum(self._count, self.windows[rows])
-        return StepResult(b, self.mode_names[b], float(phases[b]), sse, phases, self.ready, window, variant, cols)
-
-    # -----------------------------------------------------------------------------------------
-    # Naive recomputation (the specification; also used to resynchronise)
-
-    def _window_sse(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        """Naive SSE of the current window against row shifts (rows[b], cols[b]), shape (B,)."""
-        w = self.max_window
-        t = np.arange(w)
-        data = self._window_data()  # (Wmax, 4): d_{i-t}
-        lens = self.lengths[rows][:, None]
-        diff = data[None, :, :] - self._kernels[rows[:, None], :, (cols[:, None] - t[None, :]) % lens]
-        sq = np.einsum("btc,btc->bt", diff, diff)
-        sq[t[None, :] >= np.minimum(self._count, self.windows[rows][:, None])] = 0.0
-        if self._decay:
-            sq *= self._lam[rows][:, None] ** t[None, :]
-        return sq.sum(axis=1)
-
-    def full_sse(self) -> np.ndarray:
-        """e[r, j] recomputed from the buffered samples (the naive sum), (R, Nmax); padding inf."""
-        rows, cols = np.nonzero(self._valid)
-        out = np.full(self._valid.shape, np.inf)
-        for lo in range(0, rows.size, _CHUNK):
-            r, c = rows[lo : lo + _CHUNK], cols[lo : lo + _CHUNK]
-            out[r, c] = self._window_sse(r, c)
-        return out
-
-    def run(self, samples: np.ndarray) -> MatchTrace:
-        """Step through ``samples`` (T, 4), degrees; returns every step's result."""
-        x = np.asarray(samples, dtype=np.float64)
-        t = x.shape[0]
-        mode_index = np.empty(t, dtype=np.int64)
-        phase = np.empty(t)
-        sse = np.empty((t, self.n_modes))
-        phases = np.empty((t, self.n_modes))
-        ready = np.empty(t, dtype=bool)
-        for i in range(t):
-            r = self.step(x[i])
-            mode_index[i], phase[i], sse[i], phases[i], ready[i] = r.mode_index, r.phase, r.sse, r.phases, r.ready
-        return MatchTrace(list(self.mode_names), mode_index, phase, sse, phases, ready)
-
-    def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
-        raise NotImplementedError
-
-
-_CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
-
-
-@dataclass
-class _Pending:
-    """Running sums kept alongside for other age weights (IncrementalMatcher.start_uniform)."""
-
-    half_life: float
-    lam: np.ndarray
-    lam_w: np.ndarray
-    wsum: np.ndarray
-    e: np.ndarray
-    wsums: np.ndarray
-    buf: np.ndarray = None  # type: ignore[assignment]  # the numpy step's spare array
-
-    def __post_init__(self) -> None:
-        if self.buf is None:
-            self.buf = np.empty((self.e.shape[0], 1, self.e.shape[1]))
 
 
 class NaiveMatcher(_MatcherBase):
@@ -578,23 +59,23 @@ class NaiveMatcher(_MatcherBase):
         return self._kernels.nbytes + self._ring.nbytes + self._valid.nbytes
 
 
+
 class IncrementalMatcher(_MatcherBase):
     """Paper Algorithm 2 with O(N M) time and memory per step, vectorised across rows.
-
-    With W_r = n_r (the paper):
 
         e[r, j] <- e[r, j-1] + ||d_i - k_j||^2 - ||d_{i-n} - k_j||^2
                  = e[r, j-1] + ||d_i||^2 - ||d_{i-n}||^2 - 2 k_j . (d_i - d_{i-n})
 
-    With a shorter window the stale sample d_{i-W} leaves paired with kernel column j - W:
-
-        e[r, j] <- e[r, j-1] + ||d_i - k_j||^2 - ||d_{i-W} - k_{j-W}||^2
-
-    The stale sample comes from a ring buffer of the last W_max samples instead of the paper's
+    The stale sample comes from a ring buffer of the last N_max samples instead of the paper's
     N x N cache of squared terms (which would take O(N^2 M) memory). Window sums for the offset
     penalty come from a ring of prefix sums (two lookups per row). The ``numba`` backend does a
     step in one compiled pass; the ``numpy`` backend in a batched (1 x 4) @ (4 x N_max) product
     per row plus a few passes over the (R, N_max) array.
+
+    Scale band: the compiled step updates only the rows at the time scales of the band
+    (``set_scale_band``); a row outside it keeps the sums of the sample it left the band at and is
+    rebuilt exactly from the window (FFT) when it is needed again: when it re-enters the band, or
+    when ``mode_row_scores`` reads it. The numpy step updates every row.
 
     Resynchronisation: rounding errors of the running sums are bounded by recomputing
     ``resync_block`` entries from the window every few steps, so that every entry is recomputed
@@ -603,8 +84,8 @@ class IncrementalMatcher(_MatcherBase):
 
     Args:
         library: The kernels to match against.
-        window_fraction, channel_weights, subsample, time_scales, offset_tolerance_deg,
-            normalize, recency_half_life: see the module docstring.
+        channel_weights, time_scales, offset_tolerance_deg, normalize, recency_half_life: see
+            ``matching.py``.
         resync_period: Steps within which every column is recomputed from scratch (0 = never).
         resync_block: Columns recomputed at one resynchronisation.
         backend: ``auto`` (numba if installed), ``numba`` or ``numpy``.
@@ -613,9 +94,7 @@ class IncrementalMatcher(_MatcherBase):
     def __init__(
         self,
         library: KernelLibrary,
-        window_fraction: float = 1.0,
         channel_weights: Sequence[float] | None = None,
-        subsample: bool = False,
         time_scales: Sequence[float] | None = None,
         offset_tolerance_deg: float = 0.0,
         normalize: bool = False,
@@ -624,10 +103,7 @@ class IncrementalMatcher(_MatcherBase):
         resync_block: int = 64,
         backend: str = "auto",
     ) -> None:
-        super().__init__(
-            library, window_fraction, channel_weights, subsample, time_scales, offset_tolerance_deg, normalize,
-            recency_half_life,
-        )
+        super().__init__(library, channel_weights, time_scales, offset_tolerance_deg, normalize, recency_half_life)
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
         if backend == "numba" and not compiled.AVAILABLE:
@@ -639,13 +115,13 @@ class IncrementalMatcher(_MatcherBase):
         self.parallel = large and cpus > 1
         if large:  # beyond the caches the step is memory-bound: stream float32 kernels, half the traffic
             self._kernels = self._kernels.astype(np.float32)
-        if compiled.AVAILABLE:
-            self._compiled_step = compiled.step_rows_parallel if self.parallel else compiled.step_rows
+        self._active = self._rows  # rows the compiled step updates (the scale band's)
+        self._choose_step()
+        self._synced = np.zeros(r, dtype=np.int64)  # outside the band: the step count its sums are exact at
         self._ring_sq = np.zeros(self.max_window)
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
         self._psum = np.zeros(N_CHANNELS)
         self._wsums = np.zeros((r, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
-        self._pending = None
         self._e = np.empty((r, n))
         self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
         self._update_row_constants()
@@ -666,11 +142,17 @@ class IncrementalMatcher(_MatcherBase):
         self.reset()
         if self.backend == "numba":  # compile (or load the cached code) now, not at the first sample
             self._step_numba(0.0, 0.0, 0.0, 0.0, 0.0)
+            if self.parallel:  # and the one-thread step that a narrow scale band uses
+                self._compiled_step, chosen = compiled.step_rows, self._compiled_step
+                self.reset()
+                self._step_numba(0.0, 0.0, 0.0, 0.0, 0.0)
+                self._compiled_step = chosen
             self.reset()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
         # Both steps read out only the rows in the scale band: score this mode's rows now.
         rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
+        self._sync_rows(rows)
         sums = None
         if self._offset:
             sums = self._wsums[rows] if self._decay else self.window_sums()[rows]
@@ -678,59 +160,61 @@ class IncrementalMatcher(_MatcherBase):
         return np.where(self._valid[rows], score, np.inf).min(axis=1)
 
     def _reweighted(self) -> None:
-        self._pending = None
-        self._e[:] = self._rows_sse_fft(self._rows, self._lam)
-        self._wsums[:] = self.age_weighted_sums()
+        # The compiled step rebuilds the rows of the scale band; the others when they are needed.
+        rows = self._active if self.backend == "numba" else self._rows
+        self._e[rows] = self._rows_sse_fft(rows, self._lam)
+        self._wsums[rows] = self.age_weighted_sums(rows)
+        self._synced[:] = -1
+        self._synced[rows] = self._count
 
-    def start_uniform(self) -> None:
-        """Match with uniform weights for now, and keep the running sums of this matcher's
-        ``recency_half_life`` alongside (a second update pass per row, not read out), so that
-        ``set_recency_half_life`` back to it later switches at once, without recomputing
-        anything. Free on a fresh or reset matcher; otherwise the uniform sums are recomputed
-        from the window once (as set_recency_half_life(0) does)."""
-        if self._pending is not None:
+    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
+        super().set_scale_band(allowed)
+        if self.backend != "numba":
             return
-        h = self.recency_half_life
-        if h == 0:
-            raise ValueError("start_uniform needs a matcher using recency_half_life > 0")
-        keep = _Pending(h, self._lam, self._lam_w, self._wsum, self._e.copy(), self._wsums.copy())
-        self._set_weights(0.0)
-        if self._count == 0:
-            self._e[:] = np.where(self._valid, 0.0, np.inf)
-            self._wsums[:] = 0.0
-        else:
-            self._reweighted()
-        self._pending = keep  # mu_seg keeps the means of these weights
+        was = np.zeros(self.n_rows, dtype=np.bool_)
+        was[self._active] = True
+        now = np.zeros(self.n_rows, dtype=np.bool_)
+        active = self._rows if self._scale_allowed.all() else self._band_rows
+        now[active] = True
+        self._synced[was & ~now] = self._count  # rows leaving the band are exact now
+        self._active = active
+        self._choose_step()
+        self._rebuild(np.flatnonzero(now & ~was))
 
-    def _switch_to_pending(self, half_life: float) -> bool:
-        p = self._pending
-        if p is None or p.half_life != half_life:
-            return False
-        self.recency_half_life, self._lam, self._lam_w, self._wsum = p.half_life, p.lam, p.lam_w, p.wsum
-        self._e, p.e = p.e, self._e
-        self._wsums = p.wsums
-        self._pending = None
-        return True
+    def _choose_step(self) -> None:
+        """Threads, and the one-pass read-out, only for as many rows as make them pay (beyond the
+        caches); the step's results do not depend on either."""
+        many = self._active.size >= PARALLEL_MIN_ROWS
+        self._one_pass = many
+        if compiled.AVAILABLE:
+            self._compiled_step = compiled.step_rows_parallel if self.parallel and many else compiled.step_rows
+
+    def _sync_rows(self, rows: np.ndarray) -> None:
+        """Bring those of ``rows`` outside the scale band (which the compiled step does not
+        update) up to date, before they are read."""
+        if self.backend != "numba" or self._active is self._rows:
+            return
+        inside = np.zeros(self.n_rows, dtype=np.bool_)
+        inside[self._active] = True
+        self._rebuild(rows[~inside[rows]])
+
+    def _rebuild(self, rows: np.ndarray) -> None:
+        """Recompute the running state of those of ``rows`` not up to date exactly from the window
+        (FFT), so that they are what they would be had they been updated at every step."""
+        rows = rows[self._synced[rows] != self._count]
+        if rows.size == 0:
+            return
+        self._e[rows] = self._rows_sse_fft(rows, self._lam)
+        self._wsums[rows] = self.age_weighted_sums(rows)
+        self._synced[rows] = self._count
 
     def _update_row_constants(self, rows: np.ndarray | None = None) -> None:
-        """Per-row kernel constants of the step for ``rows`` (default: all) after their kernels
-        changed: ||k_j||^2 and, with a shorter window, the lagged kernel k_{j-W} and the constant
-        term of a full window's update, ||k_j||^2 - ||k_{j-W}||^2."""
+        """||k_j||^2 of ``rows`` (default: all) after their kernels changed."""
         if rows is None:
             rows = self._rows
             self._ksq = np.empty((self.n_rows, self.max_length))
-            if self._partial:
-                self._stacked = np.empty((self.n_rows, 2 * N_CHANNELS, self.max_length))
-                self._kconst = np.empty((self.n_rows, self.max_length))
         k = self._kernels[rows].astype(np.float64)
         self._ksq[rows] = np.einsum("rcj,rcj->rj", k, k)  # ||k_j||^2, (R, Nmax)
-        if self._partial:  # (no age weights: they need the whole-stride window)
-            # k_{j-W} for every column j: the kernel column the stale sample was compared with.
-            j = np.arange(self.max_length)[None, :]
-            src = np.where(self._valid[rows], (j - self.windows[rows, None]) % self.lengths[rows, None], j)
-            lagged = k[np.arange(rows.size)[:, None], :, src].transpose(0, 2, 1)  # (R, 4, Nmax)
-            self._stacked[rows] = np.concatenate([k, lagged], axis=1)  # (R, 8, Nmax)
-            self._kconst[rows] = self._ksq[rows] - np.einsum("rcj,rcj->rj", lagged, lagged)
 
     def reset(self) -> None:
         super().reset()
@@ -739,10 +223,8 @@ class IncrementalMatcher(_MatcherBase):
         self._psum[:] = 0.0
         self._wsums[:] = 0.0
         self._e[:] = np.where(self._valid, 0.0, np.inf)
-        if self._pending is not None:
-            self._pending.e[:] = self._e
-            self._pending.wsums[:] = 0.0
         self._resync_cursor = 0
+        self._synced[:] = 0
 
     def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:
         """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
@@ -760,15 +242,12 @@ class IncrementalMatcher(_MatcherBase):
         m = self.n_modes
         sse, phases = np.empty(m), np.empty(m)
         variant, column, window = np.empty((3, m), dtype=np.int64)  # fresh arrays: results outlive the step
-        p = self._pending
         b = self._compiled_step(
-            self._e, self._kernels, self._ksq, self.lengths, self.windows, self._ring, self._ring_sq,
+            self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            p is not None, p.e if p else self._e, p.lam if p else self._lam, p.lam_w if p else self._lam_w,
-            p.wsums if p else self._wsums,
-            self._offset, self._mu, self._mu_seg, self._tau, self._scratch,
-            self.normalize, self.subsample, self.n_scales, self._scale_allowed,
+            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self._one_pass, self.normalize,
+            self.n_scales, self._scale_allowed, self._active,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
         self._count += 1
@@ -783,9 +262,6 @@ class IncrementalMatcher(_MatcherBase):
         stale = (i - self.windows) % w
         full = None if i >= w else i >= self.windows  # None: every window is full
         old, old_sq = self._ring[stale], self._ring_sq[stale]
-        p = self._pending
-        if p is not None:
-            p.e, p.buf = self._advance(p.e, p.buf, d, dsq, old, old_sq, full, p.lam, p.lam_w, p.wsums)
         self._e, self._next = self._advance(
             self._e, self._next, d, dsq, old, old_sq, full, self._lam, self._lam_w, self._wsums
         )
@@ -827,11 +303,7 @@ class IncrementalMatcher(_MatcherBase):
         if self._decay:
             wsums *= lam[:, None]
             wsums += d - old
-        if self._partial:
-            vec = np.concatenate([-2.0 * np.broadcast_to(d, old.shape), 2.0 * old], axis=1)  # (R, 8)
-            np.matmul(vec[:, None, :], self._stacked, out=buf)
-        else:
-            np.matmul((-2.0 * (d[None, :] - old))[:, None, :], self._kernels, out=buf)
+        np.matmul((-2.0 * (d[None, :] - old))[:, None, :], self._kernels, out=buf)
         nxt = buf.reshape(e.shape)
         if self._decay:  # every term already in the window ages by one sample (e is free after this step)
             e *= lam[:, None]
@@ -840,10 +312,8 @@ class IncrementalMatcher(_MatcherBase):
         nxt[:, 0] = first
         nxt[self._pad_rows, self._pad_cols] = np.inf
         nxt += (dsq - old_sq)[:, None]
-        # ||k_j||^2 stays until the window is full, then ||k_j||^2 - lambda^W ||k_{j-W}||^2
-        if self._partial:
-            const = self._kconst
-        elif self._decay:
+        # ||k_j||^2 stays until the window is full, then (1 - lambda^N) ||k_j||^2
+        if self._decay:
             const = (1.0 - lam_w)[:, None] * self._ksq
         else:
             const = None
@@ -888,8 +358,7 @@ class IncrementalMatcher(_MatcherBase):
             return (self._wsums[row] / self._wsum[row] - self._mu_seg[row, :, column]) * self._unscale
         w = int(self.windows[row])
         s = self.window_sums()[row]  # not from the prefix-sum ring: the longest window's start slot is overwritten
-        mu = self._mu_seg[row, :, column] if self._partial else self._mu[row]
-        return (s / w - mu) * self._unscale
+        return (s / w - self._mu[row]) * self._unscale
 
     def resync_all(self) -> None:
         """Recompute every column from the window now (O(N^2 M); not needed in normal use)."""
@@ -912,8 +381,8 @@ class IncrementalMatcher(_MatcherBase):
         rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
         self._update_row_constants(rows)
         self._e[rows] = self._rows_sse_fft(rows, self._lam)
-        if self._pending is not None:  # the sums kept alongside, with their weights
-            self._pending.e[rows] = self._rows_sse_fft(rows, self._pending.lam)
+        if self._active is not self._rows:  # outside the band: the age-weighted sums too
+            self._sync_rows(rows)
 
     def _rows_sse_fft(self, rows: np.ndarray, lam: np.ndarray) -> np.ndarray:
         """e[r, :] for ``rows`` from the buffered window by FFT with the age weights of ``lam``
@@ -925,26 +394,28 @@ class IncrementalMatcher(_MatcherBase):
         """
         data = self._window_data()
         out = np.full((rows.size, self.max_length), np.inf)
-        for a, r in enumerate(rows):
-            n = int(self.lengths[r])
-            w = min(self._count, int(self.windows[r]))
+        # Rows of one length and age weight compare the same window part: one batch of transforms each.
+        keys = np.stack([self.lengths[rows].astype(np.float64), lam[rows]], axis=1)
+        _, group = np.unique(keys, axis=0, return_inverse=True)
+        group = group.reshape(-1)
+        for g in range(int(group.max()) + 1 if rows.size else 0):
+            sel = np.flatnonzero(group == g)
+            r0 = int(rows[sel[0]])
+            n = int(self.lengths[r0])
+            w = min(self._count, int(self.windows[r0]))
             age = np.zeros(n)
-            age[:w] = lam[r] ** np.arange(w)
+            age[:w] = lam[r0] ** np.arange(w)
             x = np.zeros((n, N_CHANNELS))
             x[:w] = data[:w]
-            k = self._kernels[r, :, :n].astype(np.float64)  # (4, n)
-            fx = np.fft.rfft(x.T * age, n=n)
-            cross = np.fft.irfft((fx * np.fft.rfft(k, n=n)).sum(axis=0), n=n)
-            ksq = np.fft.irfft(np.fft.rfft(age) * np.fft.rfft((k * k).sum(axis=0)), n=n)
-            out[a, :n] = float((age[:, None] * x * x).sum()) - 2.0 * cross + ksq
+            k = self._kernels[rows[sel], :, :n].astype(np.float64)  # (g, 4, n)
+            fx = np.fft.rfft(x.T * age, n=n)  # (4, n // 2 + 1)
+            cross = np.fft.irfft((fx[None] * np.fft.rfft(k, n=n)).sum(axis=1), n=n)
+            ksq = np.fft.irfft(np.fft.rfft(age)[None] * np.fft.rfft((k * k).sum(axis=1), n=n), n=n)
+            out[sel, :n] = float((age[:, None] * x * x).sum()) - 2.0 * cross + ksq
         return out
 
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
         arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid,
                   self._psum_ring, self._mu, self._mu_seg, self._wsums, self._scratch]
-        if self._pending is not None:
-            arrays += [self._pending.e, self._pending.buf, self._pending.wsums]
-        if self._partial:
-            arrays += [self._stacked, self._kconst]
         return int(sum(a.nbytes for a in arrays))

@@ -1,0 +1,508 @@
+"""Mode and phase matching, shared part: rows, ring buffer, read-out, naive recomputation.
+
+The matchers (``matcher.py``) are the paper's Algorithms 1 (naive) and 2 (incremental).
+
+Every step takes one sample d_i (4 angles, degrees, CHANNELS order). The matcher keeps one *row*
+per mode m and time scale s: the mode's kernel stretched to n = round(s N_m) samples (s = 1: the
+kernel itself). For every row r and every column j (0-based) it keeps the running SSE
+
+    e[r, j] = sum_{t=0}^{W-1} || d_{i-t} - k^r_{(j-t) mod n} ||^2        (deg^2)
+
+where W = min(samples seen, n): the window (the newest n samples) ends at the newest sample, aligned
+with column j. Until W = n for every row (``ready``) the sums run over the samples seen so far, as in the
+reference implementation, whose running sums start from zero.
+
+Read-out, per row: score[r, j] = e[r, j] (the paper), minus an offset penalty and divided by the
+window length if asked (below); best column j* = argmin_j score. Per mode: the row (time scale)
+with the lowest score. The best mode is argmin_m of that (ties: the earlier mode, then the
+smaller scale, then the earlier column); its best column gives the phase ((j* + 1) mod n) / n in
+[0, 1). That is the paper's phi = j*/N with its 1-based j*, and the reference implementation's
+output, except that we wrap its 1.0 to 0.0.
+
+Options (the defaults are the paper, which reproduces the reference exactly):
+
+* ``channel_weights`` w (4,), >= 0: e = sum_c w_c (d_c - k_c)^2, so 0 drops a channel (e.g.
+  unilateral sensing with the prosthesis-side thigh and shank only); implemented by scaling
+  kernels and samples by sqrt(w);
+* ``time_scales`` (S,): stretch factors of the kernels' stride duration; a wearer whose strides
+  last s times the kernel's is matched by the rows of scale s (cadence ratio 1/s);
+* ``offset_tolerance_deg`` tau >= 0: per channel, a difference of up to tau degrees between the
+  window's mean and the mean of the kernel part it is compared with costs nothing (sensor
+  mounting); larger differences cost only their excess. With x_c that mean difference the score
+  is e - W sum_c (x_c^2 - max(|x_c| - tau, 0)^2): every SSE splits exactly into the shape part
+  and W x_c^2 per channel. tau = inf matches shapes only; 0 is the paper;
+* ``normalize``: compare modes and scales by mean squared error per window sample, score / W,
+  instead of SSE (needed when rows of different lengths compete: the paper's SSE favours shorter
+  kernels);
+* ``recency_half_life`` h >= 0 (strides): weight the window's samples
+  by their age, a sample t samples old by a_t = lambda_r^t with lambda_r = 2^(-1 / (h n_r)) (its
+  weight halves every h strides): e[r, j] = sum_t a_t || d_{i-t} - k^r_{(j-t) mod n} ||^2, updated
+  as e[r, j] <- lambda e[r, j-1] + ||d_i - k_j||^2 - lambda^n ||d_{i-n} - k_j||^2. The newest part
+  of the stride counts most, so a mode change shows sooner. The offset penalty and ``normalize``
+  use the weighted window: its weight W_a = sum_t a_t for W, the weighted window mean, and the
+  weighted mean of the kernel part at each shift (precomputed, (R, 4, N)); the penalty is then
+  the exact minimum of the weighted SSE over offsets within tau, as above. 0 = uniform weights
+  (the paper); ``set_recency_half_life`` changes it at any sample;
+* ``set_scale_band``: the time scales a mode may be read at (all by default). The estimator's
+  cadence calibration narrows them to the wearer's learnt cadence; every row keeps its running
+  sums exactly (the compiled step updates only the band's rows and rebuilds the others' from the
+  window when they are needed again), so the band may change at any sample.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .channels import N_CHANNELS, Sample, sample_values
+from .kernels import KernelLibrary, resample_stride
+
+_CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
+
+@dataclass(frozen=True)
+class StepResult:
+    """The estimate after one sample.
+
+    Attributes:
+        mode_index: Index of the best mode in the library.
+        mode: Name of the best mode.
+        phase: Gait phase of the best mode, [0, 1), 0 = right heel strike.
+        sse: Per-mode match error (the score of the mode's best row and shift), shape (M,): SSE
+            in deg^2 (the paper), or deg^2 per window sample with ``normalize``; channel-weighted.
+        phases: Per-mode phase at that mode's best shift, shape (M,).
+        ready: True once the window of every row is full.
+        window: Samples in each mode's comparison window so far (of its best row), shape (M,).
+        variant: Per mode, index of the best time scale in ``matcher.time_scales``, shape (M,);
+            None when the matcher has only one scale.
+        column: Per mode, the best kernel column j* of that row, shape (M,); None if not kept.
+    """
+
+    mode_index: int
+    mode: str
+    phase: float
+    sse: np.ndarray
+    phases: np.ndarray
+    ready: bool
+    window: np.ndarray
+    variant: np.ndarray | None = None
+    column: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class MatchTrace:
+    """Step results for a whole sequence of samples (T steps, M modes)."""
+
+    mode_names: list[str]
+    mode_index: np.ndarray  # (T,) int64
+    phase: np.ndarray  # (T,) float64
+    sse: np.ndarray  # (T, M) float64, deg^2 (per window sample with normalize)
+    phases: np.ndarray  # (T, M) float64
+    ready: np.ndarray  # (T,) bool
+
+    @property
+    def modes(self) -> list[str]:
+        return [self.mode_names[i] for i in self.mode_index]
+
+
+def check_channel_weights(value: Sequence[float] | None) -> np.ndarray:
+    """Validate ``channel_weights``: 4 finite numbers >= 0, not all 0 (None = all 1)."""
+    if value is None:
+        return np.ones(N_CHANNELS)
+    w = np.asarray(value, dtype=np.float64).reshape(-1)
+    if w.size != N_CHANNELS:
+        raise ValueError(f"channel_weights needs {N_CHANNELS} values (CHANNELS order), got {w.size}")
+    if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.any(w > 0):
+        raise ValueError(f"channel_weights must be finite, >= 0 and not all 0, got {w.tolist()}")
+    return w
+
+
+def check_time_scales(value: Sequence[float] | None) -> np.ndarray:
+    """Validate ``time_scales``: distinct numbers in [0.5, 2], sorted (None = (1.0,))."""
+    if value is None:
+        return np.ones(1)
+    s = np.asarray(value, dtype=np.float64).reshape(-1)
+    if s.size == 0 or not np.all(np.isfinite(s)) or np.any((s < 0.5) | (s > 2.0)):
+        raise ValueError(f"time_scales must be one or more numbers in [0.5, 2], got {s.tolist()}")
+    if np.unique(s).size != s.size:
+        raise ValueError(f"time_scales must be distinct, got {s.tolist()}")
+    return np.sort(s)
+
+
+def check_recency_half_life(value: float) -> float:
+    """Validate ``recency_half_life``: a finite number >= 0 (strides; 0 = uniform weights)."""
+    h = float(value)
+    if not (math.isfinite(h) and h >= 0):
+        raise ValueError(f"recency_half_life must be a finite number >= 0 (strides; 0 = off), got {value!r}")
+    return h
+
+
+def check_offset_tolerance(value: float) -> float:
+    """Validate ``offset_tolerance_deg``: a number >= 0 (inf allowed)."""
+    t = float(value)
+    if math.isnan(t) or t < 0:
+        raise ValueError(f"offset_tolerance_deg must be >= 0 (inf: any offset), got {value!r}")
+    return t
+
+
+class _MatcherBase:
+    """Shared state: the rows (padded kernels), the ring buffer of recent samples, the read-out.
+
+    Args:
+        library: The kernels to match against (degrees).
+        channel_weights: Weight of each channel (CHANNELS order), >= 0, not all 0; None = all 1.
+        time_scales: Stride-duration factors of the kernel variants; None = (1.0,), the paper.
+        offset_tolerance_deg: Per-channel mean offset that costs nothing, degrees; 0 = the paper.
+        normalize: Compare by mean squared error per window sample instead of SSE.
+        recency_half_life: Age (strides) at which a sample's weight in the window halves; 0 =
+            uniform weights, the paper.
+    """
+
+    def __init__(
+        self,
+        library: KernelLibrary,
+        channel_weights: Sequence[float] | None = None,
+        time_scales: Sequence[float] | None = None,
+        offset_tolerance_deg: float = 0.0,
+        normalize: bool = False,
+        recency_half_life: float = 0.0,
+    ) -> None:
+        self.library = library
+        self.mode_names = library.mode_names
+        self.n_modes = len(library)
+        self.channel_weights = check_channel_weights(channel_weights)
+        self.time_scales = check_time_scales(time_scales)
+        self.offset_tolerance_deg = check_offset_tolerance(offset_tolerance_deg)
+        self.normalize = bool(normalize)
+        self.recency_half_life = check_recency_half_life(recency_half_life)
+        self.n_scales = int(self.time_scales.size)
+        self.active_channels = int(np.count_nonzero(self.channel_weights))
+        self._scale = np.sqrt(self.channel_weights)
+        self._scale_values: Sample = sample_values(self._scale)
+        self._unscale = np.divide(1.0, self._scale, out=np.zeros(N_CHANNELS), where=self._scale > 0)  # dropped: 0
+        self._weighted = bool(np.any(self.channel_weights != 1.0))
+        # row 0: tolerance, row 1: sensor offset (set_sensor_offset), in the weighted units of d and k
+        tolerance = np.where(self._scale > 0, self.offset_tolerance_deg, 0.0) * self._scale  # dropped channel: 0, not inf * 0
+        self._tau = np.stack([tolerance, np.zeros(N_CHANNELS)])
+        self._offset = self.offset_tolerance_deg > 0
+        base = library.lengths
+        # Rows are mode-major: row m * S + s is mode m at time scale s.
+        self.lengths = np.maximum(2, np.rint(np.outer(base, self.time_scales))).astype(np.int64).reshape(-1)
+        self.windows = self.lengths  # every row compares its whole stride
+        self.n_rows = int(self.lengths.size)
+        self.max_length = int(self.lengths.max())
+        self.max_window = self.max_length
+        self._decay = self.recency_half_life > 0  # age weights possible (set_recency_half_life)
+        self._means_half_life = self.recency_half_life  # the age weights whose kernel means mu_seg holds
+        self._set_weights(self.recency_half_life)
+        self._per_shift = self._decay  # the kernel part's weighted mean depends on the shift
+        self._rows = np.arange(self.n_rows)
+        self._all = np.arange(self.n_modes)
+        self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
+        self._scale_allowed = np.ones(self.n_scales, dtype=np.bool_)
+        self._band_rows = np.arange(self.n_rows)  # the rows at those scales, mode-major
+        self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
+        self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
+        self._mu = np.zeros((self.n_rows, N_CHANNELS))
+        # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
+        self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._per_shift else 1))
+        for m in range(self.n_modes):
+            self._set_rows(m, library.modes[m].samples)
+        self._ring = np.zeros((self.max_window, N_CHANNELS))
+        self._count = 0
+
+    # -----------------------------------------------------------------------------------------
+    # Rows
+
+    def _set_rows(self, mode: int, samples: np.ndarray) -> None:
+        """(Re)build the rows of ``mode`` from its kernel ``samples`` (N_m, 4), degrees."""
+        for r in range(mode * self.n_scales, (mode + 1) * self.n_scales):
+            n = int(self.lengths[r])
+            # float32-representable values: the compiled step streams a float32 copy (half the
+            # memory traffic); every path computes with exactly these values, in float64
+            k = (resample_stride(samples, n) * self._scale).astype(np.float32).astype(np.float64)  # (n, 4)
+            self._kernels[r] = 0.0
+            self._kernels[r, :, :n] = k.T
+            self._mu[r] = k.mean(axis=0)
+            if self._mu_seg.shape[2] > 1:
+                self._mu_seg[r, :, :n] = self._shift_means(k, r)
+
+    def _weights(self, half_life: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per row: the weight factor per sample of age lambda, lambda^W (the weight of the sample
+        leaving the window) and the weight sum of a full window W_a (lambda = 1: W)."""
+        if half_life > 0:
+            lam = 2.0 ** (-1.0 / (half_life * self.lengths))
+            lam_w = lam ** self.windows
+            return lam, lam_w, (1.0 - lam_w) / (1.0 - lam)
+        return np.ones(self.lengths.size), np.ones(self.lengths.size), self.windows.astype(np.float64)
+
+    def _set_weights(self, half_life: float) -> None:
+        self.recency_half_life = half_life
+        self._lam, self._lam_w, self._wsum = self._weights(half_life)
+
+    def set_recency_half_life(self, half_life: float) -> None:
+        """Change ``recency_half_life`` (strides; 0 = uniform weights) at any sample, keeping the
+        window: the running sums are recomputed from the buffered samples, so the next step
+        continues as if the weights had always been these. Only for a matcher made with
+        ``recency_half_life`` > 0 (its state holds the per-shift means the weights need)."""
+        h = check_recency_half_life(half_life)
+        if not self._decay:
+            raise ValueError("set_recency_half_life needs a matcher made with recency_half_life > 0")
+        if h == self.recency_half_life:
+            return
+        self._set_weights(h)
+        if h > 0 and h != self._means_half_life:  # mu_seg: the means of the weights in use
+            self._means_half_life = h
+            for r in range(self.n_rows):
+                n = int(self.lengths[r])
+                self._mu_seg[r, :, :n] = self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r)
+        self._reweighted()
+
+    def start_uniform(self) -> None:
+        """Match with uniform weights until ``set_recency_half_life`` sets the matcher's own age
+        weights again (the estimator does so once its walking calibrations have read a few
+        strides). Free on a fresh or reset matcher; otherwise the uniform sums are recomputed from
+        the window once (as set_recency_half_life(0) does)."""
+        if not self._decay:
+            raise ValueError("start_uniform needs a matcher made with recency_half_life > 0")
+        if self.recency_half_life == 0:
+            return
+        self._set_weights(0.0)
+        if self._count == 0:
+            self.reset()
+        else:
+            self._reweighted()
+
+    def _reweighted(self) -> None:
+        """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
+
+    def _shift_means(self, k: np.ndarray, r: int) -> np.ndarray:
+        """Per column j, the (weighted) mean of the kernel part row ``r``'s window is compared with
+        at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (4, n) (a_t = 1 without recency weighting); ``k``
+        (n, 4)."""
+        n, w = k.shape[0], int(self.windows[r])
+        lam, _, wsum = self._weights(self._means_half_life)
+        if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
+            c = np.cumsum(np.concatenate([k, k]), axis=0)
+            j = np.arange(n) + n
+            return ((c[j] - c[j - w]) / w).T
+        weights = np.zeros(n)
+        weights[:w] = lam[r] ** np.arange(w)
+        conv = np.fft.irfft(np.fft.rfft(k.T, n=n) * np.fft.rfft(weights), n=n)  # circular: sum_t w_t k_{j-t}
+        return conv / wsum[r]
+
+    def row_kernel(self, row: int) -> np.ndarray:
+        """The kernel of ``row`` (n, 4), degrees (unweighted channels as given)."""
+        n = int(self.lengths[row])
+        return self._kernels[row, :, :n].T.astype(np.float64) * self._unscale
+
+    @property
+    def sensor_offset_deg(self) -> np.ndarray:
+        """The sensor offset assumed by the offset penalty (4,), degrees; zeros by default."""
+        return self._tau[1] * self._unscale
+
+    def set_sensor_offset(self, offset_deg: Sequence[float] | np.ndarray) -> None:
+        """Assume the sensors read ``offset_deg`` (4,) degrees more than the kernels' (CHANNELS
+        order): the offset penalty then measures window-vs-kernel mean differences from it. The
+        running sums are untouched (the penalty is applied at read-out), so this may change at
+        any sample; non-zero turns the penalty on even with ``offset_tolerance_deg`` 0."""
+        o = np.asarray(offset_deg, dtype=np.float64).reshape(N_CHANNELS)
+        if not np.all(np.isfinite(o)):
+            raise ValueError(f"sensor offset must be finite, got {o.tolist()}")
+        self._tau[1] = o * self._scale
+        self._offset = self._offset or bool(np.any(o != 0.0))
+
+    @property
+    def scale_band(self) -> np.ndarray:
+        """Per time scale, whether a mode may be read at it (S,) bool; a copy."""
+        return self._scale_allowed.copy()
+
+    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
+        """Read every mode only at the time scales flagged in ``allowed`` (S,) (``time_scales``
+        order; None = all). The running sums of every row are kept, so this may change at any
+        sample."""
+        a = np.ones(self.n_scales, dtype=np.bool_) if allowed is None else np.asarray(allowed, dtype=np.bool_).reshape(-1)
+        if a.size != self.n_scales or not a.any():
+            raise ValueError(f"scale band needs {self.n_scales} flags, at least one true, got {a.tolist()}")
+        self._scale_allowed[:] = a
+        self._band_rows = (np.arange(self.n_modes)[:, None] * self.n_scales + np.flatnonzero(a)[None, :]).ravel()
+
+    def mode_row_scores(self, mode: int) -> np.ndarray:
+        """The best score of every row (time scale) of ``mode`` at the last step, (S,), whatever
+        the scale band."""
+        s = self.n_scales
+        return self._row_score[mode * s : (mode + 1) * s]
+
+    def best_scale_index(self, mode: int) -> int:
+        """Index in ``time_scales`` of the row of ``mode`` that scored best at the last step,
+        whatever the scale band."""
+        return int(self.mode_row_scores(mode).argmin())
+
+    def best_log_scale(self, mode: int) -> float:
+        """Natural log of the time scale at which ``mode`` fits best at the last step, between the
+        grid's scales: the vertex of the parabola through the best row's score and its two
+        neighbours' (in log scale), whatever the scale band; the grid scale itself at either end."""
+        s = self.n_scales
+        scores = self.mode_row_scores(mode)
+        b = int(scores.argmin())
+        if b == 0 or b == s - 1:
+            return math.log(self.time_scales[b])
+        x0, x1, x2 = (math.log(v) for v in self.time_scales[b - 1 : b + 2])
+        y0, y1, y2 = (float(v) for v in scores[b - 1 : b + 2])
+        a, c = x1 - x0, x1 - x2
+        den = a * (y1 - y2) - c * (y1 - y0)
+        if den == 0.0:  # flat: no side is better
+            return x1
+        return x1 - 0.5 * (a * a * (y1 - y2) - c * c * (y1 - y0)) / den
+
+    # -----------------------------------------------------------------------------------------
+    # State
+
+    @property
+    def steps(self) -> int:
+        """Samples consumed since construction or the last reset()."""
+        return self._count
+
+    @property
+    def ready(self) -> bool:
+        """True once every row's window holds its n_r samples."""
+        return self._count >= self.max_window
+
+    def reset(self) -> None:
+        """Forget all samples; the next step starts a fresh (incomplete) window."""
+        self._ring[:] = 0.0
+        self._count = 0
+
+    def _weighted_values(self, sample: Sequence[float] | np.ndarray) -> tuple[float, float, float, float, float]:
+        """The sample (4 angles, degrees) times sqrt(channel weight), as floats, and its squared
+        norm; ValueError if it is not four finite numbers."""
+        d0, d1, d2, d3 = sample_values(sample)
+        dsq = d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3
+        if not math.isfinite(dsq):  # also catches overflow of ||d||^2, i.e. |angle| > 1e154
+            raise ValueError(f"sample has non-finite values: {[d0, d1, d2, d3]}")
+        if self._weighted:
+            s0, s1, s2, s3 = self._scale_values
+            d0, d1, d2, d3 = d0 * s0, d1 * s1, d2 * s2, d3 * s3
+            dsq = d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3
+        return d0, d1, d2, d3, dsq
+
+    def _window_data(self) -> np.ndarray:
+        """The buffered samples newest first: row t is d_{i-t}, (Wmax, 4) (weighted)."""
+        w = self.max_window
+        return self._ring[(self._count - 1 - np.arange(w)) % w]
+
+    def window_sums(self) -> np.ndarray:
+        """Per row, the sum of the samples in its current window, (R, 4) (channel-weighted)."""
+        data = self._window_data()
+        cum = np.concatenate([np.zeros((1, N_CHANNELS)), np.cumsum(data, axis=0)])
+        return cum[np.minimum(self._count, self.windows)]
+
+    def age_weighted_sums(self, rows: np.ndarray | None = None, lam: np.ndarray | None = None) -> np.ndarray:
+        """Per row of ``rows`` (default: all), sum_t a_t d_{i-t} over its current window, (len(rows),
+        4) (a_t = lam^t with the per-row ``lam`` (R,), default ``recency_half_life``'s; 1 without it)."""
+        rows = self._rows if rows is None else rows
+        lam = self._lam if lam is None else lam
+        seen = np.arange(self.max_window)[None, :] < np.minimum(self._count, self.windows[rows])[:, None]
+        age = np.where(seen, lam[rows][:, None] ** np.arange(self.max_window)[None, :], 0.0)  # (r, Wmax)
+        return age @ self._window_data()
+
+    def window_weight(self) -> np.ndarray:
+        """Per row, the weight of its current window (R,): the number of samples in it, or with
+        ``recency_half_life`` the sum of their age weights."""
+        if self._count >= self.max_window:  # every window full
+            return self._wsum
+        seen = np.minimum(self._count, self.windows)
+        if self.recency_half_life > 0:
+            return (1.0 - self._lam ** seen) / (1.0 - self._lam)
+        return seen.astype(np.float64)
+
+    # -----------------------------------------------------------------------------------------
+    # Read-out (numpy): shared by the naive matcher and the numpy incremental step
+
+    def _scores(self, e: np.ndarray, sums: np.ndarray | None, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """score[r, j] of ``rows`` (default: all) from their running sums e (r, Nmax) and window
+        sums (r, 4), age-weighted with recency weighting; see the module docstring."""
+        score = e
+        if self._offset:
+            filled = self._count >= self.windows[rows]
+            w = self._wsum[rows]
+            per_shift = self.recency_half_life > 0  # mu_seg: the active weights' means
+            if per_shift:
+                x = sums[:, :, None] / w[:, None, None] - self._mu_seg[rows]  # (r, 4, Nmax)
+                w_ = w[:, None]
+                tol, off = self._tau[0, :, None], self._tau[1, :, None]
+            else:
+                x = sums / w[:, None] - self._mu[rows]  # (r, 4)
+                w_ = w
+                tol, off = self._tau
+            excess = np.maximum(np.abs(x - off) - tol, 0.0)
+            penalty = w_ * (x * x - excess * excess).sum(axis=1)
+            penalty = np.where(filled[:, None] if per_shift else filled, penalty, 0.0)
+            score = e - (penalty if per_shift else penalty[:, None])
+        if self.normalize:
+            score = score / self.window_weight()[rows][:, None]
+        return score
+
+    def _result(self, score: np.ndarray) -> StepResult:
+        cols = score.argmin(axis=1)
+        best = score[self._rows, cols]
+        self._row_score = best
+        s = self.n_scales
+        if s > 1:
+            per_mode = best.reshape(self.n_modes, s)
+            if not self._scale_allowed.all():
+                per_mode = np.where(self._scale_allowed, per_mode, np.inf)
+            variant = per_mode.argmin(axis=1)
+            rows = self._all * s + variant
+        else:
+            variant, rows = None, self._all
+        cols, sse = cols[rows], best[rows]
+        lens = self.lengths[rows]
+        phases = ((cols + 1) % lens) / lens
+        b = int(sse.argmin())
+        window = np.minimum(self._count, self.windows[rows])
+        return StepResult(b, self.mode_names[b], float(phases[b]), sse, phases, self.ready, window, variant, cols)
+
+    # -----------------------------------------------------------------------------------------
+    # Naive recomputation (the specification; also used to resynchronise)
+
+    def _window_sse(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Naive SSE of the current window against row shifts (rows[b], cols[b]), shape (B,)."""
+        w = self.max_window
+        t = np.arange(w)
+        data = self._window_data()  # (Wmax, 4): d_{i-t}
+        lens = self.lengths[rows][:, None]
+        diff = data[None, :, :] - self._kernels[rows[:, None], :, (cols[:, None] - t[None, :]) % lens]
+        sq = np.einsum("btc,btc->bt", diff, diff)
+        sq[t[None, :] >= np.minimum(self._count, self.windows[rows][:, None])] = 0.0
+        if self._decay:
+            sq *= self._lam[rows][:, None] ** t[None, :]
+        return sq.sum(axis=1)
+
+    def full_sse(self) -> np.ndarray:
+        """e[r, j] recomputed from the buffered samples (the naive sum), (R, Nmax); padding inf."""
+        rows, cols = np.nonzero(self._valid)
+        out = np.full(self._valid.shape, np.inf)
+        for lo in range(0, rows.size, _CHUNK):
+            r, c = rows[lo : lo + _CHUNK], cols[lo : lo + _CHUNK]
+            out[r, c] = self._window_sse(r, c)
+        return out
+
+    def run(self, samples: np.ndarray) -> MatchTrace:
+        """Step through ``samples`` (T, 4), degrees; returns every step's result."""
+        x = np.asarray(samples, dtype=np.float64)
+        t = x.shape[0]
+        mode_index = np.empty(t, dtype=np.int64)
+        phase = np.empty(t)
+        sse = np.empty((t, self.n_modes))
+        phases = np.empty((t, self.n_modes))
+        ready = np.empty(t, dtype=bool)
+        for i in range(t):
+            r = self.step(x[i])
+            mode_index[i], phase[i], sse[i], phases[i], ready[i] = r.mode_index, r.phase, r.sse, r.phases, r.ready
+        return MatchTrace(list(self.mode_names), mode_index, phase, sse, phases, ready)
+
+    def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
+        raise NotImplementedError
