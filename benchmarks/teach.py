@@ -227,12 +227,12 @@ def write_tables(out: Path) -> str:
             rows.append(
                 f"| {split} | {r['strides_requested']} | {used} | {lv['evaluated']:,} ({lv['steady_rows']:,}) | "
                 f"{pct(lv['accuracy'])} / {pct(of['accuracy'])} | {pct(lv['steady_accuracy'])} / "
-                f"{pct(of['steady_accuracy'])} | {pct(lv['phase_error_mean'], 2)} / {pct(of['phase_error_mean'], 2)} % | "
+                f"{pct(of['steady_accuracy'])} | {pct(lv['phase_error_mean'], 2)} / {pct(of['phase_error_mean'], 2)} | "
                 f"{kd} | {r['samples_sent'] - r['samples_accepted']} of {r['samples_sent']:,} |"
             )
     text = "\n".join([
-        "| split | N | taught (Slow/Med/Fast) | rows scored (steady) | accuracy live / offline (%) | steady rows "
-        "live / offline (%) | phase error live / offline | kernels differ by (deg) | samples lost |",
+        "| split | N | taught Slow/Med/Fast | rows (steady) | accuracy % live / offline | steady rows % "
+        "| phase error % | kernel diff (°) | samples lost |",
         "|---|---|---|---|---|---|---|---|---|",
         *rows,
     ])
