@@ -63,6 +63,7 @@ docs: venv
 	$(BIN)/python benchmarks/node.py
 	$(BIN)/python benchmarks/cross_session.py --tables-only
 	$(BIN)/python benchmarks/accuracy.py --tables-only
+	$(BIN)/python benchmarks/teach.py --tables-only
 	$(BIN)/python -m benchmarks.common --update-docs
 
 docs-check: venv

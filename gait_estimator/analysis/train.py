@@ -224,7 +224,7 @@ def train_library(recordings: Sequence[Recording], name: str, options: TrainOpti
             raise GaitEstimatorError(
                 f"mode {mode!r}: no complete stride inside its labelled samples (need {opts.min_strides})"
             )
-        kernel, infos = _train_mode(mode, parts, rate, opts)
+        kernel, infos = train_mode(mode, parts, rate, opts)
         report[mode] = infos
         modes.append(kernel)
     sources = [r.source for r in recordings]
@@ -268,9 +268,20 @@ def _data_license(sources: Sequence[str]) -> str:
     return ""
 
 
-def _train_mode(
+def train_mode(
     mode: str, parts: list[tuple[str, Recording, np.ndarray]], rate: float, opts: TrainOptions
 ) -> tuple[KernelMode, list[StrideInfo]]:
+    """One mode's kernel from its candidate strides (rules 4-5 of the module docstring).
+
+    Args:
+        mode: Mode name.
+        parts: Per source: (source name, its uniform resampling at ``rate``, stride bounds (S, 2) s).
+        rate: The uniform rate (Hz), stored with the kernel.
+        opts: Minimum strides and outlier rule.
+
+    Raises:
+        GaitEstimatorError: fewer than ``opts.min_strides`` strides left after outlier rejection.
+    """
     durations = np.concatenate([b[:, 1] - b[:, 0] for _, _, b in parts])
     base_len = max(2, round(float(np.median(durations)) * rate))
     normalised = np.concatenate([normalise_strides(u.time_s, u.angles_deg, b, base_len) for _, u, b in parts])

@@ -24,6 +24,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.bench_node",
     "gait_estimator.cli.bag_commands",
     "gait_estimator.cli.analysis_commands",
+    "gait_estimator.cli.teach_command",
 )
 """Further modules contributing subcommands (kept ROS-free at import time)."""
 

@@ -43,6 +43,10 @@ class NodeDiagnostics:
     def diagnostics_status(self) -> DiagnosticStatus:
         """The node's status; rates and processing times cover the time since the previous call."""
         now = time.monotonic()
+        if self._estimator is None:
+            self._period_start, self._period_received = now, 0
+            return self._teacher.status_without_library(f"{self.get_fully_qualified_name()}: gait estimator",
+                                                        self._received, self._guard.accepted)
         elapsed = max(now - self._period_start, 1e-9)
         lib = self.library
         m = self._estimator.matcher
@@ -86,6 +90,7 @@ class NodeDiagnostics:
             "sensor_offset_deg": ",".join(f"{v:.2f}" for v in self._estimator.sensor_offset_deg),
             "cadence_scale": f"{self._estimator.cadence_scale:.3f}" if math.isfinite(self._estimator.cadence_scale) else "",
             "adapted_strides": str(int(self._estimator.adapter.accepted.sum())) if self._estimator.adapter else "",
+            **self._teacher.diagnostic_values(),
         }
         problems = []
         if self._period_received == 0:
@@ -111,6 +116,7 @@ class NodeDiagnostics:
             level, message = DiagnosticStatus.OK, f"ready: {e.mode} phase {e.phase:.2f}"
         else:
             level, message = DiagnosticStatus.OK, f"filling window {values['window']}"
+        message += self._teacher.message_suffix()
         self._period_start = now
         self._period_received = self._period_rejected = self._period_accepted = 0
         self._period_first_stamp = self._period_last_stamp = None

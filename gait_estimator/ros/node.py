@@ -186,6 +186,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         )
         lib = self._library
         self.get_logger().info(
+            "no kernel library (kernels: ''): diagnostics only until a mode is taught (teach_mode)" if lib is None else
             f"library '{lib.name}' ({len(lib)} modes: {', '.join(lib.mode_names)}; window "
             f"{self._estimator.matcher.max_window} samples at {lib.sample_rate_hz:g} Hz) from {lib.path or '?'}; "
             f"input {self._input_type} on {self._sub.topic_name} in {self._units}"
@@ -210,11 +211,13 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
     # Services
 
     def _save_library(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        """``~/save_library``: write the personalised kernels to ``adapted_library_path``."""
+        """``~/save_library``: write the library in use, with its taught modes and personalised
+        kernels, to ``adapted_library_path``."""
         est = self._estimator
-        if est.adapter is None:
+        if est is None or (est.adapter is None and not self._teacher.taught):
             response.success = False
-            response.message = "personalisation is off (adapt_rate is 0): no adapted kernels to save"
+            response.message = ("no library yet: teach a mode first (teach_mode)" if est is None else
+                                "no taught modes, and personalisation is off (adapt_rate is 0): nothing to save")
             return response
         path = self.get_parameter("adapted_library_path").value or str(
             Path.home() / ".ros" / "gait_estimator" / f"{self.library.name}_adapted.yaml")
@@ -225,9 +228,11 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         except (GaitEstimatorError, OSError, ValueError) as exc:
             response.success, response.message = False, f"{path}: {one_line(exc)}"
             return response
-        strides = lib.provenance["adaptation"]["accepted_strides"]
+        strides = lib.provenance.get("adaptation", {}).get("accepted_strides", {})
         response.success = True
-        response.message = f"wrote {out} (strides adopted: " + ", ".join(f"{m} {n}" for m, n in strides.items()) + ")"
+        response.message = f"wrote {out} ({len(lib)} modes: {', '.join(lib.mode_names)}" + (
+            f"; taught: {', '.join(self._teacher.taught)}" if self._teacher.taught else "") + (
+            "; strides adopted: " + ", ".join(f"{m} {n}" for m, n in strides.items()) if est.adapter else "") + ")"
         self.get_logger().info(response.message)
         return response
 
@@ -235,6 +240,9 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         """``~/reset_calibration``: forget the learnt sensor offsets and cadence (after
         re-donning, or for another wearer)."""
         est = self._estimator
+        if est is None:
+            response.success, response.message = False, "no library yet: nothing calibrated"
+            return response
         before, scale = est.sensor_offset_deg.copy(), est.cadence_scale
         est.reset_calibration()
         response.success = True
@@ -332,6 +340,9 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             self._reject(exc)
             return
         est = self._estimator
+        if est is None:  # no library yet (kernels: ''): the samples only teach
+            self._teacher.on_sample(t, angles_deg)
+            return
         if restart:  # stamps jumped back by more than restart_back_s: a restarted stream
             est.reset()
             self._log_restart("back", f"input stamps jumped back by {(prev or t) - t:.3f} s (> {guard.restart_back_s:g} s)")
@@ -351,6 +362,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             )
         t1 = time.perf_counter()
         self._publish(estimate, stamp)
+        self._teacher.on_sample(t, angles_deg)  # may change the library and the estimator
 
         if self._period_first_stamp is None:
             self._period_first_stamp = t
@@ -443,7 +455,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
     @property
     def ready(self) -> bool:
         """True while the matcher window is full (mode/phase/sse are being published)."""
-        return self._estimator.matcher.ready
+        return self._estimator is not None and self._estimator.matcher.ready
 
     @property
     def samples_received(self) -> int:
@@ -463,7 +475,8 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
     @property
     def window_resets(self) -> int:
         """Window restarts caused by the input stream: gaps > max_gap_s and jumps back."""
-        return self._resets_before + self._estimator.resets + self._guard.restarts
+        resets = self._estimator.resets if self._estimator is not None else 0
+        return self._resets_before + resets + self._guard.restarts
 
 
 

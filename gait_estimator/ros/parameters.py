@@ -25,6 +25,7 @@ from ..io.library_io import load_library
 from ..io.resources import DEFAULT_LIBRARY
 from ..io.stream import INPUT_TYPES, UNITS, AngleExtractor, restart_threshold
 from .priority import MAX_PRIORITY, process_priority, set_process_priority
+from .teach import NodeTeacher
 
 ADVANCED_PREFIX = "advanced."
 EXECUTORS = ("events", "single_threaded")
@@ -51,7 +52,8 @@ DEFAULTS: dict[str, Any] = {
 
 DESCRIPTIONS: dict[str, str] = {
     "kernels": "Kernel library: a file (.yaml, .npz, reference .csv or per-mode .yaml) or directory, or a "
-    "bundled name (able_bodied, prosthesis). Changing it at run time reloads it and restarts the window.",
+    "bundled name (able_bodied, prosthesis); '' = none: the node starts without one and publishes only diagnostics "
+    "until a mode is taught (teach_mode). Changing it at run time reloads it and restarts the window.",
     "joint_names": "JointState names of right_thigh, left_thigh, right_shank, left_shank, in that order "
     "(4 distinct names; other joints in the message are ignored, message order does not matter).",
     "input_units": "Units of the input angles: rad (REP 103) or deg.",
@@ -104,8 +106,10 @@ def config_value(value: Any) -> Any:
 
 def check_kernels(value: Any) -> tuple[str, KernelLibrary | None]:
     """(why ``kernels`` is invalid or '', the library it names)."""
-    if not isinstance(value, str) or not value.strip():
-        return "must be a library path or bundled name, got an empty value", None
+    if not isinstance(value, str):
+        return "must be a library path or bundled name, or '' (none: teach modes)", None
+    if not value.strip():
+        return "", None  # no library: the node starts with none (NodeTeacher refuses it later)
     try:
         return "", load_library(value)
     except (GaitEstimatorError, OSError, ValueError) as exc:
@@ -143,7 +147,7 @@ class NodeParameters:
     _library: KernelLibrary | None
     _config: EstimatorConfig
     _config_preset: str
-    _estimator: Estimator
+    _estimator: Estimator | None
 
     def _declare_parameters(self) -> None:
         """Declare every parameter (the estimator options at the preset's values unless
@@ -170,8 +174,10 @@ class NodeParameters:
                 if name == "preset":
                     self._config_preset = self.get_parameter("preset").value
                     self._config = EstimatorConfig.preset(self._config_preset)
-            assert self._library is not None
-            self._set_estimator(self._new_estimator(self._library, self._config))
+            self._estimator = None  # None: no library yet (kernels: ''), only teaching
+            if self._library is not None:
+                self._set_estimator(self._new_estimator(self._library, self._config))
+            self._teacher = NodeTeacher(self)
         except ParameterException as exc:
             reason = self._last_rejection or ": " + one_line(exc)
             self.destroy_node()
@@ -236,9 +242,9 @@ class NodeParameters:
         self._guard.restart_back_s = restart_threshold(config.max_gap_s)
         options = {OPTION_OF_PARAMETER[n] for n in names if n in OPTION_OF_PARAMETER}
         if ("kernels" in names or options - GAP_OPTIONS) and estimator is not None:
-            self._resets_before += self._estimator.resets
+            self._resets_before += self._estimator.resets if self._estimator is not None else 0
             kept = ""
-            if "kernels" not in names:  # same kernels, same sensors: keep what was learnt
+            if "kernels" not in names and self._estimator is not None:  # same kernels, same sensors: keep what was learnt
                 estimator.adopt_calibration(self._estimator)
                 strides = estimator.adopt_adaptation(self._estimator)
                 if strides:
@@ -250,7 +256,7 @@ class NodeParameters:
                 f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: {self._options_summary()}: "
                 "window restarted" + kept
             )
-        elif options & GAP_OPTIONS:
+        elif options & GAP_OPTIONS and self._estimator is not None:
             self._estimator.set_gap_options(config)  # only gap thresholds changed: keep the window
 
     def _apply_input_parameters(self, params: list[Parameter]) -> None:

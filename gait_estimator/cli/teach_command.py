@@ -1,0 +1,80 @@
+"""``gait-estimator teach``: teach a mode to a running estimator_node, or save its library.
+
+rclpy is imported only when the command runs, so the offline CLI works without ROS.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from ..analysis.teach import TEACH_STRIDES, check_teach_strides
+from ..core.errors import GaitEstimatorError
+from ..ros import require_ros
+from .args import positive_float
+
+
+def _strides(text: str) -> int:
+    try:
+        value = int(text)
+        check_teach_strides(value)
+    except (ValueError, GaitEstimatorError) as exc:
+        raise argparse.ArgumentTypeError(str(exc) if isinstance(exc, GaitEstimatorError) else
+                                         f"expected an integer, got {text!r}") from None
+    return value
+
+
+def _domain_id(text: str) -> int:
+    v = int(text)
+    if not 0 <= v <= 232:
+        raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
+    return v
+
+
+def cmd_teach(args: argparse.Namespace) -> int:
+    if not args.mode and not args.save:
+        raise GaitEstimatorError("teach: give --mode NAME (teach it) and/or --save PATH (save the node's library)")
+    require_ros()
+    from ..ros.teach_client import TeachClient
+
+    with TeachClient(args.node, args.domain_id, args.timeout) as client:
+        code = 0
+        if args.mode:
+            client.on_log = lambda line: None if ": kernel built from " in line else print(line, flush=True)
+            print(f"teaching {args.mode} on {client.target}: walk steadily in that mode "
+                  f"({args.strides} good strides); Ctrl-C cancels", flush=True)
+            try:
+                done, text = client.teach(args.mode, args.strides, max_s=args.max_time)
+            except KeyboardInterrupt:
+                client.cancel()
+                print(f"cancelled: teach_mode of {client.target} set back to ''", flush=True)
+                return 130
+            print(("done: " if done else "not taught: ") + text, flush=True)
+            code = 0 if done else 1
+        if args.save and code == 0:
+            print(client.save(args.save), flush=True)
+        return code
+
+
+def add_commands(sub: Any) -> None:
+    """Register ``teach`` on the ``gait-estimator`` subparsers."""
+    t = sub.add_parser(
+        "teach",
+        help="teach a mode to a running estimator_node from the wearer's strides, or save its library",
+        description="Set teach_mode (and teach_strides) of a running estimator_node, print its progress until "
+        "the kernel is built, then the kernel's summary; --save PATH has the node write its library (taught "
+        "modes included) there. Uses the environment's ROS_DOMAIN_ID and discovery range unless --domain-id "
+        "is given. Exits 2 with one line when no node answers.",
+    )
+    t.add_argument("--mode", metavar="NAME", help="mode to teach (a new name adds it, an existing one replaces it)")
+    t.add_argument("--strides", type=_strides, default=TEACH_STRIDES,
+                   help="good strides to average (default %(default)s; at least train's --min-strides, 3)")
+    t.add_argument("--save", metavar="PATH", help="have the node save its library to PATH (.yaml or .npz) "
+                   "(after teaching, when --mode is given too)")
+    t.add_argument("--node", default="/estimator_node", help="the estimator node's name (default %(default)s)")
+    t.add_argument("--domain-id", type=_domain_id, help="ROS_DOMAIN_ID (default: the environment's)")
+    t.add_argument("--timeout", type=positive_float, default=5.0,
+                   help="seconds to wait for the node to answer (default %(default)s)")
+    t.add_argument("--max-time", type=positive_float, help="give up (and cancel) after this many seconds "
+                   "(default: wait until done)")
+    t.set_defaults(func=cmd_teach)
