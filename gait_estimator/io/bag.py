@@ -163,7 +163,7 @@ def is_bag_path(p: Path) -> bool:
 
 
 @contextmanager
-def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = False) -> Iterator[Any]:
+def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = False, quiet: bool = False) -> Iterator[Any]:
     """Open a bag with rosbags; every failure (while opening or reading inside the ``with``
     block) becomes a one-line RecordingError naming the bag and the topic asked for.
 
@@ -171,7 +171,8 @@ def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = Fals
     unfinished transaction, a directory whose metadata.yaml is missing or disagrees with its
     files) yields a ``bag_recover.RecoveredBag`` instead, with the same reader interface, after
     one warning line on stderr saying what was recovered; RecordingError if nothing was.
-    ``all_topics``: errors name the bag only (for readers of every topic, e.g. ``repair``)."""
+    ``all_topics``: errors name the bag only (for readers of every topic, e.g. ``repair``);
+    ``quiet``: no warning line (for a look at the topics before the bag is read)."""
     from rosbags.rosbag2 import Reader
 
     p = Path(path)
@@ -190,7 +191,7 @@ def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = Fals
         raise RecordingError(f"{where}: {str(exc).removeprefix(f'{p}: ')}") from None
     except Exception as exc:  # rosbags raises many kinds for damaged files
         raise RecordingError(f"{where}: cannot open bag, truncated or corrupt? ({_one_line(exc)})") from None
-    if isinstance(reader, bag_recover.RecoveredBag):
+    if isinstance(reader, bag_recover.RecoveredBag) and not quiet:
         bag_recover.report(reader.recovery)
     try:
         yield reader

@@ -69,7 +69,7 @@ def is_imu_bag(p: Path) -> bool:
     if not is_bag_path(p):
         return False
     try:
-        with open_bag(p) as reader:
+        with open_bag(p, quiet=True) as reader:
             types = {ty for ty, _ in bag_topics(reader).values()}
     except RecordingError:
         return False
