@@ -564,6 +564,24 @@ def test_new_options_keep_the_learnt_calibration(able_bodied) -> None:
     assert not plain.sensor_offset_deg.any() and math.isnan(plain.cadence_scale) and plain.matcher.scale_band.all()
 
 
+def test_adopting_an_early_cadence_keeps_every_scale(able_bodied) -> None:
+    """An estimator that has read fewer cadence strides than it needs to narrow the time scales
+    hands over a band that is still open, and the adopting estimator keeps it open too (it
+    narrows from the same stride count as the one it adopts from)."""
+    x = _stretched_strides(able_bodied, "Med", 8, 0.93)
+    t = np.arange(len(x)) / 230.0
+    est = Estimator(able_bodied)
+    for i in range(len(x)):
+        est.update(float(t[i]), x[i])
+        if est.calibration.cadence_strides == 1:
+            break
+    assert est.calibration.cadence_strides == 1 and est.matcher.scale_band.all()
+    other = Estimator(able_bodied, EstimatorConfig(min_dwell_s=0.1))
+    other.adopt_calibration(est)
+    assert other.calibration.cadence_strides == 1
+    np.testing.assert_array_equal(other.matcher.scale_band, est.matcher.scale_band)
+
+
 def test_cadence_calibration_stays_open_when_the_scales_spread(able_bodied) -> None:
     """Med strides alternating every 4 strides between 12 % slower and 12 % faster than the kernel
     (a wearer changing speed): the strides' scales spread, and the band is wider than the 4 %

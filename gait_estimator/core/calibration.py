@@ -140,7 +140,8 @@ class WalkingCalibration:
         if self.learns_cadence and other.cadence_strides:
             self.cadence_scale, self.cadence_strides = other.cadence_scale, other.cadence_strides
             self.cadence_spread = other.cadence_spread
-            self._narrow_scales()
+            if self.cadence_strides >= self.params.cadence_min_strides:
+                self._narrow_scales()
         if self.active:
             self.strides = other.strides
         self.fit_strides, self.typical_fit2 = other.fit_strides, other.typical_fit2

@@ -180,9 +180,6 @@ class NodeTeacher:
         dropped = ""
         if old is not None:
             estimator.adopt_calibration(old)
-            # adopt_calibration narrows the time scales from the first cadence stride on, the
-            # estimator itself from the third: read at exactly the old estimator's scales.
-            estimator.matcher.set_scale_band(old.matcher.scale_band)
             node._resets_before += old.resets
             if old.adapter is not None and old.adapter.accepted.any():
                 dropped = f"; personalised kernels ({int(old.adapter.accepted.sum())} strides) not carried over"
