@@ -182,10 +182,9 @@ class IncrementalMatcher(_MatcherBase):
         self._rebuild(np.flatnonzero(now & ~was))
 
     def _choose_step(self) -> None:
-        """Threads, and the one-pass read-out, only for as many rows as make them pay (beyond the
-        caches); the step's results do not depend on either."""
+        """Threads only for as many rows as make them pay (beyond the caches); the step's results
+        do not depend on them."""
         many = self._active.size >= PARALLEL_MIN_ROWS
-        self._one_pass = many
         if compiled.AVAILABLE:
             self._compiled_step = compiled.step_rows_parallel if self.parallel and many else compiled.step_rows
 
@@ -246,7 +245,7 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self._one_pass, self.normalize,
+            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self.normalize,
             self.n_scales, self._scale_allowed, self._active,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
