@@ -603,21 +603,22 @@ def test_rows_outside_the_band_are_rebuilt_when_they_are_needed(multispeed_csv, 
 
 
 @pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")
-def test_the_one_pass_read_out_of_many_rows_gives_the_same_results(able_bodied, multispeed_csv) -> None:
-    """From PARALLEL_MIN_ROWS updated rows on, the compiled step scores the shifts with the
-    per-shift offset penalty and finds their minimum in one pass (no scratch row): bit for bit
-    what the two passes give, and the numpy step's results."""
+def test_many_rows_over_threads_give_the_one_thread_results(able_bodied, multispeed_csv) -> None:
+    """From PARALLEL_MIN_ROWS updated rows on, the compiled step spreads the rows (per-shift
+    offset penalty, age weights) over threads: bit for bit what one thread gives, and the numpy
+    step's results."""
+    from gait_estimator.core import compiled
     from gait_estimator.core.matcher import PARALLEL_MIN_ROWS
 
     lib = able_bodied.replicated(40)
     opts = {"time_scales": (0.88, 0.92, 0.96, 1.0, 1.04, 1.08, 1.12), "offset_tolerance_deg": 2.0, "normalize": True,
             "recency_half_life": 0.3}
     x = read_recording(multispeed_csv).angles_deg[2000:2700] + np.array([3.0, -1.0, 0.5, 2.0])
+    many = IncrementalMatcher(lib, backend="numba", **opts)
     one = IncrementalMatcher(lib, backend="numba", **opts)
-    two = IncrementalMatcher(lib, backend="numba", **opts)
-    assert one.n_rows >= PARALLEL_MIN_ROWS and one._one_pass
-    two._one_pass = False
-    a, b, c = one.run(x), two.run(x), IncrementalMatcher(lib, backend="numpy", **opts).run(x)
+    assert many.n_rows >= PARALLEL_MIN_ROWS
+    one._compiled_step = compiled.step_rows
+    a, b, c = many.run(x), one.run(x), IncrementalMatcher(lib, backend="numpy", **opts).run(x)
     np.testing.assert_array_equal(a.sse, b.sse)
     np.testing.assert_array_equal(a.phase, b.phase)
     np.testing.assert_array_equal(a.mode_index, c.mode_index)

@@ -203,7 +203,7 @@ def _match(estimator: Estimator, grid_t: np.ndarray, grid_x: np.ndarray) -> dict
             mt._e, mt._kernels, mt._ksq, mt.lengths, mt._ring, mt._ring_sq,
             mt._psum_ring, mt._psum, count, d, sq, g, stop,
             mt._decay, mt._lam, mt._lam_w, mt._wsum, mt._wsums,
-            mt._offset, mt._mu, mt._mu_seg, mt._tau, mt._scratch, mt._one_pass, mt.normalize, mt.n_scales,
+            mt._offset, mt._mu, mt._mu_seg, mt._tau, mt._scratch, mt.normalize, mt.n_scales,
             mt._scale_allowed,
             mt._active, mt._out_col, mt._out_score,
             sse, phases, best, variant, column, window, scratch_v, scratch_c, scratch_w,

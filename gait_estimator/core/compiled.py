@@ -59,7 +59,7 @@ def step_rows(
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
     decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
-    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray, one_pass: bool,
+    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray,
     normalize: bool, n_scales: int, allowed: np.ndarray, active: np.ndarray,
     out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
@@ -76,9 +76,7 @@ def step_rows(
     age-weighted window sums, updated in place; offset: apply the offset penalty (mu (R, 4)
     kernel means, mu_seg (R, 4, Nmax) per-shift age-weighted means of the kernel with age
     weights, tau (2, 4): tolerances and sensor offsets; with decay the window's weight W_a and
-    age-weighted sums stand for W and the sums; scratch (R, Nmax): room for per-shift scores, or
-    one_pass: none, the per-shift scores and their minimum in one pass, the faster once the rows
-    no longer fit the caches, the same results);
+    age-weighted sums stand for W and the sums; scratch (R, Nmax): room for per-shift scores);
     normalize: divide by the window's weight;
     allowed (n_scales,) bool: the time scales a mode may be read at (at least one); active: the
     rows updated and read out (those at allowed scales, or all); the others keep their sums.
@@ -139,44 +137,22 @@ def step_rows(
         const = 0.0
         if use_offset and not per_shift:
             const = _offset_penalty(s0, s1, s2, s3, wp, mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
-        best = np.inf
-        bj = 0
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
             a0, a1, a2, a3 = s0 / wp, s1 / wp, s2 / wp, s3 / wp
             t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
             f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
             m0, m1, m2, m3 = mu_seg[r, 0], mu_seg[r, 1], mu_seg[r, 2], mu_seg[r, 3]
-            if one_pass:  # memory-bound: read mu_seg and e once, write nothing
-                for j in range(n):
-                    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
-                    g0 = max(abs(x0 - f0) - t0, 0.0)
-                    g1 = max(abs(x1 - f1) - t1, 0.0)
-                    g2 = max(abs(x2 - f2) - t2, 0.0)
-                    g3 = max(abs(x3 - f3) - t3, 0.0)
-                    v = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
-                    if v < best:
-                        best = v
-                        bj = j
-            else:
-                sr = scratch[r]
-                for j in range(n):  # no loop-carried dependence: vectorised
-                    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
-                    g0 = max(abs(x0 - f0) - t0, 0.0)
-                    g1 = max(abs(x1 - f1) - t1, 0.0)
-                    g2 = max(abs(x2 - f2) - t2, 0.0)
-                    g3 = max(abs(x3 - f3) - t3, 0.0)
-                    sr[j] = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
-                for j in range(n):
-                    v = sr[j]
-                    if v < best:
-                        best = v
-                        bj = j
+            sr = scratch[r]
+            for j in range(n):  # no loop-carried dependence: vectorised
+                x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+                g0 = max(abs(x0 - f0) - t0, 0.0)
+                g1 = max(abs(x1 - f1) - t1, 0.0)
+                g2 = max(abs(x2 - f2) - t2, 0.0)
+                g3 = max(abs(x3 - f3) - t3, 0.0)
+                sr[j] = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
+            best, bj = _argmin(sr, n)
         else:
-            for j in range(n):
-                v = er[j]
-                if v < best:
-                    best = v
-                    bj = j
+            best, bj = _argmin(er, n)
             best -= const
         out_col[r] = bj
         out_score[r] = best * scale
@@ -224,6 +200,33 @@ step_rows, step_rows_parallel = _serial_and_parallel(step_rows, "step_rows_paral
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _argmin(v, n):  # pragma: no cover - compiled
+    """(min, first index of the min) of v[:n] ((inf, 0) if no value is below inf; nan never wins):
+    the scan's four interleaved lanes have no dependence on each other, so they overlap."""
+    b0 = b1 = b2 = b3 = np.inf
+    j0 = j1 = j2 = j3 = 0
+    q = n - n % 4
+    for j in range(0, q, 4):
+        v0, v1, v2, v3 = v[j], v[j + 1], v[j + 2], v[j + 3]
+        if v0 < b0:
+            b0, j0 = v0, j
+        if v1 < b1:
+            b1, j1 = v1, j + 1
+        if v2 < b2:
+            b2, j2 = v2, j + 2
+        if v3 < b3:
+            b3, j3 = v3, j + 3
+    for j in range(q, n):
+        if v[j] < b0:
+            b0, j0 = v[j], j
+    best, bj = np.inf, 0
+    for lb, lj in ((b0, j0), (b1, j1), (b2, j2), (b3, j3)):
+        if lb < best or (lb == best and lb < np.inf and lj < bj):
+            best, bj = lb, lj
+    return best, bj
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _aged_update(er, n, a, lw, base, x0, x1, x2, x3, k0, k1, k2, k3, kq):  # pragma: no cover - compiled
     """Running sums of one whole-stride row with age weights, in place from the last column down:
     e[j] = a e[j-1] + base + (1 - lw) ||k_j||^2 - 2 k_j . x, with base = ||d||^2 - lw ||old||^2,
@@ -264,7 +267,7 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
 def run_steps(  # pragma: no cover - compiled
     e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
     decay, lam, lam_w, wsum, wsums,
-    offset, mu, mu_seg, tau, scratch, one_pass, normalize, n_scales, allowed, active, out_col, out_score,
+    offset, mu, mu_seg, tau, scratch, normalize, n_scales, allowed, active, out_col, out_score,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
@@ -282,7 +285,7 @@ def run_steps(  # pragma: no cover - compiled
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
         b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
-                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, tau, scratch, one_pass, normalize,
+                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, tau, scratch, normalize,
                  n_scales, allowed, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
         best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
         if track.shape[0] == 0:

@@ -32,7 +32,7 @@ __all__ = [
 
 BACKENDS = ("auto", "numba", "numpy")
 """Incremental step implementations: ``numba`` (compiled), ``numpy``; ``auto`` = numba if installed."""
-PARALLEL_MIN_ROWS = 256
+PARALLEL_MIN_ROWS = 64
 """From this many rows (modes x time scales) on, the compiled step reads the kernels as float32
 (the same values: every path uses float32-representable kernel values) and spreads the rows over
 threads (numba's ``parallel``) when the process may use more than one CPU."""
@@ -113,7 +113,7 @@ class IncrementalMatcher(_MatcherBase):
         cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         large = self.backend == "numba" and self.n_rows >= PARALLEL_MIN_ROWS
         self.parallel = large and cpus > 1
-        if large:  # beyond the caches the step is memory-bound: stream float32 kernels, half the traffic
+        if large:  # stream float32 kernels: half the memory traffic
             self._kernels = self._kernels.astype(np.float32)
         self._active = self._rows  # rows the compiled step updates (the scale band's)
         self._choose_step()
@@ -182,10 +182,8 @@ class IncrementalMatcher(_MatcherBase):
         self._rebuild(np.flatnonzero(now & ~was))
 
     def _choose_step(self) -> None:
-        """Threads, and the one-pass read-out, only for as many rows as make them pay (beyond the
-        caches); the step's results do not depend on either."""
+        """Threads only for as many rows as make them pay; the step's results do not depend on them."""
         many = self._active.size >= PARALLEL_MIN_ROWS
-        self._one_pass = many
         if compiled.AVAILABLE:
             self._compiled_step = compiled.step_rows_parallel if self.parallel and many else compiled.step_rows
 
@@ -246,7 +244,7 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self._one_pass, self.normalize,
+            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self.normalize,
             self.n_scales, self._scale_allowed, self._active,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
