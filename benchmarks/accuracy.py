@@ -210,18 +210,20 @@ def read_report(path: Path, command: str) -> dict[str, Any]:
 
 def step_row(path: Path) -> list[str]:
     report = read_report(path, "python benchmarks/performance.py --run")
-    rows = {(r["modes"], r["impl"], r.get("preset", "paper")): r["step_us_median"] for r in report["results"]}
+    rows = {(r["modes"], r["impl"], r.get("preset", "paper")): r["step_us_median"]
+            for r in report["results"] if "step_us_median" in r}  # (the process rows are throughputs)
     impl = next(i for _, i, _ in rows if i.startswith("incremental ("))
     med = {m: v for (m, i, p), v in rows.items() if i == impl and p == "paper"}
     lo, hi = min(med), max(med)
-    est = {p: rows.get((lo, impl.replace("incremental", "estimator"), p)) for p in ("paper", "default")}
-    extra = (f"; whole `Estimator.update` at {lo} modes: {est['default']:,.1f} µs default preset, "
-             f"{est['paper']:,.1f} µs paper preset" if all(est.values()) else "")
+    est = {(m, p): rows.get((m, impl.replace("incremental", "estimator"), p)) for m in (lo, hi) for p in ("default", "paper")}
+    extra = ("; whole `Estimator.update`, default / paper preset (default calibrated): "
+             f"{est[lo, 'default']:,.1f} / {est[lo, 'paper']:,.1f} µs at {lo} modes, "
+             f"{est[hi, 'default']:,.0f} / {est[hi, 'paper']:,.0f} µs at {hi}" if all(est.values()) else "")
     return [f"matcher time per sample (median), {lo} / {hi} modes",
             f"{med[lo]:,.1f} µs / {med[hi]:,.0f} µs, paper preset, {impl[len('incremental '):].strip('()')} step{extra} "
             "(a sample arrives every 4,348 µs at 230 Hz)",
             "2.91 µs, 7 modes (C++, Apple M3 Pro)",
-            f"`gait-estimator bench --modes 7,700 --json` on {machine(report)}"]
+            f"`python benchmarks/performance.py --run` (`gait-estimator bench --modes 7,70,700`) on {machine(report)}"]
 
 
 def new_wearer_rows(path: Path) -> list[list[str]]:
