@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import time
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -202,3 +202,22 @@ class InProcess:
         for n in self.nodes:
             n.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+def in_process_factory(monkeypatch, domains: range) -> Iterator[Callable[[int], InProcess]]:
+    """For a ``ros`` fixture: ``make(domain_id)`` -> an InProcess harness on that domain (one of
+    the test file's ``domains``), LOCALHOST discovery; every harness is closed after the test."""
+    made: list[InProcess] = []
+
+    def make(domain_id: int) -> InProcess:
+        assert domain_id in domains, f"domain {domain_id} outside this file's {domains}"
+        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
+        monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
+        h = InProcess(domain_id)
+        made.append(h)
+        return h
+
+    yield make
+    for h in made:
+        h.close()

@@ -16,10 +16,10 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from ros_helpers import (
     REPO,
-    InProcess,
     as_node_sees,
     assert_same_trace,
     check_against_offline,
+    in_process_factory,
     load_multispeed,
     lockstep,
     offline,
@@ -43,20 +43,7 @@ PERIOD_NS = round(1e9 / 230.0)
 @pytest.fixture
 def ros(monkeypatch):
     """Factory: ``ros(domain_id)`` -> an InProcess harness, closed after the test."""
-    made: list[InProcess] = []
-
-    def make(domain_id: int) -> InProcess:
-        assert 11 <= domain_id <= 29
-        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
-        monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
-        h = InProcess(domain_id)
-        made.append(h)
-        return h
-
-    yield make
-    for h in made:
-        h.close()
+    yield from in_process_factory(monkeypatch, range(11, 30))
 
 
 def test_joint_state_rad_at_230hz_equals_offline_process(ros, multispeed_csv: Path, able_bodied) -> None:

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 from imu_synth import gait_angles, random_mounts, synthesize
-from ros_helpers import InProcess, answered_indices, assert_same_trace, offline, wait_all_answered
+from ros_helpers import answered_indices, assert_same_trace, in_process_factory, offline, wait_all_answered
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
@@ -30,20 +30,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    made: list[InProcess] = []
-
-    def make(domain_id: int) -> InProcess:
-        assert 60 <= domain_id <= 69
-        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
-        monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
-        h = InProcess(domain_id)
-        made.append(h)
-        return h
-
-    yield make
-    for h in made:
-        h.close()
+    yield from in_process_factory(monkeypatch, range(60, 70))
 
 
 def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray, frame: str = "") -> Imu:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from ros_helpers import BASE_NS, InProcess
+from ros_helpers import BASE_NS, in_process_factory
 from std_srvs.srv import Trigger
 
 from gait_estimator import load_library
@@ -27,20 +27,7 @@ RATE_HZ = 230.0
 
 @pytest.fixture
 def ros(monkeypatch):
-    made: list[InProcess] = []
-
-    def make(domain_id: int) -> InProcess:
-        assert 70 <= domain_id <= 76
-        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
-        monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
-        h = InProcess(domain_id)
-        made.append(h)
-        return h
-
-    yield make
-    for h in made:
-        h.close()
+    yield from in_process_factory(monkeypatch, range(70, 77))
 
 
 @pytest.fixture(scope="module")
