@@ -70,6 +70,17 @@ def node_command(ros_args: Sequence[str] = (), executable: str | Sequence[str] |
     return cmd + (["--ros-args", *ros_args] if ros_args else [])
 
 
+
+def spin_executor_until(executor: Any, predicate: Callable[[], bool], timeout_s: float, step_s: float = 0.05) -> bool:
+    """Spin ``executor`` until ``predicate()`` is true (True) or ``timeout_s`` seconds pass (False)."""
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return False
+        executor.spin_once(timeout_sec=min(left, step_s))
+    return True
+
 class NodeProcess:
     """estimator_node as a child process; its stdout+stderr go to a temporary file.
 
@@ -361,13 +372,7 @@ class EstimatorClient:
 
     def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Spin until ``predicate()`` is true (returns True) or ``timeout_s`` passes (False)."""
-        deadline = time.monotonic() + timeout_s
-        while not predicate():
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return False
-            self.executor.spin_once(timeout_sec=min(left, 0.05))
-        return True
+        return spin_executor_until(self.executor, predicate, timeout_s)
 
     def spin_for(self, seconds: float) -> None:
         self.spin_until(lambda: False, seconds)

@@ -25,6 +25,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
 
 from ..core.errors import GaitEstimatorError
+from .node_client import spin_executor_until
 from .teach import LOG_PREFIX
 
 DEFAULT_NODE = "/estimator_node"
@@ -81,13 +82,7 @@ class TeachClient:
     # -- calls
 
     def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
-        deadline = time.monotonic() + timeout_s
-        while not predicate():
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return False
-            self.executor.spin_once(timeout_sec=min(left, 0.1))
-        return True
+        return spin_executor_until(self.executor, predicate, timeout_s, step_s=0.1)
 
     def _wait(self, future: Any, what: str, timeout_s: float = 5.0) -> Any:
         if not self.spin_until(future.done, timeout_s):
