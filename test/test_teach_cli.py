@@ -75,7 +75,7 @@ def test_teach_a_running_node_then_save(multispeed_csv: Path, tmp_path: Path, mo
             assert client.mode_count > 0  # estimating with the taught mode, no restart
 
             path = tmp_path / "wearer.yaml"
-            save = _cli("--save", str(path), domain_id=domain)
+            save = _cli("--save", path.name, domain_id=domain, cwd=tmp_path)  # relative: from the CLI's directory
             out, err = save.communicate(timeout=30)
             assert save.returncode == 0, (out, err)
             assert f"wrote {path}" in out

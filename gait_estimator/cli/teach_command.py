@@ -6,6 +6,7 @@ rclpy is imported only when the command runs, so the offline CLI works without R
 from __future__ import annotations
 
 import argparse
+import os
 from typing import Any
 
 from ..analysis.teach import TEACH_STRIDES, check_teach_strides
@@ -52,7 +53,7 @@ def cmd_teach(args: argparse.Namespace) -> int:
             print(("done: " if done else "not taught: ") + text, flush=True)
             code = 0 if done else 1
         if args.save and code == 0:
-            print(client.save(args.save), flush=True)
+            print(client.save(os.path.abspath(os.path.expanduser(args.save))), flush=True)
         return code
 
 
@@ -69,8 +70,8 @@ def add_commands(sub: Any) -> None:
     t.add_argument("--mode", metavar="NAME", help="mode to teach (a new name adds it, an existing one replaces it)")
     t.add_argument("--strides", type=_strides, default=TEACH_STRIDES,
                    help="good strides to average (default %(default)s; at least train's --min-strides, 3)")
-    t.add_argument("--save", metavar="PATH", help="have the node save its library to PATH (.yaml or .npz) "
-                   "(after teaching, when --mode is given too)")
+    t.add_argument("--save", metavar="PATH", help="have the node save its library to PATH (.yaml or .npz; a "
+                   "relative PATH is taken from this directory) (after teaching, when --mode is given too)")
     t.add_argument("--node", default="/estimator_node", help="the estimator node's name (default %(default)s)")
     t.add_argument("--domain-id", type=_domain_id, help="ROS_DOMAIN_ID (default: the environment's)")
     t.add_argument("--timeout", type=positive_float, default=5.0,
