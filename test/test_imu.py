@@ -16,6 +16,7 @@ from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.errors import RecordingError
 from gait_estimator.core.imu import (
     CalibrationError,
+    FusionParams,
     ImuCalibration,
     SegmentMount,
     fuse_raw,
@@ -23,7 +24,7 @@ from gait_estimator.core.imu import (
     up_from_quaternion,
     ups_from_quaternions,
 )
-from gait_estimator.core.imu_learn import check_configured, learn_calibration
+from gait_estimator.core.imu_learn import ImuLearnParams, check_configured, learn_calibration
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
@@ -33,6 +34,7 @@ from gait_estimator.io.imu_stream import (
     ImuCalibrator,
     ImuPairer,
     SensorInput,
+    auto_tolerance_s,
     load_calibration,
     save_calibration,
 )
@@ -120,6 +122,24 @@ def test_raw_input_within_one_degree_after_ten_seconds(angles):
         got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
         late = s.time_s >= 10.0
         assert (rms((got - s.angles_deg)[late]) < 1.0).all(), rms((got - s.angles_deg)[late])
+
+
+def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):
+    """The thresholds are passed in (ImuLearnParams, FusionParams), not read from module globals."""
+    rng = np.random.default_rng(5)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    assert learn_calibration(s.time_s, ups, params=ImuLearnParams())[2] == ""
+    cal, _, missing = learn_calibration(s.time_s, ups, params=ImuLearnParams(min_swing_deg=500.0))
+    assert cal is None and "swings only" in missing
+    cal, _, missing = learn_calibration(s.time_s, ups, params=ImuLearnParams(min_sign_margin_deg=1e4))
+    assert cal is None and "knee rule margin" in missing and "< 10000 deg" in missing
+    pytest.importorskip("imufusion")
+    k = slice(0, 1000)
+    base = fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k])
+    assert np.array_equal(base, fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k], params=FusionParams()))
+    other = fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k], params=FusionParams(gain=0.05, still_gain=0.05))
+    assert not np.array_equal(base, other)
 
 
 def test_learning_says_what_is_missing(angles):
@@ -222,6 +242,38 @@ def test_pairer_waits_for_a_silent_sensor_and_drops_unpaired_messages():
         for c in range(4):
             got += q.push(c, k * period + (2_500_000 if c == 1 else 0), k)
     assert got == [] and max(len(d) for d in q.queues) <= 50
+
+
+def test_pairing_tolerance_is_checked_and_measured():
+    with pytest.raises(ValueError, match="pairing tolerance must be a finite number of seconds >= 0"):
+        ImuPairer(-0.001)
+    with pytest.raises(ValueError, match="pairing tolerance"):
+        ImuPairer(math.nan)
+    period = 10_000_000
+    stamps = [np.arange(100) * period + c * 3_000_000 for c in range(4)]
+    assert auto_tolerance_s(stamps) == pytest.approx(0.9 * 0.010)
+    with pytest.raises(ValueError, match="message period"):
+        auto_tolerance_s([[5], [], [1, 1], [2]])
+
+
+def test_unsynchronised_100_hz_sensors_pair_every_sample(tmp_path):
+    """Four sensors at 100 Hz, each with its own phase and stamp jitter: the measured tolerance
+    pairs (nearly) every sample; the node's fixed 4 ms pairs none."""
+    rate = 100.0
+    ang = gait_angles(rate, walk_s=10.0)
+    rng = np.random.default_rng(31)
+    s = synthesize(ang, rate, random_mounts(rng), rng)
+    phases = np.array([0.0, 2.6e6, 5.1e6, 7.7e6])[rng.permutation(4)]  # the four phases spread over a period
+    jitter = rng.integers(-300_000, 300_000, (4, len(s.time_s)))
+    stamps = BASE_NS + np.round(s.time_s * 1e9).astype(np.int64)[None, :] + phases.astype(np.int64)[:, None] + jitter
+    bag = write_imu_bag(tmp_path / "unsync", stamps, np.radians(s.gyro_dps), s.acc_g * G, s.quat_xyzw)
+    rec = read_imu_bag(bag)
+    assert len(rec) >= len(s.time_s) - 2, (len(rec), rec.skipped)
+    assert (rms(rec.angles_deg - s.angles_deg[-len(rec):]) < 0.5).all()
+    with pytest.raises(RecordingError, match=r"fewer than 2 samples with all four IMUs within 0.004 s"):
+        read_imu_bag(bag, imu_tolerance_s=0.004)
+    with pytest.raises(RecordingError, match="pairing tolerance must be a finite number of seconds >= 0"):
+        read_imu_bag(bag, imu_tolerance_s=-1.0)
 
 
 @pytest.fixture(scope="module")
