@@ -12,6 +12,7 @@ import pytest
 from imu_synth import gait_angles, random_mounts, synthesize
 from scipy.spatial.transform import Rotation
 
+from gait_estimator.analysis.evaluate import read_predictions_csv
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.errors import RecordingError
 from gait_estimator.core.imu import (
@@ -320,6 +321,54 @@ def test_convert_imu_bag_to_csv_and_process_it(synthetic_bags, tmp_path):
     r = subprocess.run([sys.executable, "-m", "gait_estimator.cli", "process", str(d / "orientation")],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
+
+
+DRIVER_TOPICS = ["/thigh_r/imu/data", "/thigh_l/imu/data", "/shank_r/imu/data", "/shank_l/imu/data"]
+
+
+def test_imu_bag_with_driver_topic_names_is_read_with_imu_topics(synthetic_bags, tmp_path):
+    s, _ = synthetic_bags
+    stamps = BASE_NS + np.round(s.time_s * 1e9).astype(np.int64)
+    bag = write_imu_bag(tmp_path / "drivers", stamps, np.radians(s.gyro_dps), s.acc_g * G, s.quat_xyzw,
+                        topics=DRIVER_TOPICS)
+    cli = [sys.executable, "-m", "gait_estimator.cli"]
+    out = tmp_path / "rec.csv"
+
+    def run(*extra: str) -> subprocess.CompletedProcess:
+        return subprocess.run([*cli, "convert", str(bag), "--out", str(out), *extra],
+                              capture_output=True, text=True, timeout=120)
+
+    r = run()
+    assert r.returncode == 2 and "--imu-topics RT,LT,RS,LS" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = run("--imu-topics", ",".join(DRIVER_TOPICS[:3]))
+    assert r.returncode == 2 and "needs 4 IMU topics" in r.stderr and "got 3" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = run("--imu-topics", ",".join([*DRIVER_TOPICS[:3], "/shank_x/imu/data"]))
+    assert r.returncode == 2 and "no sensor_msgs/msg/Imu topic /shank_x/imu/data" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = run("--imu-topics", ",".join(DRIVER_TOPICS))
+    assert r.returncode == 0, r.stderr
+    assert (rms(read_project_csv(out).angles_deg - s.angles_deg) < 0.5).all()
+    # the same option (and the tolerance) reach process through its reader options
+    r = subprocess.run([*cli, "process", str(bag), "--imu-topics", ",".join(DRIVER_TOPICS), "--imu-tolerance-s", "0.002",
+                        "--out", str(tmp_path / "pred.csv")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert len(read_predictions_csv(tmp_path / "pred.csv").time_s) == len(s.time_s)
+
+
+@pytest.mark.parametrize("command", [
+    ["convert", "B", "--out", "o.csv"], ["process", "B"], ["train", "B", "--out", "l.yaml"],
+    ["evaluate", "--predictions", "p.csv", "--truth", "B", "--out-dir", "d"], ["resample", "B", "--out", "o.csv"],
+    ["label-strides", "B", "--out", "o.csv"], ["demo", "B"],
+])
+def test_every_command_that_reads_recordings_takes_the_imu_options(command):
+    from gait_estimator.cli.app import build_parser
+    from gait_estimator.cli.args import imu_reader_options
+
+    args = build_parser().parse_args([*command, "--imu-topics", "/a, /b,/c,/d", "--imu-calibration", "c.yaml",
+                                      "--imu-tolerance-s", "0.01"])
+    assert imu_reader_options(args) == {"imu_topics": ["/a", "/b", "/c", "/d"], "imu_calibration": "c.yaml",
+                                        "imu_tolerance_s": 0.01}
 
 
 def test_a_bag_without_the_four_imus_says_which_topics_it_has(synthetic_bags, tmp_path):

@@ -142,24 +142,7 @@ def read_imu_bag(
     except CalibrationError as exc:
         raise RecordingError(str(exc)) from None
     standing_deg = list(imu_standing_deg or [0.0] * N_CHANNELS)
-    with open_bag(p, "imu") as reader:
-        topics = bag_topics(reader)
-        names = ["/" + t.lstrip("/") for t in imu_topics] if imu_topics else imu_topics_of(topics)
-        if names is not None and len(names) != N_CHANNELS:
-            raise RecordingError(f"{p}: --imu-topics needs {N_CHANNELS} topics ({', '.join(CHANNELS)}), got {len(names)}")
-        if names is None or any(topics.get(t, ("",))[0] != IMU for t in names):
-            want = ", ".join(names or ["/" + t for t in DEFAULT_IMU_TOPICS])
-            raise RecordingError(f"{p}: needs four {IMU} topics ({want}); {format_topics(topics)}")
-        index = {t: i for i, t in enumerate(names)}
-        conns = [c for c in reader.connections if c.topic in index]
-        deserialize = typestore().deserialize_cdr
-        messages = []
-        undecodable = 0
-        for conn, log_ns, raw in reader.messages(connections=conns):
-            try:
-                messages.append((index[conn.topic], int(log_ns), deserialize(raw, IMU)))
-            except Exception:
-                undecodable += 1
+    names, messages, undecodable = _read_messages(p, imu_topics)
     stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for s, _, m in messages[:800] if s == 0]
     rate = 200.0
     if len(stamps) > 8:
@@ -201,6 +184,39 @@ def read_imu_bag(
         calibration=cal,
         calibration_note=note,
     )
+
+
+def _topic_names(p: Path, topics: dict[str, tuple[str, int]], imu_topics: list[str] | None) -> list[str]:
+    """The four IMU topics to read (module docstring); RecordingError (one line) if the bag lacks them."""
+    names = ["/" + t.lstrip("/") for t in imu_topics] if imu_topics else imu_topics_of(topics)
+    if names is not None and len(names) != N_CHANNELS:
+        raise RecordingError(f"{p}: needs {N_CHANNELS} IMU topics ({', '.join(CHANNELS)}), got {len(names)}: "
+                             f"{', '.join(names)}")
+    if names is not None and imu_topics and any(topics.get(t, ("",))[0] != IMU for t in names):
+        bad = ", ".join(t for t in names if topics.get(t, ("",))[0] != IMU)
+        raise RecordingError(f"{p}: no {IMU} topic {bad} in the bag; {format_topics(topics)}")
+    if names is None or any(topics.get(t, ("",))[0] != IMU for t in names):
+        want = ", ".join(names or ["/" + t for t in DEFAULT_IMU_TOPICS])
+        raise RecordingError(f"{p}: needs four {IMU} topics ({want}; others: --imu-topics RT,LT,RS,LS); "
+                             f"{format_topics(topics)}")
+    return names
+
+
+def _read_messages(p: Path, imu_topics: list[str] | None) -> tuple[list[str], list[tuple[int, int, Any]], int]:
+    """(topic names, [(sensor, log_ns, message)] in log order, messages that failed to decode)."""
+    with open_bag(p, "imu") as reader:
+        names = _topic_names(p, bag_topics(reader), imu_topics)
+        index = {t: i for i, t in enumerate(names)}
+        conns = [c for c in reader.connections if c.topic in index]
+        deserialize = typestore().deserialize_cdr
+        messages = []
+        undecodable = 0
+        for conn, log_ns, raw in reader.messages(connections=conns):
+            try:
+                messages.append((index[conn.topic], int(log_ns), deserialize(raw, IMU)))
+            except Exception:
+                undecodable += 1
+    return names, messages, undecodable
 
 
 def _measured_tolerance(messages: list[tuple[int, int, Any]]) -> float:
