@@ -371,6 +371,16 @@ def test_every_command_that_reads_recordings_takes_the_imu_options(command):
                                         "imu_tolerance_s": 0.01}
 
 
+def test_imu_options_on_a_csv_are_reported(capsys):
+    from pathlib import Path
+
+    from gait_estimator.cli.app import main
+
+    csv = Path(__file__).resolve().parents[1] / "data/swge/recordings/LG_2_Ramp_AB_Sample.csv"
+    assert main(["process", str(csv), "--stop", "500", "--imu-topics", "/a,/b,/c,/d", "--imu-tolerance-s", "0.01"]) == 0
+    assert f"note: --imu-topics, --imu-tolerance-s apply to bags only; ignored for {csv}" in capsys.readouterr().out
+
+
 def test_a_bag_without_the_four_imus_says_which_topics_it_has(synthetic_bags, tmp_path):
     s, _ = synthetic_bags
     stamps = BASE_NS + np.round(s.time_s[:100] * 1e9).astype(np.int64)

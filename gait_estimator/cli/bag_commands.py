@@ -100,7 +100,8 @@ def finish_process(args: argparse.Namespace, rec: Recording, pred: Predictions) 
     if isinstance(rec, BagRecording):
         lines += [f"note: {n}" for n in rec.notes]
     else:
-        flags = {"topic": "--topic", "input_units": "--input-units", "joint_names": "--joint-names"}
+        flags = {"topic": "--topic", "input_units": "--input-units", "joint_names": "--joint-names",
+                 "imu_topics": "--imu-topics", "imu_calibration": "--imu-calibration", "imu_tolerance_s": "--imu-tolerance-s"}
         given = [flags[k] for k in getattr(args, "reader_options", None) or {} if k in flags]
         if given:
             lines.append(f"note: {', '.join(given)} apply to bags only; ignored for {args.recording}")
