@@ -1,7 +1,8 @@
 """IMU input (issue 27, docs/imu.md): real IMUs vs motion capture, the estimator fed with either,
 synthetic checks and the per-sample conversion cost. One command:
 
-    python benchmarks/imu.py            # writes benchmarks/results/imu/imu.{json,md}
+    python benchmarks/imu.py                # writes benchmarks/results/imu/imu.json and tables.md
+    python benchmarks/imu.py --tables-only  # only tables.md, from the saved imu.json (make docs)
 
 * camargo_ab06 (data/camargo_ab06, 5 level-walking trials, raw right thigh/shank IMUs at 200 Hz):
   each trial is written as a rosbag2 bag of four sensor_msgs/Imu topics and read back with
@@ -257,10 +258,14 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)
-    args = ap.parse_args()
+    ap.add_argument("--tables-only", action="store_true", help="only rewrite tables.md from the saved imu.json")
+    args = ap.parse_args(argv)
+    if args.tables_only:
+        print(write_tables(args.out))
+        return 0
     started = time.time()
     with tempfile.TemporaryDirectory() as tmp:
         trials = [trial_imu(p, Path(tmp)) for p in sorted(DATA.glob("levelground_*.csv"))]
@@ -280,13 +285,51 @@ def main() -> int:
     result["seconds"] = round(time.time() - started, 1)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "imu.json").write_text(json.dumps(result, indent=1) + "\n")
-    md = markdown(result)
-    (args.out / "imu.md").write_text(md)
-    print(md)
+    print(write_tables(args.out))
     return 0
 
 
-def markdown(r: dict) -> str:
+def write_tables(out: Path) -> str:
+    """tables.md from imu.json: per-trial figures, then the sections docs/imu.md copies
+    (``imu#Angles``, ``imu#Estimator``, ``imu#Cost``); returns it."""
+    r = json.loads((out / "imu.json").read_text(encoding="utf-8"))
+    text = "\n".join(["### Per trial", "", per_trial(r), "### Angles", "", angles_table(r), "",
+                      "### Estimator", "", estimator_table(r), "", "### Cost", "", cost_table(r)])
+    (out / "tables.md").write_text(text + "\n", encoding="utf-8")
+    return text
+
+
+def angles_table(r: dict) -> str:
+    """Mean of the trials' RMS IMU - mocap (deg), per input."""
+    rows = ["| input | right thigh | right shank | shank without the data set's IMU faults |", "|---|---|---|---|"]
+    for kind, name in (("raw", "raw (the node's fusion)"),
+                       ("orientation", "orientation from imufusion, defaults (as a Fusion-based driver would publish it)")):
+        m = r[f"mean_rms_{kind}"]
+        rows.append(f"| {name} | {m['thigh']:.1f}° | {m['shank']:.1f}° | {m['shank_clean']:.1f}° |")
+    return "\n".join(rows)
+
+
+def estimator_table(r: dict) -> str:
+    """Accuracy and mean phase error (% of a stride) per kernel source and input."""
+    every, sound = r["estimator"], r["estimator_without_faults"]
+    n_all, n_sound = next(iter(every.values()))["samples"], next(iter(sound.values()))["samples"]
+    rows = [f"| kernels from → fed with | all samples ({n_all}): accuracy, phase error | without the shank IMU "
+            f"faults ({n_sound}) |", "|---|---|---|"]
+    names = {"mocap": "mocap", "imu_raw": "IMU (raw)"}
+    for key in every:
+        a, b = key.split("->")
+        cells = [f"{100 * v[key]['accuracy']:.1f} %, {100 * v[key]['phase_error_mean']:.2f}" for v in (every, sound)]
+        rows.append(f"| {names[a]} → {names[b]} | {cells[0]} | {cells[1]} |")
+    return "\n".join(rows)
+
+
+def cost_table(r: dict) -> str:
+    rows = ["| input | median µs | p99 µs |", "|---|---|---|"]
+    rows += [f"| {k} | {v['median_us']:.1f} | {v['p99_us']:.1f} |" for k, v in r["cost"].items()]
+    return "\n".join(rows)
+
+
+def per_trial(r: dict) -> str:
     lines = [f"Measured {r['date']} on {r['machine']} with `{r['command']}` ({r['seconds']} s).", "",
              "| camargo_ab06 trial | input | right thigh RMS deg (r) | right shank RMS deg (r) | shank without the data "
              "set's IMU faults (share of walking kept) |", "|---|---|---|---|---|"]
@@ -305,11 +348,8 @@ def markdown(r: dict) -> str:
     s = r["synthetic"]
     lines += ["", f"Synthetic, {s['mountings']} random mountings: orientation input worst RMS "
               f"{s['orientation_worst_rms_deg']:.2g} deg; raw input (noise, 2 deg/s gyro bias) worst RMS after 10 s "
-              f"{s['raw_worst_rms_after_10s_deg']:.2f} deg.", "",
-              "| conversion per four-sensor sample | median us | p99 us |", "|---|---|---|"]
-    for k, v in r["cost"].items():
-        lines.append(f"| {k} | {v['median_us']:.1f} | {v['p99_us']:.1f} |")
-    return "\n".join(lines) + "\n"
+              f"{s['raw_worst_rms_after_10s_deg']:.2f} deg.", ""]
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

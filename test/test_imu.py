@@ -12,10 +12,12 @@ import pytest
 from imu_synth import gait_angles, random_mounts, synthesize
 from scipy.spatial.transform import Rotation
 
+from gait_estimator.analysis.evaluate import read_predictions_csv
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.errors import RecordingError
 from gait_estimator.core.imu import (
     CalibrationError,
+    FusionParams,
     ImuCalibration,
     SegmentMount,
     fuse_raw,
@@ -23,7 +25,7 @@ from gait_estimator.core.imu import (
     up_from_quaternion,
     ups_from_quaternions,
 )
-from gait_estimator.core.imu_learn import check_configured, learn_calibration
+from gait_estimator.core.imu_learn import ImuLearnParams, check_configured, learn_calibration
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
@@ -33,6 +35,7 @@ from gait_estimator.io.imu_stream import (
     ImuCalibrator,
     ImuPairer,
     SensorInput,
+    auto_tolerance_s,
     load_calibration,
     save_calibration,
 )
@@ -120,6 +123,24 @@ def test_raw_input_within_one_degree_after_ten_seconds(angles):
         got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
         late = s.time_s >= 10.0
         assert (rms((got - s.angles_deg)[late]) < 1.0).all(), rms((got - s.angles_deg)[late])
+
+
+def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):
+    """The thresholds are passed in (ImuLearnParams, FusionParams), not read from module globals."""
+    rng = np.random.default_rng(5)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    assert learn_calibration(s.time_s, ups, params=ImuLearnParams())[2] == ""
+    cal, _, missing = learn_calibration(s.time_s, ups, params=ImuLearnParams(min_swing_deg=500.0))
+    assert cal is None and "swings only" in missing
+    cal, _, missing = learn_calibration(s.time_s, ups, params=ImuLearnParams(min_sign_margin_deg=1e4))
+    assert cal is None and "knee rule margin" in missing and "< 10000 deg" in missing
+    pytest.importorskip("imufusion")
+    k = slice(0, 1000)
+    base = fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k])
+    assert np.array_equal(base, fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k], params=FusionParams()))
+    other = fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k], params=FusionParams(gain=0.05, still_gain=0.05))
+    assert not np.array_equal(base, other)
 
 
 def test_learning_says_what_is_missing(angles):
@@ -224,6 +245,38 @@ def test_pairer_waits_for_a_silent_sensor_and_drops_unpaired_messages():
     assert got == [] and max(len(d) for d in q.queues) <= 50
 
 
+def test_pairing_tolerance_is_checked_and_measured():
+    with pytest.raises(ValueError, match="pairing tolerance must be a finite number of seconds >= 0"):
+        ImuPairer(-0.001)
+    with pytest.raises(ValueError, match="pairing tolerance"):
+        ImuPairer(math.nan)
+    period = 10_000_000
+    stamps = [np.arange(100) * period + c * 3_000_000 for c in range(4)]
+    assert auto_tolerance_s(stamps) == pytest.approx(0.9 * 0.010)
+    with pytest.raises(ValueError, match="message period"):
+        auto_tolerance_s([[5], [], [1, 1], [2]])
+
+
+def test_unsynchronised_100_hz_sensors_pair_every_sample(tmp_path):
+    """Four sensors at 100 Hz, each with its own phase and stamp jitter: the measured tolerance
+    pairs (nearly) every sample; the node's fixed 4 ms pairs none."""
+    rate = 100.0
+    ang = gait_angles(rate, walk_s=10.0)
+    rng = np.random.default_rng(31)
+    s = synthesize(ang, rate, random_mounts(rng), rng)
+    phases = np.array([0.0, 2.6e6, 5.1e6, 7.7e6])[rng.permutation(4)]  # the four phases spread over a period
+    jitter = rng.integers(-300_000, 300_000, (4, len(s.time_s)))
+    stamps = BASE_NS + np.round(s.time_s * 1e9).astype(np.int64)[None, :] + phases.astype(np.int64)[:, None] + jitter
+    bag = write_imu_bag(tmp_path / "unsync", stamps, np.radians(s.gyro_dps), s.acc_g * G, s.quat_xyzw)
+    rec = read_imu_bag(bag)
+    assert len(rec) >= len(s.time_s) - 2, (len(rec), rec.skipped)
+    assert (rms(rec.angles_deg - s.angles_deg[-len(rec):]) < 0.5).all()
+    with pytest.raises(RecordingError, match=r"fewer than 2 samples with all four IMUs within 0.004 s"):
+        read_imu_bag(bag, imu_tolerance_s=0.004)
+    with pytest.raises(RecordingError, match="pairing tolerance must be a finite number of seconds >= 0"):
+        read_imu_bag(bag, imu_tolerance_s=-1.0)
+
+
 @pytest.fixture(scope="module")
 def synthetic_bags(tmp_path_factory, angles):
     rng = np.random.default_rng(21)
@@ -268,6 +321,64 @@ def test_convert_imu_bag_to_csv_and_process_it(synthetic_bags, tmp_path):
     r = subprocess.run([sys.executable, "-m", "gait_estimator.cli", "process", str(d / "orientation")],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
+
+
+DRIVER_TOPICS = ["/thigh_r/imu/data", "/thigh_l/imu/data", "/shank_r/imu/data", "/shank_l/imu/data"]
+
+
+def test_imu_bag_with_driver_topic_names_is_read_with_imu_topics(synthetic_bags, tmp_path):
+    s, _ = synthetic_bags
+    stamps = BASE_NS + np.round(s.time_s * 1e9).astype(np.int64)
+    bag = write_imu_bag(tmp_path / "drivers", stamps, np.radians(s.gyro_dps), s.acc_g * G, s.quat_xyzw,
+                        topics=DRIVER_TOPICS)
+    cli = [sys.executable, "-m", "gait_estimator.cli"]
+    out = tmp_path / "rec.csv"
+
+    def run(*extra: str) -> subprocess.CompletedProcess:
+        return subprocess.run([*cli, "convert", str(bag), "--out", str(out), *extra],
+                              capture_output=True, text=True, timeout=120)
+
+    r = run()
+    assert r.returncode == 2 and "--imu-topics RT,LT,RS,LS" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = run("--imu-topics", ",".join(DRIVER_TOPICS[:3]))
+    assert r.returncode == 2 and "needs 4 IMU topics" in r.stderr and "got 3" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = run("--imu-topics", ",".join([*DRIVER_TOPICS[:3], "/shank_x/imu/data"]))
+    assert r.returncode == 2 and "no sensor_msgs/msg/Imu topic /shank_x/imu/data" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = run("--imu-topics", ",".join(DRIVER_TOPICS))
+    assert r.returncode == 0, r.stderr
+    assert (rms(read_project_csv(out).angles_deg - s.angles_deg) < 0.5).all()
+    # the same option (and the tolerance) reach process through its reader options
+    r = subprocess.run([*cli, "process", str(bag), "--imu-topics", ",".join(DRIVER_TOPICS), "--imu-tolerance-s", "0.002",
+                        "--out", str(tmp_path / "pred.csv")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert len(read_predictions_csv(tmp_path / "pred.csv").time_s) == len(s.time_s)
+
+
+@pytest.mark.parametrize("command", [
+    ["convert", "B", "--out", "o.csv"], ["process", "B"], ["train", "B", "--out", "l.yaml"],
+    ["evaluate", "--predictions", "p.csv", "--truth", "B", "--out-dir", "d"], ["resample", "B", "--out", "o.csv"],
+    ["label-strides", "B", "--out", "o.csv"], ["demo", "B"],
+])
+def test_every_command_that_reads_recordings_takes_the_imu_options(command):
+    from gait_estimator.cli.app import build_parser
+    from gait_estimator.cli.args import imu_reader_options
+
+    args = build_parser().parse_args([*command, "--imu-topics", "/a, /b,/c,/d", "--imu-calibration", "c.yaml",
+                                      "--imu-tolerance-s", "0.01"])
+    assert imu_reader_options(args) == {"imu_topics": ["/a", "/b", "/c", "/d"], "imu_calibration": "c.yaml",
+                                        "imu_tolerance_s": 0.01}
+
+
+def test_imu_options_on_a_csv_are_reported(capsys):
+    from pathlib import Path
+
+    from gait_estimator.cli.app import main
+
+    csv = Path(__file__).resolve().parents[1] / "data/swge/recordings/LG_2_Ramp_AB_Sample.csv"
+    assert main(["process", str(csv), "--stop", "500", "--imu-topics", "/a,/b,/c,/d", "--imu-tolerance-s", "0.01"]) == 0
+    assert f"note: --imu-topics, --imu-tolerance-s apply to bags only; ignored for {csv}" in capsys.readouterr().out
 
 
 def test_a_bag_without_the_four_imus_says_which_topics_it_has(synthetic_bags, tmp_path):

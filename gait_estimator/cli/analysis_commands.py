@@ -25,7 +25,7 @@ from ..analysis.strides import (
 from ..core.errors import GaitEstimatorError
 from ..io.readers import read_recording
 from ..io.recording import DEFAULT_REFERENCE_RATE_HZ, Recording, write_project_csv
-from .args import positive_float
+from .args import add_imu_reading_options, imu_reader_options, positive_float
 
 
 def _window(text: str) -> tuple[float, float]:
@@ -71,7 +71,7 @@ def _detection(args: argparse.Namespace) -> DetectionOptions:
 def _read_labelled(path: str, args: argparse.Namespace, rate_hz: float | None = None) -> Recording:
     from ..analysis.labels import read_label_ranges, with_mode, with_ranges
 
-    rec = read_recording(path, rate_hz=rate_hz if rate_hz is not None else args.time_rate)
+    rec = read_recording(path, rate_hz=rate_hz if rate_hz is not None else args.time_rate, **imu_reader_options(args))
     if args.mode:
         rec = with_mode(rec, args.mode)
     elif args.labels:
@@ -185,7 +185,7 @@ def cmd_label_strides(args: argparse.Namespace) -> int:
         durations = {n: lib.mode(n).stride_duration_s for n in names}
     except KeyError as exc:
         raise GaitEstimatorError(str(exc.args[0])) from None
-    rec = read_recording(args.recording, rate_hz=args.time_rate or lib.sample_rate_hz)
+    rec = read_recording(args.recording, rate_hz=args.time_rate or lib.sample_rate_hz, **imu_reader_options(args))
     det = _detection(args)
     hs = heel_strikes(rec, args.heel_strikes, None, det)
     bounds, _ = stride_bounds(hs.times_s, det)
@@ -240,6 +240,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="never reject strides within this fraction of the median duration (default %(default)s)")
     _detection_args(t)
     _time_rate_arg(t)
+    add_imu_reading_options(t)
     t.set_defaults(func=cmd_train)
 
     e = sub.add_parser("evaluate", help="accuracy, confusion, phase error and figures of predictions vs truth")
@@ -255,6 +256,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--title", help="figure title (default: the predictions file name)")
     _detection_args(e)
     _time_rate_arg(e)
+    add_imu_reading_options(e)
     e.set_defaults(func=cmd_evaluate)
 
     r = sub.add_parser("resample", help="resample a recording to a uniform rate (with labels and heel strikes)")
@@ -266,6 +268,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help="add a heel_strike column found this way (default %(default)s)")
     _detection_args(r)
     _time_rate_arg(r)
+    add_imu_reading_options(r)
     r.set_defaults(func=cmd_resample)
 
     ls = sub.add_parser("label-strides", help="label steady strides by the nearest kernel stride duration (cadence)")
@@ -280,4 +283,5 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     ls.add_argument("--out", "-o", required=True, help="label range CSV to write")
     _detection_args(ls)
     _time_rate_arg(ls, None)
+    add_imu_reading_options(ls)
     ls.set_defaults(func=cmd_label_strides)

@@ -1,4 +1,5 @@
-"""argparse value types and the output-path check shared by the CLI modules (bad values: one-line usage errors)."""
+"""argparse value types, the output-path check and the IMU reading options shared by the CLI
+modules (bad values: one-line usage errors)."""
 
 from __future__ import annotations
 
@@ -74,3 +75,36 @@ def int_list(text: str) -> list[int]:
     if not values or any(v <= 0 for v in values):
         raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
     return values
+
+
+IMU_READING_OPTIONS = ("imu_topics", "imu_calibration", "imu_tolerance_s")
+"""``read_recording`` keywords set by ``add_imu_reading_options`` (read_imu_bag's arguments)."""
+
+
+def _topic_list(text: str) -> list[str]:
+    """Comma-separated topic names; their number is checked by the reader (one line)."""
+    return [t.strip() for t in text.split(",")]
+
+
+def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store") -> None:
+    """The options of a recording that is a bag of four sensor_msgs/Imu topics (docs/imu.md), on
+    every command that reads recordings; ``imu_reader_options`` collects them."""
+    p.add_argument(
+        "--imu-topics", dest="imu_topics", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        help="bag of sensor_msgs/Imu topics: those of right_thigh,left_thigh,right_shank,left_shank (default "
+        "/imu/<channel>, or the Imu topics named after the channels)",
+    )
+    p.add_argument(
+        "--imu-calibration", dest="imu_calibration", action=action, metavar="YAML",
+        help="bag of sensor_msgs/Imu topics: the IMU mounting to use (default: learnt from the bag; docs/imu.md)",
+    )
+    p.add_argument(
+        "--imu-tolerance-s", dest="imu_tolerance_s", type=seconds, action=action, metavar="SECONDS",
+        help="bag of sensor_msgs/Imu topics: largest stamp spread of the four messages of one sample (default: "
+        "0.9 of the message period, for sensors not sampled together)",
+    )
+
+
+def imu_reader_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The IMU reading options given on the command line, as ``read_recording`` keywords."""
+    return {k: getattr(args, k) for k in IMU_READING_OPTIONS if getattr(args, k, None) is not None}

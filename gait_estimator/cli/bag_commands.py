@@ -32,7 +32,7 @@ from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
 from ..io.resources import DEFAULT_LIBRARY
 from ..io.stream import UNITS
-from .args import positive_float, seconds
+from .args import add_imu_reading_options, imu_reader_options, positive_float, seconds
 
 STORAGES = ("mcap", "sqlite3")
 
@@ -67,10 +67,7 @@ def _bag_reading_options(p: Any, action: type[argparse.Action] | str = "store", 
         help=f"a gap between sample times longer than this restarts the window, as in the node (default "
         f"{DEFAULT_MAX_GAP_S:g}; 0 disables; any recording)",
     )
-    p.add_argument(
-        "--imu-calibration", dest="imu_calibration", action=action, metavar="YAML",
-        help="bag of four sensor_msgs/Imu topics: the IMU mounting to use (default: learnt from the bag; docs/imu.md)",
-    )
+    add_imu_reading_options(p, action)
 
 
 def add_process_options(proc: argparse.ArgumentParser) -> None:
@@ -103,7 +100,8 @@ def finish_process(args: argparse.Namespace, rec: Recording, pred: Predictions) 
     if isinstance(rec, BagRecording):
         lines += [f"note: {n}" for n in rec.notes]
     else:
-        flags = {"topic": "--topic", "input_units": "--input-units", "joint_names": "--joint-names"}
+        flags = {"topic": "--topic", "input_units": "--input-units", "joint_names": "--joint-names",
+                 "imu_topics": "--imu-topics", "imu_calibration": "--imu-calibration", "imu_tolerance_s": "--imu-tolerance-s"}
         given = [flags[k] for k in getattr(args, "reader_options", None) or {} if k in flags]
         if given:
             lines.append(f"note: {', '.join(given)} apply to bags only; ignored for {args.recording}")
@@ -146,7 +144,7 @@ def _read_source(args: argparse.Namespace) -> Recording:
             p, topic=args.topic, joint_names=args.joint_names, input_units=args.units,
             max_gap_s=DEFAULT_MAX_GAP_S if args.max_gap_s is None else args.max_gap_s,
         )
-    return read_recording(p, rate_hz=args.sample_rate, imu_calibration=args.imu_calibration)
+    return read_recording(p, rate_hz=args.sample_rate, **imu_reader_options(args))
 
 
 def _print_reading_notes(rec: Recording) -> None:

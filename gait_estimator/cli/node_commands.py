@@ -19,7 +19,7 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import positive_float
+from .args import add_imu_reading_options, imu_reader_options, positive_float
 
 DEMO_DOMAIN_ID = 77
 
@@ -72,7 +72,7 @@ def _demo_recording(args: argparse.Namespace) -> tuple[Path, Any, Any]:
     if not path.exists():
         raise GaitEstimatorError(f"{path}: recording not found")
     lib = load_library(args.kernels)
-    rec = read_recording(path, rate_hz=lib.sample_rate_hz).slice(args.start, args.stop)
+    rec = read_recording(path, rate_hz=lib.sample_rate_hz, **imu_reader_options(args)).slice(args.start, args.stop)
     if len(rec) == 0:
         raise GaitEstimatorError(f"{path}: no samples in the selected range")
     return path, lib, rec
@@ -211,6 +211,7 @@ def add_commands(sub: Any) -> None:
     d.add_argument("--speed", type=positive_float, default=1.0, help="playback speed factor (default 1 = real time)")
     d.add_argument("--start", type=int, help="first sample index (inclusive)")
     d.add_argument("--stop", type=int, help="last sample index (exclusive)")
+    add_imu_reading_options(d)
     d.add_argument("--echo-every", type=int, default=23, metavar="N",
                    help="print every Nth mode/phase message, and every mode change (default 23, ~10 lines/s; 1 = all)")
     d.add_argument("--reliable", action="store_true", help="publish the input reliably (default best effort)")

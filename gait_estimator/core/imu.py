@@ -221,23 +221,34 @@ def _imufusion() -> Any:
     return imufusion
 
 
-FUSION_GAIN = 0.5
-"""imufusion AHRS gain (its default): weight of the accelerometer's tilt correction."""
-FUSION_ACCELERATION_REJECTION_DEG = 0.0
-"""imufusion acceleration rejection (deg; 0 = off). Off: on the camargo walking trials its
-recoveries (jumps back to the accelerometer's tilt) cost more than the accelerations it ignores
-(benchmarks/imu.py)."""
-FUSION_REJECTION_TIMEOUT_S = 1.0
-STILL_GAIN = 5.0
-"""imufusion gain while the sensor is still (the accelerometer then reads gravity alone): the tilt
-settles on it within a fraction of a second instead of keeping the error of the last movement."""
-STILL_RATE_DPS = 10.0
-STILL_ACC_G = 0.05
-STILL_AFTER_S = 0.1
-"""A sensor is still after STILL_AFTER_S with |gyro - bias| < STILL_RATE_DPS and
-||acc| - 1 g| < STILL_ACC_G."""
-_STILL_RATE2 = STILL_RATE_DPS * STILL_RATE_DPS
-_STILL_ACC2 = 2.0 * STILL_ACC_G  # |acc|^2 - 1 ~ 2 (|acc| - 1)
+@dataclass(frozen=True)
+class FusionParams:
+    """Settings of ``RawFusion`` (imufusion's AHRS without magnetometer).
+
+    Attributes:
+        gain: AHRS gain (imufusion's default): weight of the accelerometer's tilt correction.
+        acceleration_rejection_deg: imufusion acceleration rejection (deg; 0 = off). Off because
+            on walking its recoveries (jumps back to the accelerometer's tilt) cost more than the
+            accelerations it ignores (docs/imu.md).
+        rejection_timeout_s: imufusion rejection timeout (s).
+        still_gain: Gain while the sensor is still (the accelerometer then reads gravity alone):
+            the tilt settles on it within a fraction of a second instead of keeping the error of
+            the last movement.
+        still_rate_dps, still_acc_g, still_after_s: A sensor is still after ``still_after_s`` (s)
+            with |gyro - bias| < ``still_rate_dps`` (deg/s) and ||acc| - 1 g| < ``still_acc_g`` (g).
+    """
+
+    gain: float = 0.5
+    acceleration_rejection_deg: float = 0.0
+    rejection_timeout_s: float = 1.0
+    still_gain: float = 5.0
+    still_rate_dps: float = 10.0
+    still_acc_g: float = 0.05
+    still_after_s: float = 0.1
+
+
+DEFAULT_FUSION = FusionParams()
+"""The default fusion settings (a default argument value)."""
 
 
 def _tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
@@ -259,22 +270,27 @@ class RawFusion:
     Args:
         rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given.
         gyro_bias_dps: Subtracted from every gyro sample (deg/s, sensor frame).
+        params: Gains and the stillness test.
     """
 
-    def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)) -> None:
+    def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0),
+                 params: FusionParams = FusionParams()) -> None:
         fusion = _imufusion()
+        self.params = params
         self._ahrs = fusion.Ahrs()
         self._settings = [fusion.AhrsSettings(
             sample_rate=float(rate_hz),
             convention=fusion.CONVENTION_NWU,
             gain=gain,
             gyroscope_range=2000.0,
-            acceleration_rejection=FUSION_ACCELERATION_REJECTION_DEG,
+            acceleration_rejection=params.acceleration_rejection_deg,
             magnetic_rejection=0.0,
-            rejection_timeout=FUSION_REJECTION_TIMEOUT_S,
-        ) for gain in (FUSION_GAIN, STILL_GAIN)]
+            rejection_timeout=params.rejection_timeout_s,
+        ) for gain in (params.gain, params.still_gain)]
         self._ahrs.set_settings(self._settings[0])
-        self._still_needed = max(1, round(STILL_AFTER_S * rate_hz))
+        self._still_needed = max(1, round(params.still_after_s * rate_hz))
+        self._still_rate2 = params.still_rate_dps * params.still_rate_dps
+        self._still_acc2 = 2.0 * params.still_acc_g  # |acc|^2 - 1 ~ 2 (|acc| - 1)
         self._still = 0
         self._period = 1.0 / rate_hz
         self.gyro_bias_dps = gyro_bias_dps
@@ -296,7 +312,8 @@ class RawFusion:
             self._first = False
             self._ahrs.set_quaternion(_tilt_quaternion_wxyz(a))
             self._ahrs.skip_startup()
-        if gx * gx + gy * gy + gz * gz < _STILL_RATE2 and -_STILL_ACC2 < ax * ax + ay * ay + az * az - 1.0 < _STILL_ACC2:
+        rate2, acc2 = self._still_rate2, self._still_acc2
+        if gx * gx + gy * gy + gz * gz < rate2 and -acc2 < ax * ax + ay * ay + az * az - 1.0 < acc2:
             self._still += 1
             if self._still == self._still_needed:
                 self._ahrs.set_settings(self._settings[1]).set_sample_period(self._period)
@@ -310,11 +327,11 @@ class RawFusion:
 
 
 def fuse_raw(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
-             gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)) -> np.ndarray:
+             gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0), params: FusionParams = FusionParams()) -> np.ndarray:
     """``RawFusion`` over a whole stream: (T,), (T, 3), (T, 3) -> up (T, 3)."""
     t = np.asarray(time_s, dtype=np.float64)
     rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 200.0
-    fusion = RawFusion(rate, gyro_bias_dps)
+    fusion = RawFusion(rate, gyro_bias_dps, params)
     out = np.empty((len(t), 3))
     prev = None
     for i in range(len(t)):

@@ -9,7 +9,7 @@
 * **Signs** per leg from the knee: with the right signs the knee (shank - thigh) flexes (negative)
   by 40-65 deg in swing and hardly extends past straight; every other sign choice makes it extend
   by tens of degrees. The choice with the smallest 98th percentile of the knee angle wins and must
-  beat the next by ``MIN_SIGN_MARGIN_DEG``.
+  beat the next by ``ImuLearnParams.min_sign_margin_deg``.
 
 Every function takes whole arrays (a file, or the live node's buffer); ``learn_calibration``
 returns the calibration or what is still missing.
@@ -28,21 +28,47 @@ from .imu import CalibrationError, ImuCalibration, SegmentMount, Vec3
 
 STILL_S = 1.0
 """Length (s) of the still stretch that makes a standing pose."""
-STILL_MAX_TILT_DEG = 3.0
-"""Most any sensor's up direction may move within the still stretch (deg)."""
-STILL_MAX_RATE_DPS = 25.0
-"""Largest gyro magnitude in a still stretch (deg/s; raw input)."""
-STILL_ACC_TOLERANCE = 0.1
-"""Accelerometer magnitude in a still stretch within 1 +- this (g; raw input)."""
 WALK_S = 4.0
 """Time of movement (s) after the standing pose before the sagittal axes are learnt."""
-MIN_SWING_DEG = 20.0
-"""Least angle range (2nd-98th percentile, deg) a segment must sweep for its axis to be learnt."""
-MIN_PLANARITY = 0.8
-"""Share of the rotation that must lie about the principal axis (a sagittal swing)."""
-MIN_SIGN_MARGIN_DEG = 15.0
-"""Margin (deg) by which the knee rule's best sign choice must beat the next."""
-ROTATION_LAG_S = 0.05
+
+
+@dataclass(frozen=True)
+class ImuLearnParams:
+    """Thresholds of mount learning (standing pose, swing axis, knee-rule signs).
+
+    Attributes:
+        still_max_tilt_deg: Most any sensor's up direction may move within a still stretch (deg).
+        still_max_rate_dps: Largest gyro magnitude in a still stretch (deg/s; raw input).
+        still_acc_tolerance: Accelerometer magnitude in a still stretch within 1 +- this (g; raw).
+        min_swing_deg: Least angle range (2nd-98th percentile, deg) a segment must sweep for its
+            axis to be learnt.
+        min_planarity: Share of the rotation that must lie about the principal axis (a sagittal
+            swing).
+        min_sign_margin_deg: Margin (deg) by which the knee rule's best sign choice must beat the next.
+        rotation_lag_s: Lag (s) between the up directions whose cross product gives the rotation
+            axis when there is no gyro.
+        short_still_s: Still stretch (s) taken as the standing pose of a file without one of
+            ``STILL_S`` (offline only: the whole file is known).
+        learn_every_s: How often (s of stream) the live calibrator tries to learn again.
+        max_buffer_s: Longest stream (s) the live calibrator keeps while no standing pose is found.
+    """
+
+    still_max_tilt_deg: float = 3.0
+    still_max_rate_dps: float = 25.0
+    still_acc_tolerance: float = 0.1
+    min_swing_deg: float = 20.0
+    min_planarity: float = 0.8
+    min_sign_margin_deg: float = 15.0
+    rotation_lag_s: float = 0.05
+    short_still_s: float = 0.5
+    learn_every_s: float = 0.5
+    max_buffer_s: float = 120.0
+
+
+DEFAULT_LEARN = ImuLearnParams()
+"""The default learning thresholds (a default argument value)."""
+
+
 LEGS = ((0, 2), (1, 3))
 """(thigh, shank) channel indices of the right and the left leg (CHANNELS order)."""
 
@@ -74,7 +100,7 @@ def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
 
 def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | None = None,
                   acc_g: np.ndarray | None = None, start_s: float | None = None,
-                  still_s: float = STILL_S) -> Standing | None:
+                  still_s: float = STILL_S, params: ImuLearnParams = ImuLearnParams()) -> Standing | None:
     """The first still stretch of ``still_s`` seconds (after ``start_s``), or None.
 
     Args:
@@ -85,6 +111,8 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
             sensor's stillness and up direction come from its accelerometer (the fused direction
             may still be settling), with twice the tilt tolerance (accelerometer noise).
         start_s: Only stretches that start at or after this time.
+        still_s: Length of the stretch (s).
+        params: The stillness thresholds.
     """
     t = np.asarray(time_s, dtype=np.float64)
     if len(t) < 2:
@@ -97,7 +125,7 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
         acc_a = acc_a.copy()
         acc_a[raw] = _moving_mean(acc_a[raw], max(1, round(0.1 / dt)))
     u = _norm_rows(np.where(raw[:, None, None], acc_a if acc_a is not None else ups_a, ups_a))
-    tilt_limit = np.where(raw, 2.0 * STILL_MAX_TILT_DEG, STILL_MAX_TILT_DEG)
+    tilt_limit = np.where(raw, 2.0 * params.still_max_tilt_deg, params.still_max_tilt_deg)
     lag = max(1, round(0.2 / dt))
     ok = np.isfinite(u).all(axis=(0, 2))
     moved = np.zeros(len(t), dtype=bool)
@@ -105,9 +133,9 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
     moved[lag:] = (np.einsum("stk,stk->st", u[:, lag:], u[:, :-lag]) < cos_lim).any(axis=0)
     if gyro_dps is not None:
         with np.errstate(invalid="ignore"):
-            moved |= (np.linalg.norm(gyro_dps, axis=2) > STILL_MAX_RATE_DPS).any(axis=0)
+            moved |= (np.linalg.norm(gyro_dps, axis=2) > params.still_max_rate_dps).any(axis=0)
     if acc_a is not None and raw.any():
-        moved |= (np.abs(np.linalg.norm(acc_a[raw], axis=2) - 1.0) > STILL_ACC_TOLERANCE).any(axis=0)
+        moved |= (np.abs(np.linalg.norm(acc_a[raw], axis=2) - 1.0) > params.still_acc_tolerance).any(axis=0)
     still = ok & ~moved
     if start_s is not None:
         still &= t >= start_s
@@ -131,8 +159,8 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
     return None
 
 
-def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3,
-               gyro_dps: np.ndarray | None = None) -> tuple[Vec3 | None, str]:
+def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3, gyro_dps: np.ndarray | None = None,
+               params: ImuLearnParams = ImuLearnParams()) -> tuple[Vec3 | None, str]:
     """Sagittal axis (sign undecided) of one sensor while walking: the principal axis of its
     rotation perpendicular to ``proximal`` (which removes turning about the vertical), from the
     gyro (T, 3) when there is one, else from the rotation of its up directions (T, 3); or None
@@ -144,7 +172,7 @@ def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3,
     if gyro_dps is not None and np.isfinite(gyro_dps).all():
         d = np.asarray(gyro_dps, dtype=np.float64)
     else:
-        lag = max(1, round(ROTATION_LAG_S / float(np.median(np.diff(t)))))
+        lag = max(1, round(params.rotation_lag_s / float(np.median(np.diff(t)))))
         u = _norm_rows(np.asarray(ups, dtype=np.float64))
         d = np.cross(u[:-lag], u[lag:])
         d = d[np.isfinite(d).all(axis=1)]
@@ -153,8 +181,8 @@ def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3,
     d = d - np.outer(d @ p, p)
     m = d.T @ d
     w, v = np.linalg.eigh(m)
-    if w[-1] <= 0 or w[-1] / w.sum() < MIN_PLANARITY:
-        return None, f"no clear sagittal swing (planarity {w[-1] / max(w.sum(), 1e-300):.2f} < {MIN_PLANARITY})"
+    if w[-1] <= 0 or w[-1] / w.sum() < params.min_planarity:
+        return None, f"no clear sagittal swing (planarity {w[-1] / max(w.sum(), 1e-300):.2f} < {params.min_planarity})"
     a = v[:, -1] - float(v[:, -1] @ p) * p
     if np.linalg.norm(a) < 0.5:
         return None, "swing axis along the segment"
@@ -162,7 +190,7 @@ def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3,
 
 
 def _leg_signs(cands: dict[int, list[SegmentMount]], ups: np.ndarray, thigh: int,
-               shank: int) -> tuple[dict[int, SegmentMount], str]:
+               shank: int, margin_deg: float) -> tuple[dict[int, SegmentMount], str]:
     """Pick the mounts of one leg's thigh and shank by the knee rule (module docstring)."""
     options = [cands[thigh], cands[shank]]
     scores = []
@@ -171,9 +199,9 @@ def _leg_signs(cands: dict[int, list[SegmentMount]], ups: np.ndarray, thigh: int
         knee = knee[np.isfinite(knee)]
         scores.append((float(np.percentile(knee, 98)), mt, ms))
     scores.sort(key=lambda s: s[0])
-    if len(scores) > 1 and scores[1][0] - scores[0][0] < MIN_SIGN_MARGIN_DEG:
+    if len(scores) > 1 and scores[1][0] - scores[0][0] < margin_deg:
         return {}, (f"{CHANNELS[thigh]}/{CHANNELS[shank]}: cannot tell forward from backward "
-                    f"(knee rule margin {scores[1][0] - scores[0][0]:.1f} < {MIN_SIGN_MARGIN_DEG:g} deg); "
+                    f"(knee rule margin {scores[1][0] - scores[0][0]:.1f} < {margin_deg:g} deg); "
                     "walk a few more strides")
     return {thigh: scores[0][1], shank: scores[0][2]}, ""
 
@@ -190,6 +218,7 @@ def learn_calibration(
     acc_g: np.ndarray | None = None,
     walk_s: float = WALK_S,
     still_s: float = STILL_S,
+    params: ImuLearnParams = ImuLearnParams(),
 ) -> tuple[ImuCalibration | None, Standing | None, str]:
     """Complete the configured axes into a calibration from a stream.
 
@@ -202,6 +231,7 @@ def learn_calibration(
         gyro_dps, acc_g: (4, T, 3) raw rates and accelerations for the still test and the bias.
         walk_s: Seconds of stream after the standing pose needed before learning axes.
         still_s: Length of the still stretch taken as the standing pose (s).
+        params: Learning thresholds.
 
     Returns:
         (calibration or None, the standing pose used or None, what is missing: '' when done).
@@ -210,7 +240,7 @@ def learn_calibration(
     ups = np.asarray(ups, dtype=np.float64)
     need_stand = any(p is None for p in proximal)
     if need_stand and standing is None:
-        standing = find_standing(t, ups, gyro_dps, acc_g, still_s=still_s)
+        standing = find_standing(t, ups, gyro_dps, acc_g, still_s=still_s, params=params)
         if standing is None:
             return None, None, f"stand still for {still_s:g} s"
     prox = [p if p is not None else standing.proximal[i] for i, p in enumerate(proximal)]  # type: ignore[union-attr]
@@ -228,17 +258,18 @@ def learn_calibration(
         if lateral[i] is not None:
             cands[i] = [SegmentMount(lateral[i], prox[i], standing_deg[i], bias[i], tags[i])]  # type: ignore[arg-type]
             continue
-        axis, why = swing_axis(t[walk], ups[i, walk], prox[i], None if gyro_dps is None else gyro_dps[i, walk])
+        axis, why = swing_axis(t[walk], ups[i, walk], prox[i], None if gyro_dps is None else gyro_dps[i, walk],
+                               params)
         if axis is None:
             return None, standing, f"{CHANNELS[i]}: {why}; walk a few more strides"
         both = [SegmentMount(s, prox[i], standing_deg[i], bias[i], "learnt") for s in (axis, tuple(-x for x in axis))]
         swept = np.percentile(both[0].angles_deg(ups[i, walk]), [2, 98])
-        if swept[1] - swept[0] < MIN_SWING_DEG:
+        if swept[1] - swept[0] < params.min_swing_deg:
             return None, standing, f"{CHANNELS[i]}: swings only {swept[1] - swept[0]:.0f} deg; walk a few more strides"
         cands[i] = both
     mounts: dict[int, SegmentMount] = {}
     for thigh, shank in LEGS:
-        chosen, why = _leg_signs(cands, ups[:, walk], thigh, shank)
+        chosen, why = _leg_signs(cands, ups[:, walk], thigh, shank, params.min_sign_margin_deg)
         if why:
             return None, standing, why
         mounts.update(chosen)

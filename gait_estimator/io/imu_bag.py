@@ -8,10 +8,14 @@ input (no orientation) the fusion is run again with the gyro bias measured while
 
 Topics: ``imu_topics`` (four names, CHANNELS order), else ``/imu/right_thigh``, ... if present,
 else the four Imu topics whose names end in the channel names.
+
+Pairing tolerance: ``imu_tolerance_s``, else measured from the stamps (``auto_tolerance_s``): the
+whole file is known, so sensors that are not sampled together pair too.
 """
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,15 +25,13 @@ import numpy as np
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
-from ..core.imu import CalibrationError, ImuCalibration
-from ..core.imu_learn import STILL_S, check_configured, learn_calibration
+from ..core.imu import DEFAULT_FUSION, CalibrationError, FusionParams, ImuCalibration
+from ..core.imu_learn import DEFAULT_LEARN, STILL_S, ImuLearnParams, check_configured, learn_calibration
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
-from .imu_stream import DEFAULT_TOLERANCE_S, UNPAIRED, ImuPairer, SensorInput, load_calibration
+from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
 from .stream import SampleRejected
 
 IMU = "sensor_msgs/msg/Imu"
-SHORT_STILL_S = 0.5
-"""Still stretch (s) taken as the standing pose when a file has none of STILL_S."""
 DEFAULT_IMU_TOPICS = tuple(f"imu/{c}" for c in CHANNELS)
 """Relative topic names of the four IMUs (the node's default ``imu_topics``)."""
 
@@ -76,9 +78,10 @@ def is_imu_bag(p: Path) -> bool:
     return IMU in types and not types & {"sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray"}
 
 
-def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list | None, tolerance_s: float):
+def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list | None, tolerance_s: float,
+               fusion: FusionParams):
     """Messages (sensor, log_ns, msg) -> paired (stamp_ns, log_ns, ups, gyro, acc) and rejections."""
-    inputs = [SensorInput(rate_hz) for _ in range(N_CHANNELS)]
+    inputs = [SensorInput(rate_hz, params=fusion) for _ in range(N_CHANNELS)]
     if bias is not None:
         for s, b in zip(inputs, bias, strict=False):
             s.set_gyro_bias(b)
@@ -108,8 +111,10 @@ def read_imu_bag(
     imu_lateral_axes: list[str] | None = None,
     imu_proximal_axes: list[str] | None = None,
     imu_standing_deg: list[float] | None = None,
-    imu_tolerance_s: float = DEFAULT_TOLERANCE_S,
+    imu_tolerance_s: float | None = None,
     max_gap_s: float = 0.5,
+    fusion_params: FusionParams = DEFAULT_FUSION,
+    learn_params: ImuLearnParams = DEFAULT_LEARN,
     **_: Any,
 ) -> ImuBagRecording:
     """Segment angles (deg, CHANNELS order) from a bag's four Imu topics.
@@ -120,12 +125,15 @@ def read_imu_bag(
         imu_calibration: A calibration (or its YAML file) to use instead of learning one.
         imu_lateral_axes, imu_proximal_axes: Configured sensor axes per segment ('' = learn).
         imu_standing_deg: Angle of each segment in the standing pose (deg; default 0).
-        imu_tolerance_s: Pairing tolerance (s).
+        imu_tolerance_s: Pairing tolerance (s, >= 0); None = measured (module docstring).
+        fusion_params, learn_params: Raw-input fusion and mount-learning settings.
 
     Raises:
         RecordingError: one line (missing topics, unusable messages, no calibration possible).
     """
     p = Path(path)
+    if imu_tolerance_s is not None and not (math.isfinite(imu_tolerance_s) and imu_tolerance_s >= 0):
+        raise RecordingError(f"IMU pairing tolerance must be a finite number of seconds >= 0, got {imu_tolerance_s!r}")
     try:
         lateral, proximal = check_configured(imu_lateral_axes or [""] * N_CHANNELS, imu_proximal_axes or [""] * N_CHANNELS)
         cal = imu_calibration or None
@@ -134,41 +142,28 @@ def read_imu_bag(
     except CalibrationError as exc:
         raise RecordingError(str(exc)) from None
     standing_deg = list(imu_standing_deg or [0.0] * N_CHANNELS)
-    with open_bag(p, "imu") as reader:
-        topics = bag_topics(reader)
-        names = ["/" + t.lstrip("/") for t in imu_topics] if imu_topics else imu_topics_of(topics)
-        if names is None or any(topics.get(t, ("",))[0] != IMU for t in names):
-            want = ", ".join(names or ["/" + t for t in DEFAULT_IMU_TOPICS])
-            raise RecordingError(f"{p}: needs four {IMU} topics ({want}); {format_topics(topics)}")
-        index = {t: i for i, t in enumerate(names)}
-        conns = [c for c in reader.connections if c.topic in index]
-        deserialize = typestore().deserialize_cdr
-        messages = []
-        undecodable = 0
-        for conn, log_ns, raw in reader.messages(connections=conns):
-            try:
-                messages.append((index[conn.topic], int(log_ns), deserialize(raw, IMU)))
-            except Exception:
-                undecodable += 1
+    names, messages, undecodable = _read_messages(p, imu_topics)
     stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for s, _, m in messages[:800] if s == 0]
     rate = 200.0
     if len(stamps) > 8:
         d = float(np.median(np.diff(np.array(stamps, dtype=np.int64)))) * 1e-9
         rate = 1.0 / d if d > 0 else rate
-    paired, rejected = _front_end(messages, rate, None, imu_tolerance_s)
+    tolerance_s = imu_tolerance_s if imu_tolerance_s is not None else _measured_tolerance(messages)
+    paired, rejected = _front_end(messages, rate, None, tolerance_s, fusion_params)
     if undecodable:
         rejected["undecodable"] += undecodable
     if len(paired) < 2:
         raise RecordingError(
-            f"{p}: fewer than 2 samples with all four IMUs within {imu_tolerance_s:g} s; skipped: {dict(rejected)}")
+            f"{p}: fewer than 2 samples with all four IMUs within {tolerance_s:g} s; skipped: {dict(rejected)}")
     note = ""
     if cal is None:
-        cal, note = _learn(p, paired, lateral, proximal, standing_deg)
+        cal, note = _learn(p, paired, lateral, proximal, standing_deg, learn_params)
         if cal is not None and any(any(b) for m in cal.mounts for b in [m.gyro_bias_dps]):
-            paired, rejected = _front_end(messages, rate, [m.gyro_bias_dps for m in cal.mounts], imu_tolerance_s)
+            paired, rejected = _front_end(messages, rate, [m.gyro_bias_dps for m in cal.mounts], tolerance_s,
+                                          fusion_params)
             if undecodable:
                 rejected["undecodable"] += undecodable
-            cal, note = _learn(p, paired, lateral, proximal, standing_deg)
+            cal, note = _learn(p, paired, lateral, proximal, standing_deg, learn_params)
     else:
         note = "IMU calibration given: " + cal.summary()
     assert cal is not None
@@ -191,18 +186,63 @@ def read_imu_bag(
     )
 
 
-def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list) -> tuple[ImuCalibration, str]:
+def _topic_names(p: Path, topics: dict[str, tuple[str, int]], imu_topics: list[str] | None) -> list[str]:
+    """The four IMU topics to read (module docstring); RecordingError (one line) if the bag lacks them."""
+    names = ["/" + t.lstrip("/") for t in imu_topics] if imu_topics else imu_topics_of(topics)
+    if names is not None and len(names) != N_CHANNELS:
+        raise RecordingError(f"{p}: needs {N_CHANNELS} IMU topics ({', '.join(CHANNELS)}), got {len(names)}: "
+                             f"{', '.join(names)}")
+    if names is not None and imu_topics and any(topics.get(t, ("",))[0] != IMU for t in names):
+        bad = ", ".join(t for t in names if topics.get(t, ("",))[0] != IMU)
+        raise RecordingError(f"{p}: no {IMU} topic {bad} in the bag; {format_topics(topics)}")
+    if names is None or any(topics.get(t, ("",))[0] != IMU for t in names):
+        want = ", ".join(names or ["/" + t for t in DEFAULT_IMU_TOPICS])
+        raise RecordingError(f"{p}: needs four {IMU} topics ({want}; others: --imu-topics RT,LT,RS,LS); "
+                             f"{format_topics(topics)}")
+    return names
+
+
+def _read_messages(p: Path, imu_topics: list[str] | None) -> tuple[list[str], list[tuple[int, int, Any]], int]:
+    """(topic names, [(sensor, log_ns, message)] in log order, messages that failed to decode)."""
+    with open_bag(p, "imu") as reader:
+        names = _topic_names(p, bag_topics(reader), imu_topics)
+        index = {t: i for i, t in enumerate(names)}
+        conns = [c for c in reader.connections if c.topic in index]
+        deserialize = typestore().deserialize_cdr
+        messages = []
+        undecodable = 0
+        for conn, log_ns, raw in reader.messages(connections=conns):
+            try:
+                messages.append((index[conn.topic], int(log_ns), deserialize(raw, IMU)))
+            except Exception:
+                undecodable += 1
+    return names, messages, undecodable
+
+
+def _measured_tolerance(messages: list[tuple[int, int, Any]]) -> float:
+    """``auto_tolerance_s`` from the header stamps (log times when zero) of the first messages."""
+    stamps: list[list[int]] = [[] for _ in range(N_CHANNELS)]
+    for sensor, log_ns, m in messages[:4000]:
+        stamps[sensor].append(stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) or log_ns)
+    try:
+        return auto_tolerance_s(stamps)
+    except ValueError:
+        return 0.0  # too few messages to pair anyway: the caller's "fewer than 2 samples" line
+
+
+def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list,
+           params: ImuLearnParams) -> tuple[ImuCalibration, str]:
     t = np.array([s[0] for s in paired], dtype=np.int64)
     time_s = (t - t[0]) * 1e-9
     ups = np.asarray([s[2] for s in paired], dtype=np.float64).transpose(1, 0, 2)
     gyro = np.asarray([s[3] for s in paired], dtype=np.float64).transpose(1, 0, 2)
     acc = np.asarray([s[4] for s in paired], dtype=np.float64).transpose(1, 0, 2)
     try:
-        for still_s in (STILL_S, SHORT_STILL_S):  # a short still stretch if the file has no longer one
+        for still_s in (STILL_S, params.short_still_s):  # a short still stretch if the file has no longer one
             cal, standing, missing = learn_calibration(
                 time_s, ups, lateral=lateral, proximal=proximal, standing_deg=standing_deg,
                 gyro_dps=gyro if np.isfinite(gyro).any() else None, acc_g=acc if np.isfinite(acc).any() else None,
-                still_s=still_s)
+                still_s=still_s, params=params)
             if cal is not None:
                 break
     except CalibrationError as exc:

@@ -6,7 +6,7 @@
   a zero quaternion or acceleration, a stamp not after the sensor's previous one).
 * ``ImuPairer``: the four streams paired by stamp within a tolerance; a message without partners
   is dropped (``unpaired``), so a silent sensor stops the samples instead of repeating its last
-  value.
+  value. ``auto_tolerance_s``: the tolerance of unsynchronised sensors, from their stamps.
 * ``ImuCalibrator``: while no calibration is complete, keeps the paired samples and learns the
   mounts from them (``core/imu_learn.py``); the standing pose can be asked for again.
 * ``save_calibration`` / ``load_calibration``: the calibration as YAML (atomic write).
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -23,8 +24,8 @@ import numpy as np
 import yaml
 
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.imu import STANDARD_GRAVITY, CalibrationError, ImuCalibration, RawFusion, Vec3
-from ..core.imu_learn import Standing, find_standing, learn_calibration
+from ..core.imu import DEFAULT_FUSION, STANDARD_GRAVITY, CalibrationError, FusionParams, ImuCalibration, RawFusion, Vec3
+from ..core.imu_learn import DEFAULT_LEARN, ImuLearnParams, Standing, find_standing, learn_calibration
 from .atomic import atomic_write_text
 from .stream import NON_FINITE, NON_INCREASING_STAMP, SampleRejected
 
@@ -33,7 +34,10 @@ UNPAIRED = "unpaired"
 WRONG_FRAME = "wrong_frame"
 IMU_REASONS = (NON_FINITE, ZERO_NORM, NON_INCREASING_STAMP, UNPAIRED, WRONG_FRAME)
 DEFAULT_TOLERANCE_S = 0.004
-"""Largest stamp spread (s) of four messages that make one sample (a 200 Hz period is 0.005 s)."""
+"""Largest stamp spread (s) of four messages that make one sample (a 200 Hz period is 0.005 s):
+the node's default, for sensors sampled together."""
+AUTO_TOLERANCE_PERIODS = 0.9
+"""``auto_tolerance_s``: this share of the message period (see there)."""
 MAX_QUEUE = 50
 """Messages kept per sensor while waiting for partners; older ones are dropped (unpaired)."""
 _RAD2DEG = 180.0 / math.pi
@@ -47,10 +51,12 @@ class SensorInput:
     Args:
         rate_hz: Nominal rate for the raw-input fusion.
         frame_id: The ``header.frame_id`` this sensor's messages must carry ('' = any).
+        params: Settings of the raw-input fusion.
     """
 
-    def __init__(self, rate_hz: float = 200.0, frame_id: str = "") -> None:
+    def __init__(self, rate_hz: float = 200.0, frame_id: str = "", params: FusionParams = DEFAULT_FUSION) -> None:
         self._rate_hz = rate_hz
+        self.params = params
         self.frame_id = frame_id
         self.fusion: RawFusion | None = None
         self.gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
@@ -87,7 +93,7 @@ class SensorInput:
         if ax * ax + ay * ay + az * az < 1e-6:
             raise SampleRejected(ZERO_NORM, "zero acceleration (no gravity in the accelerometer)")
         if self.fusion is None:
-            self.fusion = RawFusion(self._rate_hz, self.gyro_bias_dps)
+            self.fusion = RawFusion(self._rate_hz, self.gyro_bias_dps, self.params)
         gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG)
         acc = (ax / STANDARD_GRAVITY, ay / STANDARD_GRAVITY, az / STANDARD_GRAVITY)
         up = self.fusion.update(gyro, acc, None if last is None else (stamp_ns - last) * 1e-9)
@@ -100,17 +106,40 @@ class SensorInput:
             self.fusion.gyro_bias_dps = bias_dps
 
 
+def auto_tolerance_s(stamps_ns: Sequence[Any]) -> float:
+    """Pairing tolerance (s) for sensors that are not sampled together: AUTO_TOLERANCE_PERIODS of
+    the message period (the median over the sensors of each one's median stamp step).
+
+    Four sensors at one rate with any phases always have one message each within 3/4 of a period
+    (the largest of the four gaps between their phases is at least 1/4); a tolerance below one
+    period never puts two messages a period apart into one sample. ``stamps_ns``: per sensor, its
+    stamps (ns) in order. ValueError when no sensor has two increasing stamps.
+    """
+    periods = []
+    for st in stamps_ns:
+        d = np.diff(np.asarray(st, dtype=np.int64))
+        d = d[d > 0]
+        if len(d):
+            periods.append(float(np.median(d)) * 1e-9)
+    if not periods:
+        raise ValueError("cannot measure the IMU message period (fewer than two increasing stamps per sensor)")
+    return AUTO_TOLERANCE_PERIODS * float(np.median(periods))
+
+
 class ImuPairer:
     """Pairs the four sensors' messages by stamp.
 
     Args:
-        tolerance_s: Largest spread of the four stamps in one sample (s).
+        tolerance_s: Largest spread of the four stamps in one sample (s, >= 0); for sensors not
+            sampled together see ``auto_tolerance_s``.
+        max_queue: Messages kept per sensor while waiting for partners.
     """
 
-    def __init__(self, tolerance_s: float = DEFAULT_TOLERANCE_S) -> None:
+    def __init__(self, tolerance_s: float = DEFAULT_TOLERANCE_S, max_queue: int = MAX_QUEUE) -> None:
         if not (math.isfinite(tolerance_s) and tolerance_s >= 0):
-            raise ValueError(f"pairing tolerance must be >= 0 s, got {tolerance_s!r}")
+            raise ValueError(f"IMU pairing tolerance must be a finite number of seconds >= 0, got {tolerance_s!r}")
         self.tolerance_ns = round(tolerance_s * 1e9)
+        self.max_queue = max_queue
         self.queues: list[deque] = [deque() for _ in range(N_CHANNELS)]
         self.dropped: Counter = Counter()  # unpaired messages per sensor name
 
@@ -120,7 +149,7 @@ class ImuPairer:
         queues = self.queues
         q = queues[sensor]
         q.append((stamp_ns, item))
-        if len(q) > MAX_QUEUE:
+        if len(q) > self.max_queue:
             q.popleft()
             self.dropped[CHANNELS[sensor]] += 1
         q0, q1, q2, q3 = queues
@@ -148,10 +177,6 @@ class ImuPairer:
             q.clear()
 
 
-LEARN_EVERY_S = 0.5
-MAX_LEARN_BUFFER_S = 120.0
-
-
 class ImuCalibrator:
     """Learns the mounts from paired samples while no calibration is complete.
 
@@ -159,10 +184,12 @@ class ImuCalibrator:
         lateral, proximal: Configured sensor axes per segment (None = learn).
         standing_deg: Angle each segment is taken to have while standing (deg).
         calibration: A complete calibration to start with (saved or configured), or None.
+        params: Learning thresholds and how often to try.
     """
 
     def __init__(self, lateral: list[Vec3 | None], proximal: list[Vec3 | None], standing_deg: list[float],
-                 calibration: ImuCalibration | None = None) -> None:
+                 calibration: ImuCalibration | None = None, params: ImuLearnParams = DEFAULT_LEARN) -> None:
+        self.params = params
         self.lateral, self.proximal, self.standing_deg = list(lateral), list(proximal), list(standing_deg)
         self.calibration = calibration
         self.status = "calibrated" if calibration is not None else "waiting for samples"
@@ -197,7 +224,7 @@ class ImuCalibrator:
         """One paired sample (t in s); returns the calibration when it has just been learnt."""
         n = self._n
         if n == len(self._t):
-            if t - self._t[0] > MAX_LEARN_BUFFER_S:  # bounded: drop the oldest half (no standing found)
+            if t - self._t[0] > self.params.max_buffer_s:  # bounded: drop the oldest half (no standing found)
                 half = n // 2
                 self._t[:n - half], self._rows[:n - half] = self._t[half:n], self._rows[half:n]
                 n -= half
@@ -211,7 +238,7 @@ class ImuCalibrator:
         self._n = n = n + 1
         if t < self._next_try:
             return None
-        self._next_try = t + LEARN_EVERY_S
+        self._next_try = t + self.params.learn_every_s
         time_s = self._t[:n]
         ups_a = self._rows[:n, :, 0:3].transpose(1, 0, 2)
         gyro_a = self._rows[:n, :, 3:6].transpose(1, 0, 2)
@@ -222,11 +249,13 @@ class ImuCalibrator:
         if self._keep_lateral is not None:
             lateral = [a if a is not None else k for a, k in zip(self.lateral, self._keep_lateral, strict=False)]
         if self._standing is None and any(p is None for p in self.proximal):
-            self._standing = find_standing(time_s, ups_a, gyro_a if have_rates else None, acc_a if have_acc else None)
+            self._standing = find_standing(time_s, ups_a, gyro_a if have_rates else None, acc_a if have_acc else None,
+                                           params=self.params)
         try:
             cal, standing, missing = learn_calibration(
                 time_s, ups_a, lateral=lateral, proximal=self.proximal, standing_deg=self.standing_deg,
-                standing=self._standing, gyro_dps=gyro_a if have_rates else None, acc_g=acc_a if have_acc else None)
+                standing=self._standing, gyro_dps=gyro_a if have_rates else None, acc_g=acc_a if have_acc else None,
+                params=self.params)
         except CalibrationError as exc:
             cal, standing, missing = None, self._standing, str(exc)
         self._standing = standing

@@ -358,9 +358,9 @@ _SAMPLES_SLOT = re.compile(r"^( *)samples: '?@samples (\d+)@'?$", re.MULTILINE)
 def _yaml_body(doc: dict[str, Any], lib: KernelLibrary) -> str:
     """``yaml.dump`` of the library document (without samples) with ``lib``'s kernel rows, rounded
     to SAMPLE_DECIMALS, in flow style (``- [a, b, c, d]``): the text ``library_to_doc(lib)``
-    dumps, in ~12 ms instead of ~60 for the bundled library. The rows (thousands of floats, each
-    through PyYAML's Python representer) are formatted here and put where placeholders stood
-    (``doc`` gets the placeholders)."""
+    dumps. The rows (thousands of floats) are formatted here and put where placeholders stood
+    (``doc`` gets the placeholders), because passing each float through PyYAML's Python
+    representer makes saving a library several times slower."""
     for k, md in enumerate(doc["modes"]):
         md["samples"] = f"@samples {k}@"
     text = yaml.dump(doc, Dumper=_YamlDumper, sort_keys=False, width=120, allow_unicode=True)
