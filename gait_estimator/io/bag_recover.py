@@ -8,8 +8,11 @@ What counts as damaged (``damage``):
 * an ``.db3`` file shorter than its header says, or with a ``-wal`` / ``-journal`` file left
   beside it (the last transaction never finished): the database is read from a copy in a
   temporary directory, where SQLite rolls back the unfinished transaction or replays the
-  committed part of the write-ahead log, up to the first page it cannot read; the original
-  files are never opened for writing;
+  committed part of the write-ahead log; the original files are never opened for writing.
+  When SQLite stops early (a cut lost interior b-tree pages of the messages table), the
+  table-leaf pages still in the file are read on their own (``sqlite_pages.py``): topics,
+  message definitions, and the messages of consecutive ids from the first up to the first
+  missing id (a lost page cannot be told from a gap);
 * a bag directory whose ``metadata.yaml`` is missing or unreadable, lists files that are
   missing, misses files that are there, or (``count_disagreement``) gives message counts its
   files do not hold: the storage files are read on their own.
@@ -37,6 +40,7 @@ import yaml
 
 from ..core.errors import RecordingError
 from .mcap_scan import McapScan, has_end_magic, iter_mcap
+from .sqlite_pages import table_rows
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -225,7 +229,8 @@ class _McapStorage(_Storage):
             self.topics.append(_Topic(ch.id, ch.topic, name, msgdef, "", ch.message_encoding, qos))
         self.counts, self.first_ns, self.last_ns = dict(scan.counts), scan.first_ns, scan.last_ns
         if not scan.complete:
-            self.ends = f"{path.name} ends at byte {scan.size} ({scan.problem}); complete records up to byte {scan.intact_bytes}"
+            where = scan.problem or "at a record boundary"
+            self.ends = f"{path.name} ends at byte {scan.size} ({where}); complete records up to byte {scan.intact_bytes}"
         elif not has_end_magic(path):
             self.ends = f"{path.name} ends at byte {scan.size}, inside its summary; its data section is complete"
 
@@ -240,9 +245,6 @@ class _SqliteStorage(_Storage):
     roll back the last transaction without touching the original."""
 
     def __init__(self, path: Path) -> None:
-        from rosbags.interfaces import MessageDefinition, MessageDefinitionFormat
-        from rosbags.rosbag2.metadata import parse_qos
-
         super().__init__(path)
         self._tmp = tempfile.TemporaryDirectory(prefix="gait_recover_")
         self.copy = Path(self._tmp.name) / path.name
@@ -251,7 +253,18 @@ class _SqliteStorage(_Storage):
         for side in SIDE_FILES:
             if (s := path.with_name(path.name + side)).is_file():
                 shutil.copyfile(s, self.copy.with_name(self.copy.name + side))
-        problem = ""
+        problem = self._read()
+        if problem:
+            self._read_pages(problem)
+        elif file_damage(path):
+            self.ends = f"{path.name}: every row the database still holds was read (from a copy)"
+
+    def _read(self) -> str:
+        """Topics and message counts through SQLite: '' or what stopped the read."""
+        from rosbags.interfaces import MessageDefinition, MessageDefinitionFormat
+        from rosbags.rosbag2.metadata import parse_qos
+
+        self.topics, self.counts, self.first_ns, self.last_ns = [], {}, None, None
         try:
             con = self._connect()
             try:
@@ -271,15 +284,30 @@ class _SqliteStorage(_Storage):
                         int(r["id"]), r["name"], r["type"], defs.get(r["type"]) or none,
                         r.get("type_description_hash") or "", r["serialization_format"], qos,
                     ))
-                problem = self._count(con)
+                return self._count(con)
             finally:
                 con.close()
         except sqlite3.DatabaseError as exc:
-            problem = f"unreadable database: {exc}"
-        if problem:
-            self.ends = f"{path.name}: reading stopped after {sum(self.counts.values())} message(s) ({problem})"
-        elif file_damage(path):
-            self.ends = f"{path.name}: every row the database still holds was read (from a copy)"
+            return f"unreadable database: {exc}"
+
+    def _read_pages(self, problem: str) -> None:
+        """SQLite stopped early (a cut file lost interior b-tree pages): rebuild the tables from
+        the leaf pages still in the file (``sqlite_pages``) and read that if it holds more."""
+        name, by_sql = self.path.name, sum(self.counts.values())
+        rebuilt = self.copy.with_name("pages_" + self.copy.name)
+        first, kept, left = _rebuild_from_pages(self.copy, rebuilt)
+        self.ends = f"{name}: reading stopped after {by_sql} message(s) ({problem})"
+        if kept <= by_sql:
+            return
+        self.copy = rebuilt
+        if again := self._read():
+            self.ends = f"{name}: unreadable even page by page ({again})"
+            return
+        past = f"; {left} row(s) past the first missing id left out" if left else ""
+        self.ends = (
+            f"{name}: SQLite stopped ({problem}); read page by page: messages with ids {first} to "
+            f"{first + kept - 1}, up to the first id whose page is lost{past}"
+        )
 
     def _count(self, con: sqlite3.Connection) -> str:
         problem: list[str] = []
@@ -319,6 +347,53 @@ def _whole_pages(db: Path) -> None:
         size = f.seek(0, 2)
         if page and size % page:
             f.truncate(size - size % page)
+
+
+_ROSBAG2_TABLES = """
+CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT, type TEXT, serialization_format TEXT,
+                    offered_qos_profiles TEXT, type_description_hash TEXT);
+CREATE TABLE message_definitions(id INTEGER PRIMARY KEY, topic_type TEXT, encoding TEXT,
+                                 encoded_message_definition TEXT, type_description_hash TEXT);
+CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER, timestamp INTEGER, data BLOB);
+"""
+
+
+def _rebuild_from_pages(src: Path, dest: Path) -> tuple[int, int, int]:
+    """Write the rosbag2 rows found on the leaf pages of ``src`` to a new database ``dest``.
+
+    Rows are told apart by their columns (the b-tree that says which table a leaf belongs to
+    may be lost): messages (rowid, topic id, time, blob), topics (rowid and 4 or 5 texts, the
+    name starting with '/'), message definitions (rowid and 4 texts, encoding ros2msg or
+    ros2idl). Message ids run 1, 2, 3... in a bag, but a missing id cannot be told from a lost
+    page: only the run of consecutive ids from the smallest is kept.
+
+    Returns:
+        (first id, messages kept, messages found past the first missing id).
+    """
+    topics, defs, msgs = {}, {}, {}
+    for row in table_rows(src):
+        v = row.values
+        texts = len(v) > 1 and all(isinstance(x, str) for x in v[1:])
+        if len(v) == 4 and type(v[1]) is int and type(v[2]) is int and isinstance(v[3], bytes):
+            msgs[row.rowid] = v[1:]
+        elif texts and len(v) in (5, 6) and v[1].startswith("/"):
+            topics[row.rowid] = (*v[1:], "") if len(v) == 5 else v[1:]
+        elif texts and len(v) == 5 and v[2] in ("ros2msg", "ros2idl"):
+            defs[row.rowid] = v[1:]
+    first = min(msgs, default=1)
+    kept = 0
+    while first + kept in msgs:
+        kept += 1
+    con = sqlite3.connect(dest)
+    try:
+        con.executescript("PRAGMA journal_mode=OFF;" + _ROSBAG2_TABLES)
+        con.executemany("INSERT INTO topics VALUES (?, ?, ?, ?, ?, ?)", [(k, *t) for k, t in topics.items()])
+        con.executemany("INSERT INTO message_definitions VALUES (?, ?, ?, ?, ?)", [(k, *d) for k, d in defs.items()])
+        con.executemany("INSERT INTO messages VALUES (?, ?, ?, ?)", ((i, *msgs[i]) for i in range(first, first + kept)))
+        con.commit()
+    finally:
+        con.close()
+    return first, kept, len(msgs) - kept
 
 
 def _rows(con: sqlite3.Connection, problem: list[str]) -> Iterator[tuple[int, int, bytes]]:
