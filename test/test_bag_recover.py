@@ -436,6 +436,43 @@ def test_repair_writes_a_complete_bag_and_never_overwrites(tmp_path, ms_mcap, ra
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no staging left
 
 
+FOO_MSG = "float64 x\nstring label\n"
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_repair_keeps_topics_of_custom_types(tmp_path, ms_full, storage, capsys):
+    """A topic of a type the Jazzy type store does not know is copied with the definition
+    recorded in the bag, as ros2 bag reindex keeps it."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    ts = get_typestore(Stores.ROS2_JAZZY)  # not the project's cached store, which must not learn Foo
+    ts.register(get_types_from_msg(FOO_MSG, "my_pkg/msg/Foo"))
+    foo_type = ts.types["my_pkg/msg/Foo"]
+    bag = tmp_path / "cust"
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(bag, version=8, storage_plugin=plugin) as writer, Reader(ms_full.bag) as reader:
+        angles = writer.add_connection("/segment_angles", "sensor_msgs/msg/JointState", typestore=ts)
+        foo = writer.add_connection("/foo", "my_pkg/msg/Foo", typestore=ts)
+        for k, (_, log_ns, raw) in enumerate(reader.messages()):
+            writer.write(angles, log_ns, raw)
+            if k % 10 == 0:
+                writer.write(foo, log_ns, bytes(ts.serialize_cdr(foo_type(float(k), f"n{k}"), "my_pkg/msg/Foo")))
+    f = _storage(bag)
+    f.write_bytes(f.read_bytes()[: f.stat().st_size * 2 // 3])
+    with open_recovered(bag, damage(bag)) as recovered:
+        kept = [r for r in recovered.records() if r.topic == "/foo"]
+    assert len(kept) > 100
+    assert main(["repair", str(bag)]) == 0
+    out = capsys.readouterr().out
+    assert "not copied" not in out and f"/foo {len(kept)}" in out
+    with AnyReader([tmp_path / "cust_repaired"]) as reader:
+        conn = next(c for c in reader.connections if c.topic == "/foo")
+        assert conn.msgtype == "my_pkg/msg/Foo" and conn.msgdef.data == FOO_MSG
+        got = [reader.deserialize(raw, conn.msgtype) for _, _, raw in reader.messages(connections=[conn])]
+    assert [(m.x, m.label) for m in got] == [(10.0 * k, f"n{10 * k}") for k in range(len(kept))]
+
+
 def test_repair_of_a_bag_without_messages_is_an_error(tmp_path, ms_mcap, capsys):
     bag = _cut_copy(ms_mcap, tmp_path / "cut", 30)
     assert main(["repair", str(bag)]) == 2

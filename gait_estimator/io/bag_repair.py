@@ -14,6 +14,7 @@ import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from ..core.errors import GaitEstimatorError
 from .bag import open_bag, typestore
@@ -26,8 +27,8 @@ BAG_VERSION = 8
 
 @dataclass
 class RepairResult:
-    """What ``repair_bag`` wrote: output directory, storage, messages per topic, topics of
-    types the type store does not know (not copied)."""
+    """What ``repair_bag`` wrote: output directory, storage, messages per topic, topics not
+    copied (a type the type store does not know, without a definition in the bag)."""
 
     out: Path
     storage: str
@@ -78,14 +79,10 @@ def repair_bag(bag: str | Path, out: str | Path | None = None) -> RepairResult:
             with Writer(staged, version=BAG_VERSION, storage_plugin=plugin) as writer:
                 conns = {}
                 for c in reader.connections:
-                    try:
-                        conns[c.id] = writer.add_connection(
-                            c.topic, c.msgtype, typestore=typestore(),
-                            serialization_format=c.ext.serialization_format,
-                            offered_qos_profiles=c.ext.offered_qos_profiles,
-                        )
-                    except Exception:  # a type the Jazzy type store does not know
+                    if (conn := _add_connection(writer, c)) is None:
                         result.skipped_topics.append(f"{c.topic} [{c.msgtype}]")
+                    else:
+                        conns[c.id] = conn
                 for c, log_ns, data in reader.messages(connections=[c for c in reader.connections if c.id in conns]):
                     writer.write(conns[c.id], log_ns, data)
                     result.counts[c.topic] = result.counts.get(c.topic, 0) + 1
@@ -96,6 +93,41 @@ def repair_bag(bag: str | Path, out: str | Path | None = None) -> RepairResult:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return result
+
+
+UNKNOWN_RIHS01 = "RIHS01_" + "0" * 64
+"""Type hash written with a recorded definition that gives none and cannot be hashed."""
+
+
+def _add_connection(writer: Any, c: Any) -> Any:
+    """Add the source connection ``c`` to ``writer``: with the Jazzy type store's definition,
+    or, for a type it does not know (a custom message), with the definition recorded in the
+    source bag, as ``ros2 bag reindex`` keeps it. None if neither is there."""
+    kw = {"serialization_format": c.ext.serialization_format, "offered_qos_profiles": c.ext.offered_qos_profiles}
+    try:
+        return writer.add_connection(c.topic, c.msgtype, typestore=typestore(), **kw)
+    except Exception:  # a type the Jazzy type store does not know
+        recorded = getattr(c.msgdef, "data", "")
+        if not recorded:
+            return None
+        rihs01 = c.digest or _rihs01(c.msgtype, c.msgdef)
+        return writer.add_connection(c.topic, c.msgtype, msgdef=recorded, rihs01=rihs01, **kw)
+
+
+def _rihs01(msgtype: str, msgdef: Any) -> str:
+    """The type hash of a recorded .msg definition (a cut mcap gives the definition without
+    it), as rosbags' AnyReader computes it to check a bag's types."""
+    from rosbags.interfaces import MessageDefinitionFormat
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    if msgdef.format != MessageDefinitionFormat.MSG:
+        return UNKNOWN_RIHS01
+    try:
+        store = get_typestore(Stores.EMPTY)
+        store.register(get_types_from_msg(msgdef.data, msgtype))
+        return store.hash_rihs01(msgtype)
+    except Exception:  # a definition rosbags cannot parse
+        return UNKNOWN_RIHS01
 
 
 def _fsync(path: Path) -> None:
