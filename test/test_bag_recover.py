@@ -7,12 +7,14 @@ No ROS needed: bags are written and checked with rosbags; cuts are made by trunc
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import shutil
 import signal
 import sqlite3
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -492,3 +494,34 @@ def test_bag_records_gives_raw_messages_of_intact_and_cut_bags(tmp_path, ms_mcap
     _warning(capsys)
     with pytest.raises(RecordingError, match="no topic /imu"):
         list(bag_records(bag, ["/imu"]))
+
+
+def test_a_killed_bag_write_leaves_no_bag_or_a_complete_one(tmp_path, multispeed_csv):
+    """--out-bag, convert and repair write into a temporary directory renamed when complete: a
+    process killed while writing leaves no bag under the target name, never a cut one."""
+    rec = read_recording(multispeed_csv)
+    t0 = time.perf_counter()
+    write_input_bag(rec, tmp_path / "ref", start_ns=START_NS)
+    write_s = time.perf_counter() - t0
+    inside = 0
+    for i in range(8):
+        target = tmp_path / f"b{i}"
+        pid = os.fork()
+        if pid == 0:  # the child: write the bag, then wait to be killed
+            try:
+                write_input_bag(rec, target, start_ns=START_NS)
+                time.sleep(60)
+            finally:
+                os._exit(1)
+        deadline = time.monotonic() + 10 * write_s
+        while not list(tmp_path.glob(f".b{i}.*")) and time.monotonic() < deadline:
+            pass  # until the child opens its bag writer (after serializing every message)
+        time.sleep(write_s * i / 20)
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        if target.exists():
+            assert damage(target) == "" and len(read_bag(target)) == len(rec)
+        staging = list(tmp_path.glob(f".b{i}.*"))
+        assert not (staging and target.exists())
+        inside += bool(staging)
+    assert inside > 0, "no kill landed while the bag was being written"

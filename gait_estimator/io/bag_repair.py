@@ -2,16 +2,13 @@
 as ``ros2 bag reindex`` rebuilds what a crash left.
 
 The source is read as every command reads it (``bag.open_bag``: intact, or recovered by
-``bag_recover``) and never modified. The copy is written with rosbags into a temporary
-directory beside the output, its files fsynced, and renamed to the output at the end, so an
-interrupted repair leaves no half-written bag under the output name.
+``bag_recover``) and never modified. The copy is written as every bag is
+(``bag_write.staged_writer``): into a temporary directory beside the output, fsynced, renamed
+to the output at the end, so an interrupted repair leaves no half-written bag under its name.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,10 +16,9 @@ from typing import Any
 from ..core.errors import GaitEstimatorError
 from .bag import open_bag, typestore
 from .bag_recover import storage_files
+from .bag_write import staged_writer
 
 REPAIRED_SUFFIX = "_repaired"
-BAG_VERSION = 8
-"""rosbag2 metadata version written (ROS 2 Jazzy), as bag_write."""
 
 
 @dataclass
@@ -56,8 +52,6 @@ def repair_bag(bag: str | Path, out: str | Path | None = None) -> RepairResult:
         GaitEstimatorError: ``out`` exists, its parent is missing, or nothing is readable
             (one line).
     """
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
     src = Path(bag)
     target = Path(out) if out is not None else default_repair_path(src)
     if target.exists():
@@ -68,30 +62,19 @@ def repair_bag(bag: str | Path, out: str | Path | None = None) -> RepairResult:
         raise GaitEstimatorError(f"{src}: no such file or directory")
     files = storage_files(src) if src.is_dir() else [src]
     storage = "sqlite3" if files and all(f.suffix == ".db3" for f in files) else "mcap"
-    plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
     result = RepairResult(target, storage)
-    work = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    try:
-        staged = work / target.name
-        with open_bag(src, all_topics=True) as reader:
-            recovery = getattr(reader, "recovery", None)
-            result.recovered = recovery.line() if recovery else ""
-            with Writer(staged, version=BAG_VERSION, storage_plugin=plugin) as writer:
-                conns = {}
-                for c in reader.connections:
-                    if (conn := _add_connection(writer, c)) is None:
-                        result.skipped_topics.append(f"{c.topic} [{c.msgtype}]")
-                    else:
-                        conns[c.id] = conn
-                for c, log_ns, data in reader.messages(connections=[c for c in reader.connections if c.id in conns]):
-                    writer.write(conns[c.id], log_ns, data)
-                    result.counts[c.topic] = result.counts.get(c.topic, 0) + 1
-        for f in staged.iterdir():
-            _fsync(f)
-        os.rename(staged, target)
-        _fsync(target.parent)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+    with open_bag(src, all_topics=True) as reader, staged_writer(target, storage) as writer:
+        recovery = getattr(reader, "recovery", None)
+        result.recovered = recovery.line() if recovery else ""
+        conns = {}
+        for c in reader.connections:
+            if (conn := _add_connection(writer, c)) is None:
+                result.skipped_topics.append(f"{c.topic} [{c.msgtype}]")
+            else:
+                conns[c.id] = conn
+        for c, log_ns, data in reader.messages(connections=[c for c in reader.connections if c.id in conns]):
+            writer.write(conns[c.id], log_ns, data)
+            result.counts[c.topic] = result.counts.get(c.topic, 0) + 1
     return result
 
 
@@ -128,11 +111,3 @@ def _rihs01(msgtype: str, msgdef: Any) -> str:
         return store.hash_rihs01(msgtype)
     except Exception:  # a definition rosbags cannot parse
         return UNKNOWN_RIHS01
-
-
-def _fsync(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
