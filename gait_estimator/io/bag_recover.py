@@ -40,7 +40,7 @@ import yaml
 
 from ..core.errors import RecordingError
 from .mcap_scan import McapScan, has_end_magic, iter_mcap
-from .sqlite_pages import table_rows
+from .sqlite_pages import rebuild_rosbag2
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -295,7 +295,7 @@ class _SqliteStorage(_Storage):
         the leaf pages still in the file (``sqlite_pages``) and read that if it holds more."""
         name, by_sql = self.path.name, sum(self.counts.values())
         rebuilt = self.copy.with_name("pages_" + self.copy.name)
-        first, kept, left = _rebuild_from_pages(self.copy, rebuilt)
+        first, kept, left = rebuild_rosbag2(self.copy, rebuilt)
         self.ends = f"{name}: reading stopped after {by_sql} message(s) ({problem})"
         if kept <= by_sql:
             return
@@ -347,53 +347,6 @@ def _whole_pages(db: Path) -> None:
         size = f.seek(0, 2)
         if page and size % page:
             f.truncate(size - size % page)
-
-
-_ROSBAG2_TABLES = """
-CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT, type TEXT, serialization_format TEXT,
-                    offered_qos_profiles TEXT, type_description_hash TEXT);
-CREATE TABLE message_definitions(id INTEGER PRIMARY KEY, topic_type TEXT, encoding TEXT,
-                                 encoded_message_definition TEXT, type_description_hash TEXT);
-CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER, timestamp INTEGER, data BLOB);
-"""
-
-
-def _rebuild_from_pages(src: Path, dest: Path) -> tuple[int, int, int]:
-    """Write the rosbag2 rows found on the leaf pages of ``src`` to a new database ``dest``.
-
-    Rows are told apart by their columns (the b-tree that says which table a leaf belongs to
-    may be lost): messages (rowid, topic id, time, blob), topics (rowid and 4 or 5 texts, the
-    name starting with '/'), message definitions (rowid and 4 texts, encoding ros2msg or
-    ros2idl). Message ids run 1, 2, 3... in a bag, but a missing id cannot be told from a lost
-    page: only the run of consecutive ids from the smallest is kept.
-
-    Returns:
-        (first id, messages kept, messages found past the first missing id).
-    """
-    topics, defs, msgs = {}, {}, {}
-    for row in table_rows(src):
-        v = row.values
-        texts = len(v) > 1 and all(isinstance(x, str) for x in v[1:])
-        if len(v) == 4 and type(v[1]) is int and type(v[2]) is int and isinstance(v[3], bytes):
-            msgs[row.rowid] = v[1:]
-        elif texts and len(v) in (5, 6) and v[1].startswith("/"):
-            topics[row.rowid] = (*v[1:], "") if len(v) == 5 else v[1:]
-        elif texts and len(v) == 5 and v[2] in ("ros2msg", "ros2idl"):
-            defs[row.rowid] = v[1:]
-    first = min(msgs, default=1)
-    kept = 0
-    while first + kept in msgs:
-        kept += 1
-    con = sqlite3.connect(dest)
-    try:
-        con.executescript("PRAGMA journal_mode=OFF;" + _ROSBAG2_TABLES)
-        con.executemany("INSERT INTO topics VALUES (?, ?, ?, ?, ?, ?)", [(k, *t) for k, t in topics.items()])
-        con.executemany("INSERT INTO message_definitions VALUES (?, ?, ?, ?, ?)", [(k, *d) for k, d in defs.items()])
-        con.executemany("INSERT INTO messages VALUES (?, ?, ?, ?)", ((i, *msgs[i]) for i in range(first, first + kept)))
-        con.commit()
-    finally:
-        con.close()
-    return first, kept, len(msgs) - kept
 
 
 def _rows(con: sqlite3.Connection, problem: list[str]) -> Iterator[tuple[int, int, bytes]]:

@@ -7,14 +7,17 @@ lost some of them, and SQLite then reports "database disk image is malformed" al
 leaf pages, which hold the rows, are still there. ``table_rows`` reads every table-leaf page
 (type 0x0D) of the file on its own: its cells (payload length, rowid, record), with overflow
 pages followed when they lie inside the file. Which table a row belongs to is not known here
-(that needs the lost interior pages); the caller tells tables apart by their columns.
+(that needs the lost interior pages). ``rebuild_rosbag2`` tells rosbag2's tables apart by
+their columns and writes what it finds into a new database that SQLite reads as usual.
 
-Format: https://www.sqlite.org/fileformat2.html (sections 1.3, 1.6, 2.1). Pure Python (struct).
+Format: https://www.sqlite.org/fileformat2.html (sections 1.3, 1.6, 2.1). Pages are read in pure
+Python (struct); SQLite only writes the rebuilt database.
 """
 
 from __future__ import annotations
 
 import mmap
+import sqlite3
 import struct
 from collections.abc import Iterator
 from pathlib import Path
@@ -156,3 +159,50 @@ def _varint(buf: Any, pos: int) -> tuple[int, int]:
         if b < 0x80:
             return value, pos + i + 1
     return (value << 8) | buf[pos + 8], pos + 9
+
+
+_ROSBAG2_TABLES = """
+CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT, type TEXT, serialization_format TEXT,
+                    offered_qos_profiles TEXT, type_description_hash TEXT);
+CREATE TABLE message_definitions(id INTEGER PRIMARY KEY, topic_type TEXT, encoding TEXT,
+                                 encoded_message_definition TEXT, type_description_hash TEXT);
+CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER, timestamp INTEGER, data BLOB);
+"""
+
+
+def rebuild_rosbag2(src: Path, dest: Path) -> tuple[int, int, int]:
+    """Write the rosbag2 rows found on the leaf pages of ``src`` to a new database ``dest``.
+
+    Rows are told apart by their columns (the b-tree that says which table a leaf belongs to
+    may be lost): messages (rowid, topic id, time, blob), topics (rowid and 4 or 5 texts, the
+    name starting with '/'), message definitions (rowid and 4 texts, encoding ros2msg or
+    ros2idl). Message ids run 1, 2, 3... in a bag, but a missing id cannot be told from a lost
+    page: only the run of consecutive ids from the smallest is kept.
+
+    Returns:
+        (first id, messages kept, messages found past the first missing id).
+    """
+    topics, defs, msgs = {}, {}, {}
+    for row in table_rows(src):
+        v = row.values
+        texts = len(v) > 1 and all(isinstance(x, str) for x in v[1:])
+        if len(v) == 4 and type(v[1]) is int and type(v[2]) is int and isinstance(v[3], bytes):
+            msgs[row.rowid] = v[1:]
+        elif texts and len(v) in (5, 6) and v[1].startswith("/"):
+            topics[row.rowid] = (*v[1:], "") if len(v) == 5 else v[1:]
+        elif texts and len(v) == 5 and v[2] in ("ros2msg", "ros2idl"):
+            defs[row.rowid] = v[1:]
+    first = min(msgs, default=1)
+    kept = 0
+    while first + kept in msgs:
+        kept += 1
+    con = sqlite3.connect(dest)
+    try:
+        con.executescript("PRAGMA journal_mode=OFF;" + _ROSBAG2_TABLES)
+        con.executemany("INSERT INTO topics VALUES (?, ?, ?, ?, ?, ?)", [(k, *t) for k, t in topics.items()])
+        con.executemany("INSERT INTO message_definitions VALUES (?, ?, ?, ?, ?)", [(k, *d) for k, d in defs.items()])
+        con.executemany("INSERT INTO messages VALUES (?, ?, ?, ?)", ((i, *msgs[i]) for i in range(first, first + kept)))
+        con.commit()
+    finally:
+        con.close()
+    return first, kept, len(msgs) - kept
