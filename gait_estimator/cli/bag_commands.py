@@ -189,7 +189,7 @@ def cmd_repair(args: argparse.Namespace) -> int:
     topics = ", ".join(f"{t} {n}" for t, n in sorted(result.counts.items()))
     print(f"wrote {result.out} ({result.storage}, {result.messages} messages: {topics})")
     for topic in result.skipped_topics:
-        print(f"note: not copied: {topic} (message type unknown to the ROS 2 Jazzy type store)")
+        print(f"note: not copied: {topic} (type unknown to the ROS 2 Jazzy type store, no definition in the bag)")
     if not result.recovered:
         print(f"note: {args.bag} was intact; the copy holds the same messages")
     return 0

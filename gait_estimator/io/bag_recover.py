@@ -8,8 +8,11 @@ What counts as damaged (``damage``):
 * an ``.db3`` file shorter than its header says, or with a ``-wal`` / ``-journal`` file left
   beside it (the last transaction never finished): the database is read from a copy in a
   temporary directory, where SQLite rolls back the unfinished transaction or replays the
-  committed part of the write-ahead log, up to the first page it cannot read; the original
-  files are never opened for writing;
+  committed part of the write-ahead log; the original files are never opened for writing.
+  When SQLite stops early (a cut lost interior b-tree pages of the messages table), the
+  table-leaf pages still in the file are read on their own (``sqlite_pages.py``): topics,
+  message definitions, and the messages of consecutive ids from the first up to the first
+  missing id (a lost page cannot be told from a gap);
 * a bag directory whose ``metadata.yaml`` is missing or unreadable, lists files that are
   missing, misses files that are there, or (``count_disagreement``) gives message counts its
   files do not hold: the storage files are read on their own.
@@ -37,6 +40,7 @@ import yaml
 
 from ..core.errors import RecordingError
 from .mcap_scan import McapScan, has_end_magic, iter_mcap
+from .sqlite_pages import rebuild_rosbag2
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -225,7 +229,8 @@ class _McapStorage(_Storage):
             self.topics.append(_Topic(ch.id, ch.topic, name, msgdef, "", ch.message_encoding, qos))
         self.counts, self.first_ns, self.last_ns = dict(scan.counts), scan.first_ns, scan.last_ns
         if not scan.complete:
-            self.ends = f"{path.name} ends at byte {scan.size} ({scan.problem}); complete records up to byte {scan.intact_bytes}"
+            where = scan.problem or "at a record boundary"
+            self.ends = f"{path.name} ends at byte {scan.size} ({where}); complete records up to byte {scan.intact_bytes}"
         elif not has_end_magic(path):
             self.ends = f"{path.name} ends at byte {scan.size}, inside its summary; its data section is complete"
 
@@ -240,9 +245,6 @@ class _SqliteStorage(_Storage):
     roll back the last transaction without touching the original."""
 
     def __init__(self, path: Path) -> None:
-        from rosbags.interfaces import MessageDefinition, MessageDefinitionFormat
-        from rosbags.rosbag2.metadata import parse_qos
-
         super().__init__(path)
         self._tmp = tempfile.TemporaryDirectory(prefix="gait_recover_")
         self.copy = Path(self._tmp.name) / path.name
@@ -251,7 +253,18 @@ class _SqliteStorage(_Storage):
         for side in SIDE_FILES:
             if (s := path.with_name(path.name + side)).is_file():
                 shutil.copyfile(s, self.copy.with_name(self.copy.name + side))
-        problem = ""
+        problem = self._read()
+        if problem:
+            self._read_pages(problem)
+        elif file_damage(path):
+            self.ends = f"{path.name}: every row the database still holds was read (from a copy)"
+
+    def _read(self) -> str:
+        """Topics and message counts through SQLite: '' or what stopped the read."""
+        from rosbags.interfaces import MessageDefinition, MessageDefinitionFormat
+        from rosbags.rosbag2.metadata import parse_qos
+
+        self.topics, self.counts, self.first_ns, self.last_ns = [], {}, None, None
         try:
             con = self._connect()
             try:
@@ -271,15 +284,30 @@ class _SqliteStorage(_Storage):
                         int(r["id"]), r["name"], r["type"], defs.get(r["type"]) or none,
                         r.get("type_description_hash") or "", r["serialization_format"], qos,
                     ))
-                problem = self._count(con)
+                return self._count(con)
             finally:
                 con.close()
         except sqlite3.DatabaseError as exc:
-            problem = f"unreadable database: {exc}"
-        if problem:
-            self.ends = f"{path.name}: reading stopped after {sum(self.counts.values())} message(s) ({problem})"
-        elif file_damage(path):
-            self.ends = f"{path.name}: every row the database still holds was read (from a copy)"
+            return f"unreadable database: {exc}"
+
+    def _read_pages(self, problem: str) -> None:
+        """SQLite stopped early (a cut file lost interior b-tree pages): rebuild the tables from
+        the leaf pages still in the file (``sqlite_pages``) and read that if it holds more."""
+        name, by_sql = self.path.name, sum(self.counts.values())
+        rebuilt = self.copy.with_name("pages_" + self.copy.name)
+        first, kept, left = rebuild_rosbag2(self.copy, rebuilt)
+        self.ends = f"{name}: reading stopped after {by_sql} message(s) ({problem})"
+        if kept <= by_sql:
+            return
+        self.copy = rebuilt
+        if again := self._read():
+            self.ends = f"{name}: unreadable even page by page ({again})"
+            return
+        past = f"; {left} row(s) past the first missing id left out" if left else ""
+        self.ends = (
+            f"{name}: SQLite stopped ({problem}); read page by page: messages with ids {first} to "
+            f"{first + kept - 1}, up to the first id whose page is lost{past}"
+        )
 
     def _count(self, con: sqlite3.Connection) -> str:
         problem: list[str] = []

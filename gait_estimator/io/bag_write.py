@@ -6,14 +6,19 @@
   types and layouts of ``outputs.py`` (what the live node publishes), stamped with the input
   stamps.
 
-Bags are written as rosbag2 metadata version 8, the format of ROS 2 Jazzy's ``ros2 bag``.
+Bags are written as rosbag2 metadata version 8, the format of ROS 2 Jazzy's ``ros2 bag``, into
+a temporary directory beside the target that is renamed to it when complete (``staged_writer``).
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import shutil
 import struct
+import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -80,16 +85,40 @@ def offered_qos(depth: int) -> list[Any]:
     ]
 
 
-def _writer(path: str | Path, storage: str) -> Any:
+@contextlib.contextmanager
+def staged_writer(path: str | Path, storage: str) -> Iterator[Any]:
+    """An open rosbags ``Writer`` for a new bag directory ``path``, writing into a temporary
+    directory beside it. On a clean exit the files are fsynced and the directory renamed to
+    ``path``, so an interrupted write never leaves a half-written bag under that name; on an
+    error nothing is left."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     if storage not in STORAGES:
         raise GaitEstimatorError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
-    p = Path(path)
-    if p.exists():
-        raise GaitEstimatorError(f"{p}: already exists; rosbag2 bags are written to a new directory")
+    target = Path(path)
+    if target.exists():
+        raise GaitEstimatorError(f"{target}: already exists; rosbag2 bags are written to a new directory")
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-    return Writer(p, version=BAG_VERSION, storage_plugin=plugin)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        staged = work / target.name  # rosbags names the storage file after the directory
+        with Writer(staged, version=BAG_VERSION, storage_plugin=plugin) as writer:
+            yield writer
+        for f in staged.iterdir():
+            _fsync(f)
+        os.rename(staged, target)
+        _fsync(target.parent)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def recording_stamps(rec: Recording, start_ns: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -176,8 +205,7 @@ def write_input_bag(
     stamps, logs = recording_stamps(rec, start_ns)
     data = serialize_inputs(rec, stamps, msg_type=msg_type, units=units, joint_names=joint_names)
     msgtype = INPUT_MSGTYPES[msg_type]
-    writer = _writer(path, storage)
-    with writer:
+    with staged_writer(path, storage) as writer:
         conn = writer.add_connection(
             normalize_topic(topic), msgtype, typestore=typestore(), offered_qos_profiles=offered_qos(100)
         )
@@ -251,8 +279,7 @@ def write_output_bag(
     phase = _ArrayTemplate(lambda i: serialize(t[FLOAT64](data=float(tr.phase[i])), FLOAT64), tr.phase[:, None], tail=0)
     modes = [bytes(serialize(t[STRING](data=name), STRING)) for name in tr.mode_names]
     counts = dict.fromkeys(OUTPUT_MSGTYPES, 0)
-    writer = _writer(path, storage)
-    with writer:
+    with staged_writer(path, storage) as writer:
         conns = {
             name: writer.add_connection(ns + name, ty, typestore=ts, offered_qos_profiles=offered_qos(10))
             for name, ty in OUTPUT_MSGTYPES.items()

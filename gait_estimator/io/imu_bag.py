@@ -286,13 +286,12 @@ def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray,
             sensor: a list of four (T, 4) arrays or None).
         topics: Four topic names (default ``/imu/<channel>``).
     """
-    from .bag_write import _writer, offered_qos
+    from .bag_write import offered_qos, staged_writer
 
     ts = typestore()
     names = ["/" + t.lstrip("/") for t in (topics or DEFAULT_IMU_TOPICS)]
     stamps = np.broadcast_to(np.asarray(stamps_ns, dtype=np.int64), gyro_rps.shape[:2])
-    writer = _writer(path, storage)
-    with writer:
+    with staged_writer(path, storage) as writer:
         conns = [writer.add_connection(n, IMU, typestore=ts, offered_qos_profiles=offered_qos(100)) for n in names]
         for k in range(stamps.shape[1]):
             for c in range(N_CHANNELS):

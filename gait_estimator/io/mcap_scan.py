@@ -132,6 +132,9 @@ def iter_mcap(scan: McapScan, with_data: bool = True) -> Iterator[tuple[int, int
     if buf[: min(8, scan.size)] != MAGIC[: min(8, scan.size)]:
         scan.problem = "not an mcap file (no magic at the start)"
         return
+    if scan.size < len(MAGIC):
+        scan.problem = "cut inside the magic at the start"
+        return
     yield from _walk(buf, 8, scan.size, 0, scan, with_data, top=True)
 
 
