@@ -245,6 +245,31 @@ def test_pairer_waits_for_a_silent_sensor_and_drops_unpaired_messages():
     assert got == [] and max(len(d) for d in q.queues) <= 50
 
 
+def test_a_restarted_sensor_stream_is_taken_up_again():
+    """A driver restart or a bag played again: stamps jump back by more than restart_back_s. The
+    sensor starts afresh instead of rejecting every later message; the pairer drops what was queued
+    under the old stamps and pairs the new ones once every sensor has restarted."""
+    period = 5_000_000
+    inputs = [SensorInput(restart_back_s=1.0) for _ in range(4)]
+    p = ImuPairer(tolerance_s=0.002)
+    out = []
+    for start in (50_000_000_000, 10_000_000_000):  # 50 s, then restarted at 10 s
+        for k in range(40):
+            for c in range(4):
+                t = start + k * period
+                inputs[c].convert(t, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+                out += [stamp for stamp, _ in p.push(c, t, k)]
+    assert [i.restarts for i in inputs] == [1, 1, 1, 1]
+    assert len(out) == 80 and out[40] == 10_000_000_000 and np.all(np.diff(out[40:]) == period)
+    with pytest.raises(SampleRejected) as err:  # a step back within restart_back_s stays a bad stamp
+        inputs[0].convert(10_000_000_000 + 30 * period, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+    assert err.value.reason == NON_INCREASING_STAMP
+    never = SensorInput(restart_back_s=0.0)
+    never.convert(50_000_000_000, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+    with pytest.raises(SampleRejected):
+        never.convert(10_000_000_000, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+
+
 def test_pairing_tolerance_is_checked_and_measured():
     with pytest.raises(ValueError, match="pairing tolerance must be a finite number of seconds >= 0"):
         ImuPairer(-0.001)

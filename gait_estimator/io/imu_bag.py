@@ -81,7 +81,7 @@ def is_imu_bag(p: Path) -> bool:
 def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list | None, tolerance_s: float,
                fusion: FusionParams):
     """Messages (sensor, log_ns, msg) -> paired (stamp_ns, log_ns, ups, gyro, acc) and rejections."""
-    inputs = [SensorInput(rate_hz, params=fusion) for _ in range(N_CHANNELS)]
+    inputs = [SensorInput(rate_hz, params=fusion, restart_back_s=0.0) for _ in range(N_CHANNELS)]  # one recording
     if bias is not None:
         for s, b in zip(inputs, bias, strict=False):
             s.set_gyro_bias(b)

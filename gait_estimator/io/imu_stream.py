@@ -27,7 +27,7 @@ from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import DEFAULT_FUSION, STANDARD_GRAVITY, CalibrationError, FusionParams, ImuCalibration, RawFusion, Vec3
 from ..core.imu_learn import DEFAULT_LEARN, ImuLearnParams, Standing, find_standing, learn_calibration
 from .atomic import atomic_write_text
-from .stream import NON_FINITE, NON_INCREASING_STAMP, SampleRejected
+from .stream import NON_FINITE, NON_INCREASING_STAMP, STREAM_RESTART_S, SampleRejected
 
 ZERO_NORM = "zero_norm"
 UNPAIRED = "unpaired"
@@ -52,15 +52,21 @@ class SensorInput:
         rate_hz: Nominal rate for the raw-input fusion.
         frame_id: The ``header.frame_id`` this sensor's messages must carry ('' = any).
         params: Settings of the raw-input fusion.
+        restart_back_s: A stamp more than this (s) before the previous one is a restarted sensor
+            (a driver restart, a bag played again): accepted, with the fusion started afresh and
+            ``restarts`` counted; a smaller step back is rejected (0 = always rejected).
     """
 
-    def __init__(self, rate_hz: float = 200.0, frame_id: str = "", params: FusionParams = DEFAULT_FUSION) -> None:
+    def __init__(self, rate_hz: float = 200.0, frame_id: str = "", params: FusionParams = DEFAULT_FUSION,
+                 restart_back_s: float = STREAM_RESTART_S) -> None:
         self._rate_hz = rate_hz
         self.params = params
         self.frame_id = frame_id
+        self.restart_back_ns = round(restart_back_s * 1e9)
         self.fusion: RawFusion | None = None
         self.gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
         self.last_ns: int | None = None
+        self.restarts = 0
 
     def convert(self, stamp_ns: int, orientation: Any, orientation_cov0: float, gyro_rps: Any,
                 acc_mps2: Any, frame_id: str = "") -> tuple[Vec3, Vec3, Vec3]:
@@ -69,8 +75,12 @@ class SensorInput:
             raise SampleRejected(WRONG_FRAME, f"frame_id {frame_id!r}, expected {self.frame_id!r}")
         last = self.last_ns
         if last is not None and stamp_ns <= last:
-            raise SampleRejected(NON_INCREASING_STAMP,
-                                 f"stamp {stamp_ns * 1e-9:.6f} s is not after the previous {last * 1e-9:.6f} s")
+            if not 0 < self.restart_back_ns < last - stamp_ns:
+                raise SampleRejected(NON_INCREASING_STAMP,
+                                     f"stamp {stamp_ns * 1e-9:.6f} s is not after the previous {last * 1e-9:.6f} s")
+            self.restarts += 1
+            self.fusion = None
+            last = None
         gx, gy, gz = gyro_rps
         if orientation_cov0 != -1.0:
             x, y, z, w = orientation
@@ -142,11 +152,19 @@ class ImuPairer:
         self.max_queue = max_queue
         self.queues: list[deque] = [deque() for _ in range(N_CHANNELS)]
         self.dropped: Counter = Counter()  # unpaired messages per sensor name
+        self._newest = [-1] * N_CHANNELS
 
     def push(self, sensor: int, stamp_ns: int, item: Any) -> list[tuple[int, list[Any]]]:
         """Add one accepted message; returns the samples it completes: (stamp_ns = the latest
         of the four, [item per sensor])."""
         queues = self.queues
+        if stamp_ns < self._newest[sensor]:  # a restarted sensor: drop what was queued under the old stamps
+            limit = stamp_ns + self.tolerance_ns
+            for i, old in enumerate(queues):
+                kept = [m for m in old if m[0] <= limit]
+                self.dropped[CHANNELS[i]] += len(old) - len(kept)
+                queues[i] = deque(kept)
+        self._newest[sensor] = stamp_ns
         q = queues[sensor]
         q.append((stamp_ns, item))
         if len(q) > self.max_queue:
