@@ -238,18 +238,6 @@ def evaluate(
     names, matrix = _confusion(pred, labels, evaluated)
     settle = settle_time(pred)
     steady = evaluated & (time_in_run(t, labels) >= settle)
-    per_mode = {
-        n: {
-            "samples": int(rows.sum()),
-            "accuracy": _ratio(correct[rows].sum(), rows.sum()),
-            "steady_samples": int((rows & steady).sum()),
-            "steady_accuracy": _ratio(correct[rows & steady].sum(), (rows & steady).sum()),
-            "accepted_predictions": list(accepted.get(n, (n,))),
-            **_stats(err[good & rows], "phase_error"),
-            **_stats(err[has_phase & rows], "phase_error_all"),
-        }
-        for n, rows in ((n, evaluated & (labels == n)) for n in names if (labels[evaluated] == n).any())
-    }
     metrics: dict[str, Any] = {
         "predictions": pred.source,
         "truth": truth.source,
@@ -262,7 +250,7 @@ def evaluate(
             "columns": "predicted",
             "prediction_modes": [n for n in names if n in pred.sse_modes or (pred.mode[evaluated] == n).any()],
         },
-        "per_mode": per_mode,
+        "per_mode": _per_mode(al, names, accepted, err, steady),
         **_stats(err[good], "phase_error"),
         **_stats(err[has_phase], "phase_error_all"),
         "steady": {
@@ -280,14 +268,40 @@ def evaluate(
             "with_phase_truth": int(has_phase.sum()),
             "match_tolerance_s": tol,
         },
-        "phase_truth": {
-            "heel_strikes": heel_strikes.method if heel_strikes is not None else "none",
-            "count": int(hs.size),
-            "strides": len(stride_bounds(np.sort(hs), options)[0]) if hs.size else 0,
-        },
+        "phase_truth": _phase_truth_counts(heel_strikes, options),
         "units": "phase errors are fractions of a stride (0.01 = 1 % of the gait cycle); delays in seconds",
     }
     return Evaluation(metrics, al)
+
+
+def _per_mode(al: Aligned, names: list[str], accepted: Mapping[str, tuple[str, ...]], err: np.ndarray,
+              steady: np.ndarray) -> dict[str, dict[str, Any]]:
+    """The metrics of every truth mode with evaluated samples: accuracy (all and steady), phase error."""
+    labels, correct, evaluated = al.truth, al.correct, al.evaluated
+    has_phase = evaluated & np.isfinite(al.phase_true)
+    good = has_phase & correct
+    return {
+        n: {
+            "samples": int(rows.sum()),
+            "accuracy": _ratio(correct[rows].sum(), rows.sum()),
+            "steady_samples": int((rows & steady).sum()),
+            "steady_accuracy": _ratio(correct[rows & steady].sum(), (rows & steady).sum()),
+            "accepted_predictions": list(accepted.get(n, (n,))),
+            **_stats(err[good & rows], "phase_error"),
+            **_stats(err[has_phase & rows], "phase_error_all"),
+        }
+        for n, rows in ((n, evaluated & (labels == n)) for n in names if (labels[evaluated] == n).any())
+    }
+
+
+def _phase_truth_counts(heel_strikes: HeelStrikes | None, options: DetectionOptions | None) -> dict[str, Any]:
+    """Where the phase truth came from: heel-strike method, count and whole strides."""
+    hs = heel_strikes.times_s if heel_strikes is not None else np.empty(0)
+    return {
+        "heel_strikes": heel_strikes.method if heel_strikes is not None else "none",
+        "count": int(hs.size),
+        "strides": len(stride_bounds(np.sort(hs), options)[0]) if hs.size else 0,
+    }
 
 
 def _confusion(pred: PredictionTable, labels: np.ndarray, evaluated: np.ndarray) -> tuple[list[str], np.ndarray]:

@@ -195,24 +195,8 @@ def train_library(recordings: Sequence[Recording], name: str, options: TrainOpti
         for lab in rec.labels:
             if lab and lab not in order:
                 order.append(lab)
-        hs = heel_strikes(rec, opts.heel_strikes, rate, opts.detection)
-        if hs.times_s.size == 0:
-            raise GaitEstimatorError(f"{rec.source}: no heel strikes found ({hs.method})")
-        bounds, not_strides = stride_bounds(hs.times_s, opts.detection)
-        hs_report[rec.source] = {
-            "method": hs.method,
-            "heel_strikes": int(hs.times_s.size),
-            "intervals_outside_limits": [[round(a, 4), round(b, 4)] for a, b in not_strides.tolist()],
-        }
+        per_mode, hs_report[rec.source] = _labelled_strides(rec, rate, opts, skipped)
         uni = resample_uniform(rec, rate)
-        per_mode: dict[str, list[np.ndarray]] = {}
-        for (a, b), labs in zip(bounds, _stride_labels(rec, bounds), strict=True):
-            named = labs - {""}
-            if len(named) > 1 or (named and "" in labs):
-                skipped.append({"source": rec.source, "start_s": round(float(a), 4), "duration_s": round(float(b - a), 4),
-                                "reason": "spans labels " + ", ".join(sorted(repr(x) for x in labs))})
-            elif named:
-                per_mode.setdefault(next(iter(named)), []).append(np.array([a, b]))
         for mode, rows in per_mode.items():
             segments.setdefault(mode, []).append((rec.source, uni, np.array(rows)))
 
@@ -227,7 +211,36 @@ def train_library(recordings: Sequence[Recording], name: str, options: TrainOpti
         kernel, infos = train_mode(mode, parts, rate, opts)
         report[mode] = infos
         modes.append(kernel)
-    sources = [r.source for r in recordings]
+    lib = KernelLibrary(name, tuple(modes), _provenance([r.source for r in recordings], rate, opts, hs_report))
+    return TrainResult(lib, report, skipped, hs_report)
+
+
+def _labelled_strides(rec: Recording, rate: float, opts: TrainOptions,
+                      skipped: list[dict[str, Any]]) -> tuple[dict[str, list[np.ndarray]], dict[str, Any]]:
+    """The strides of ``rec`` within one label each, as (start, end) seconds per mode, and the
+    heel-strike report of ``rec``; strides spanning labels are appended to ``skipped``."""
+    hs = heel_strikes(rec, opts.heel_strikes, rate, opts.detection)
+    if hs.times_s.size == 0:
+        raise GaitEstimatorError(f"{rec.source}: no heel strikes found ({hs.method})")
+    bounds, not_strides = stride_bounds(hs.times_s, opts.detection)
+    report = {
+        "method": hs.method,
+        "heel_strikes": int(hs.times_s.size),
+        "intervals_outside_limits": [[round(a, 4), round(b, 4)] for a, b in not_strides.tolist()],
+    }
+    per_mode: dict[str, list[np.ndarray]] = {}
+    for (a, b), labs in zip(bounds, _stride_labels(rec, bounds), strict=True):
+        named = labs - {""}
+        if len(named) > 1 or (named and "" in labs):
+            skipped.append({"source": rec.source, "start_s": round(float(a), 4), "duration_s": round(float(b - a), 4),
+                            "reason": "spans labels " + ", ".join(sorted(repr(x) for x in labs))})
+        elif named:
+            per_mode.setdefault(next(iter(named)), []).append(np.array([a, b]))
+    return per_mode, report
+
+
+def _provenance(sources: list[str], rate: float, opts: TrainOptions, hs_report: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The trained library's provenance: sources, version, rate, rules and the data's license."""
     provenance = {
         "source": "trained from " + ", ".join(sources),
         "built_by": f"gait-estimator train (gait_estimator {__version__})",
@@ -246,8 +259,7 @@ def train_library(recordings: Sequence[Recording], name: str, options: TrainOpti
     lic = _data_license(sources)
     if lic:
         provenance["license"] = lic
-    lib = KernelLibrary(name, tuple(modes), provenance)
-    return TrainResult(lib, report, skipped, hs_report)
+    return provenance
 
 
 def _data_license(sources: Sequence[str]) -> str:

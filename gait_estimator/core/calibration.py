@@ -161,6 +161,19 @@ class WalkingCalibration:
         if self.recency_waits and self.strides == self.params.recency_after_strides:
             self.matcher.set_recency_half_life(self.half_life)
 
+    def stride_state(self) -> np.ndarray:
+        """The stride tracker's state after the last sample, as the compiled steps advance it
+        (``IncrementalMatcher.run_steps``): (known, mode, phase, passed_mid, began_in_mode)."""
+        last = self._last
+        if last is None:
+            return np.zeros(5)
+        return np.array([1.0, last.mode, last.phase, float(last.passed_mid), float(last.began_in_mode)])
+
+    def set_stride_state(self, state: np.ndarray) -> None:
+        """Take the stride tracker's state in the form ``stride_state`` gives."""
+        known, mode, phase, passed_mid, began_in_mode = state.tolist()
+        self._last = _StrideTrack(int(mode), phase, passed_mid > 0, began_in_mode > 0) if known > 0 else None
+
     def _confident_stride_end(self, est: Estimate) -> bool:
         """True at a heel strike (the phase wrapped) that ends a stride reported as one mode (near
         copies count as one) from the previous heel strike on, whose phase passed mid-stride,

@@ -309,25 +309,3 @@ def run_steps(  # pragma: no cover - compiled
 
 run_steps = njit(cache=True, nogil=True)(run_steps)
 
-
-@njit(cache=True, nogil=True)
-def phase_rates(time_s, mode, phase, ready, alpha, state, out):  # pragma: no cover - compiled
-    """``Supervisor._phase_rate`` over a run of steps: ``state`` = (has_last, last time, last
-    mode, last phase, rate), in place; ``alpha`` per step the smoothing weight for the time since
-    the previous ready step (precomputed with math.exp); nan while not ready."""
-    for g in range(time_s.shape[0]):
-        if not ready[g]:
-            out[g] = np.nan
-            continue
-        t, m, p = time_s[g], mode[g], phase[g]
-        has, lt, lm, lp = state[0] > 0.0, state[1], int(state[2]), state[3]
-        state[0], state[1], state[2], state[3] = 1.0, t, m, p
-        if has and lm == m and t > lt:
-            dt = t - lt
-            dphi = (p - lp + 0.5) % 1.0 - 0.5
-            inst = dphi / dt
-            if np.isnan(state[4]):
-                state[4] = inst
-            else:
-                state[4] += alpha[g] * (inst - state[4])
-        out[g] = state[4]

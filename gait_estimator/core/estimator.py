@@ -23,7 +23,7 @@ import numpy as np
 from .adapt import KernelAdapter, Personaliser
 from .calibration import WalkingCalibration
 from .channels import Sample, sample_values
-from .gaps import GapCheck, GapParams
+from .gaps import NO_GAP, GapCheck, GapParams, GapVerdict
 from .kernels import KernelLibrary
 from .options import (  # noqa: F401  (re-exported: the options live beside the pipeline for its users)
     DEFAULT_TIME_SCALES,
@@ -76,7 +76,8 @@ class Estimator:
         """Window restarts caused by gaps longer than ``max_gap_s``."""
         self.calibration_resets = 0
         """Gaps longer than ``calibration_reset_gap_s`` that made the calibrations start again."""
-        self._last: Estimate | None = None  # the latest grid estimate, with resampling
+        self.grid_estimate: Estimate | None = None
+        """With resampling, the latest grid estimate (the one carried forward to input samples)."""
 
     @property
     def mode_names(self) -> list[str]:
@@ -110,18 +111,23 @@ class Estimator:
         """
         x = sample_values(sample_deg)  # four floats: no numpy call per sample before the matcher
         gap = self.gaps.admit(time_s, x)
+        if gap is not NO_GAP:
+            self.on_gap(gap)
+        if self.resampler is None:
+            return self._step(time_s, x)
+        for t, p in self.resampler.push(time_s, x):
+            self.grid_estimate = self._step(t, p)
+        assert self.grid_estimate is not None  # the first sample of a stream is a grid point
+        return self.grid_estimate.at(time_s)
+
+    def on_gap(self, gap: GapVerdict) -> None:
+        """Do what a gap in the stamps asks (``GapCheck``): restart the window, forget the calibrations."""
         if gap.restart_window:
             self._restart_window()
             self.resets += 1
         if gap.reset_calibration and self.calibration.active:
             self.calibration.reset()
             self.calibration_resets += 1
-        if self.resampler is None:
-            return self._step(time_s, x)
-        for t, p in self.resampler.push(time_s, x):
-            self._last = self._step(t, p)
-        assert self._last is not None  # the first sample of a stream is a grid point
-        return self._last.at(time_s)
 
     def _step(self, time_s: float, x: Sample) -> Estimate:
         """One sample on the library's clock through matcher, supervisor and the learning stages."""
@@ -148,7 +154,7 @@ class Estimator:
             self.resampler.reset()
         if self.personaliser is not None:
             self.personaliser.adapter.reset()
-        self._last = None
+        self.grid_estimate = None
 
     def reset_calibration(self) -> None:
         """Forget the learnt sensor offsets and cadence (after the sensors were re-donned, or for

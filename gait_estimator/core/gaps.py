@@ -7,6 +7,8 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numpy as np
+
 from .channels import Sample
 
 
@@ -67,3 +69,14 @@ class GapCheck:
         p = self.params
         restart, recalibrate = 0 < p.max_gap_s < gap, 0 < p.calibration_reset_gap_s < gap
         return GapVerdict(restart, recalibrate) if restart or recalibrate else NO_GAP
+
+    def admit_many(self, time_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The bulk form of ``admit`` for stamps (T,) already checked (finite, increasing, after
+        ``last_time``): per stamp, whether its gap restarts the window and whether it resets the
+        calibrations."""
+        prev = np.concatenate([[math.nan if self.last_time is None else self.last_time], time_s[:-1]])
+        gap = time_s - prev
+        p = self.params
+        if time_s.size:
+            self.last_time = float(time_s[-1])
+        return (0 < p.max_gap_s) & (gap > p.max_gap_s), (0 < p.calibration_reset_gap_s) & (gap > p.calibration_reset_gap_s)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,7 +27,7 @@ from .matching import (
 )
 
 __all__ = [
-    "BACKENDS", "PARALLEL_MIN_ROWS", "IncrementalMatcher", "MatchTrace", "NaiveMatcher", "StepResult",
+    "BACKENDS", "PARALLEL_MIN_ROWS", "IncrementalMatcher", "MatchTrace", "NaiveMatcher", "StepBlock", "StepResult",
     "check_channel_weights", "check_offset_tolerance", "check_recency_half_life", "check_time_scales",
 ]
 
@@ -36,6 +37,45 @@ PARALLEL_MIN_ROWS = 64
 """From this many rows (modes x time scales) on, the compiled step reads the kernels as float32
 (the same values: every path uses float32-representable kernel values) and spreads the rows over
 threads (numba's ``parallel``) when the process may use more than one CPU."""
+
+
+@dataclass(frozen=True)
+class StepBlock:
+    """The results of a run of matcher steps in bulk (``IncrementalMatcher.run_steps``; G steps,
+    M modes): what ``StepResult`` holds per step, with the variant, column and window of the best
+    mode only."""
+
+    mode_names: list[str]
+    n_scales: int
+    sse: np.ndarray  # (G, M) every mode's score
+    phases: np.ndarray  # (G, M) every mode's phase
+    best: np.ndarray  # (G,) int64: the best mode
+    variant: np.ndarray  # (G,) int64: its best time scale (index)
+    column: np.ndarray  # (G,) int64: its best kernel column
+    window: np.ndarray  # (G,) int64: its window's samples so far
+    ready: np.ndarray  # (G,) bool
+
+    @classmethod
+    def empty(cls, mode_names: Sequence[str], n_scales: int, steps: int) -> StepBlock:
+        """Room for ``steps`` steps."""
+        best, variant, column, window = np.empty((4, steps), dtype=np.int64)
+        m = len(mode_names)
+        return cls(list(mode_names), n_scales, np.empty((steps, m)), np.empty((steps, m)), best, variant, column,
+                   window, np.empty(steps, dtype=bool))
+
+    def rows(self, start: int, stop: int) -> StepBlock:
+        """Steps ``start`` .. ``stop`` - 1 (views)."""
+        s = slice(start, stop)
+        return replace(self, sse=self.sse[s], phases=self.phases[s], best=self.best[s], variant=self.variant[s],
+                       column=self.column[s], window=self.window[s], ready=self.ready[s])
+
+    def result(self, g: int) -> StepResult:
+        """Step ``g`` as a ``StepResult`` (the other modes' variant, column and window are 0)."""
+        b = int(self.best[g])
+        variant, column, window = np.zeros((3, len(self.mode_names)), dtype=np.int64)
+        variant[b], column[b], window[b] = self.variant[g], self.column[g], self.window[g]
+        return StepResult(b, self.mode_names[b], float(self.phases[g, b]), self.sse[g], self.phases[g],
+                          bool(self.ready[g]), window, variant if self.n_scales > 1 else None, column)
 
 
 class NaiveMatcher(_MatcherBase):
@@ -235,6 +275,46 @@ class IncrementalMatcher(_MatcherBase):
         if self._resync_every and self._count % self._resync_every == 0:
             self._resync()
         return result
+
+    def weighted_samples(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Samples (G, 4), degrees, as ``run_steps`` takes them: times sqrt(channel weight), and
+        their squared norms, in the float operations of ``step``."""
+        d = np.ascontiguousarray(samples * np.asarray(self._scale_values) if self._weighted else samples)
+        return d, d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2] + d[:, 3] * d[:, 3]
+
+    def run_steps(
+        self, samples: np.ndarray, squares: np.ndarray, start: int, stop: int, out: StepBlock,
+        tracker: np.ndarray | None = None, near: np.ndarray | None = None, mid_stride: tuple[float, float] = (0.25, 0.75),
+    ) -> tuple[int, bool]:
+        """Steps ``start`` .. at most ``stop`` - 1 of ``samples`` (``weighted_samples``) in one
+        compiled call (numba backend), each step's result into that row of ``out``: the state and
+        results of ``step`` sample by sample. Stops after a step that resynchronises (done, as in
+        ``step``) and, with a stride ``tracker`` (``WalkingCalibration.stride_state``, advanced in
+        place; ``near`` (M, M) its near copies), after a step that ends a whole stride, the tracker
+        then as before that step (``compiled.run_steps``). Returns the step after the last done
+        and whether it ended a stride."""
+        if self.backend != "numba":
+            raise ValueError("run_steps needs the numba backend")
+        if self._resync_every:
+            stop = min(stop, start + self._resync_every - self._count % self._resync_every)
+        track = np.zeros(0) if tracker is None else tracker
+        near = np.zeros((self.n_modes, self.n_modes), dtype=bool) if near is None else near
+        scratch_v, scratch_c, scratch_w = np.empty((3, self.n_modes), dtype=np.int64)
+        count = self._count
+        done, ended = compiled.run_steps(  # one thread: the rows' results do not depend on it
+            self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
+            self._psum_ring, self._psum, count, samples, squares, start, stop,
+            self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
+            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self.normalize, self.n_scales,
+            self._scale_allowed, self._active, self._out_col, self._out_score,
+            out.sse, out.phases, out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
+            track, near, mid_stride[0], mid_stride[1], self.max_window,
+        )
+        self._count = count + done - start
+        out.ready[start:done] = count + 1 + np.arange(done - start) >= self.max_window
+        if self._resync_every and self._count % self._resync_every == 0:
+            self._resync()
+        return done, ended
 
     def _step_numba(self, d0: float, d1: float, d2: float, d3: float, dsq: float) -> StepResult:
         m = self.n_modes

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
+
 
 class UniformResampler:
     """Linear interpolation of a time-stamped stream onto t0 + k / rate_hz.
@@ -59,3 +61,35 @@ class UniformResampler:
         self._prev_t, self._prev_x = time_s, x
         return out
 
+
+    def push_many(self, time_s: np.ndarray, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The bulk form of ``push`` for samples (T, C) whose stamps (T,) increase after the last
+        one: the grid times (G,) and values (G, C) they complete, in the float operations of
+        ``push``, and per sample how many grid points it and the samples before it emitted (T,)."""
+        t, x = time_s, samples
+        first_t, first_x, lead = np.zeros(0), np.zeros((0, x.shape[1])), 0
+        if self._t0 is None:  # the first sample starts the grid
+            self._t0, self._k, self._prev_t, self._prev_x = float(t[0]), 1, float(t[0]), tuple(x[0].tolist())
+            first_t, first_x, lead = t[:1], x[:1], 1
+            t, x = t[1:], x[1:]
+        snap = self.snap / self.rate_hz
+        upper = t + snap
+        tk = np.zeros(0)
+        if t.size:
+            count = max(0, math.floor((float(upper[-1]) - self._t0) * self.rate_hz) - self._k + 3)
+            tk = self._t0 + (self._k + np.arange(count)) / self.rate_hz
+            tk = tk[tk <= upper[-1]]
+        src = np.searchsorted(upper, tk, side="left")  # the first sample with t + snap >= t_k emits it
+        prev_t = np.concatenate([[self._prev_t], t[:-1]])
+        prev_x = np.concatenate([np.asarray(self._prev_x, dtype=np.float64).reshape(1, -1), x[:-1]])
+        snapped = tk >= t[src] - snap if tk.size else np.zeros(0, dtype=bool)
+        a = (tk - prev_t[src]) / (t[src] - prev_t[src])
+        p, v = prev_x[src], x[src]
+        grid_x = np.where(snapped[:, None], v, p + a[:, None] * (v - p))
+        grid_t = np.where(snapped, t[src], tk)
+        emitted = np.searchsorted(src, np.arange(t.size), side="right")
+        if t.size:
+            self._k += tk.size
+            self._prev_t, self._prev_x = float(t[-1]), tuple(x[-1].tolist())
+        emitted = np.concatenate([[lead] if lead else [], emitted + lead]).astype(np.int64)
+        return np.concatenate([first_t, grid_t]), np.concatenate([first_x, grid_x]), emitted

@@ -13,8 +13,11 @@ estimate:
    ``min_dwell_s`` seconds;
 5. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
 
-``Supervisor.decide`` is the one place where the reported mode and phase are decided. Every option
-off (the defaults) reports the matcher's choice unchanged.
+``Supervisor.decide`` is the one place where the reported mode and phase are decided;
+``Supervisor.decide_many`` is its bulk form (offline, ``batch.py``), and both compute confidence,
+fit and phase rate with the same functions (``relative_margin``, ``fit_rms``,
+``phase_rate_step``; compiled for the bulk form). Every option off (the defaults) reports the
+matcher's choice unchanged.
 """
 
 from __future__ import annotations
@@ -27,8 +30,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from . import compiled
 from .errors import GaitEstimatorError
-from .matcher import StepResult
+from .matcher import StepBlock, StepResult
 
 
 @dataclass(frozen=True)
@@ -75,9 +79,7 @@ class Estimate:
             return self
         phase = self.phase
         if self.ready and math.isfinite(self.phase_rate):
-            phase = (phase + self.phase_rate * dt) % 1.0
-            if phase >= 1.0:
-                phase = 0.0
+            phase = advanced_phase(phase, self.phase_rate, dt)
         return self.restamped(time_s, phase)
 
     def restamped(self, time_s: float, phase: float) -> Estimate:
@@ -86,6 +88,24 @@ class Estimate:
         return Estimate(time_s, self.mode_index, self.mode, phase, self.ready, self.sse, self.phases,
                         self.raw_mode_index, self.confidence, self.fit_rms_deg, self.held, self.phase_rate,
                         self.cadence_ratio)
+
+    @classmethod
+    def from_columns(cls, columns: Mapping[str, np.ndarray], g: int, mode_names: Sequence[str]) -> Estimate:
+        """Row ``g`` of the columns ``Supervisor.decide_many`` gives."""
+        c, m = columns, int(columns["mode_index"][g])
+        return cls(float(c["time_s"][g]), m, mode_names[m], float(c["phase"][g]), bool(c["ready"][g]), c["sse"][g],
+                   c["phases"][g], int(c["raw_mode_index"][g]), float(c["confidence"][g]), float(c["fit_rms_deg"][g]),
+                   bool(c["held"][g]), float(c["phase_rate"][g]), float(c["cadence_ratio"][g]))
+
+
+def carry_forward(columns: Mapping[str, np.ndarray], time_s: np.ndarray) -> dict[str, np.ndarray]:
+    """The bulk form of ``Estimate.at``: row i of the decided ``columns`` carried forward to
+    ``time_s[i]``, seconds."""
+    out = dict(columns)
+    out["phase"] = columns["phase"].copy()
+    _carried_rows(columns["time_s"], time_s, columns["ready"], columns["phase_rate"], out["phase"])
+    out["time_s"] = np.where(time_s - columns["time_s"] > 0.0, time_s, columns["time_s"])
+    return out
 
 
 def load_transitions(path: str | Path, mode_names: Sequence[str]) -> np.ndarray:
@@ -177,6 +197,11 @@ class Supervisor:
         self._inverse_scales: list[float] = (1.0 / np.asarray(time_scales, dtype=np.float64)).tolist()
         self.reset()
 
+    @property
+    def passes_through(self) -> bool:
+        """Every option off: the reported mode is the matcher's choice (``decide_many`` needs it)."""
+        return self.min_confidence == 0 and self.min_dwell_s == 0 and self.allowed is None
+
     def reset(self) -> None:
         self._current: int | None = None
         self._pending: int | None = None
@@ -199,7 +224,7 @@ class Supervisor:
             reported = candidate
         else:
             reported, held = self._choose(time_s, candidate, confidence)
-        fit_rms = self.fit_rms(values[reported], int(result.window[reported]))
+        fit = fit_rms(values[reported], int(result.window[reported]), self.normalized, self.active_channels)
         phase = result.phase if reported == result.mode_index else float(result.phases[reported])
         rate = self._phase_rate(time_s, reported, phase) if result.ready else math.nan
         return Estimate(
@@ -212,17 +237,48 @@ class Supervisor:
             phases=result.phases,
             raw_mode_index=result.mode_index,
             confidence=confidence,
-            fit_rms_deg=fit_rms,
+            fit_rms_deg=fit,
             held=held,
             phase_rate=rate,
             cadence_ratio=math.nan if result.variant is None else self._inverse_scales[int(result.variant[reported])],
         )
 
-    def fit_rms(self, error: float, window: int) -> float:
-        """RMS error per sample and channel, degrees, of a mode whose matcher error is ``error``
-        over a window of ``window`` samples."""
-        per_sample = max(error, 0.0) / (1 if self.normalized else max(window, 1))
-        return math.sqrt(per_sample / self.active_channels)
+    def decide_many(self, time_s: np.ndarray, steps: StepBlock) -> dict[str, np.ndarray]:
+        """The bulk form of ``decide`` for a run of matcher steps at ``time_s`` (G,), seconds: the
+        fields of their estimates as columns (G,) or (G, M), the values ``decide`` gives, the state
+        left as it leaves it. Only while the supervisor passes the matcher's choice through."""
+        if not self.passes_through:
+            raise ValueError("decide_many needs min_confidence 0, min_dwell_s 0 and no transitions")
+        n, (best, ready) = time_s.shape[0], (steps.best, steps.ready)
+        rows = np.arange(n)
+        phase, err = steps.phases[rows, best], steps.sse[rows, best]
+        other = np.partition(steps.sse, 1, axis=1)[:, 1] if steps.sse.shape[1] > 1 else np.full(n, math.inf)
+        state = np.array([0.0, 0.0, 0.0, 0.0, self._rate])  # _last (known, time, mode, phase), _rate
+        if self._last is not None:
+            state[:4] = 1.0, *self._last
+        ready_t = time_s[ready]
+        alpha = np.zeros(n)
+        alpha[ready] = self._smoothing_weights(ready_t - np.concatenate([state[1:2], ready_t[:-1]]))
+        confidence, fit, rate = np.empty((3, n))
+        _decided_rows(time_s, err, best, phase, steps.window, ready, other, alpha, state, self.normalized,
+                      self.active_channels, confidence, fit, rate)
+        if state[0] > 0:
+            self._last = (float(state[1]), int(state[2]), float(state[3]))
+        self._rate = float(state[4])
+        if ready.any():  # what _choose leaves with every option off
+            self._current, self._pending = int(best[ready][-1]), None
+        cadence = np.asarray(self._inverse_scales)[steps.variant] if steps.n_scales > 1 else np.full(n, math.nan)
+        return {
+            "time_s": time_s, "mode_index": best, "phase": phase, "ready": ready, "sse": steps.sse,
+            "phases": steps.phases, "raw_mode_index": best.copy(), "confidence": confidence, "fit_rms_deg": fit,
+            "held": np.zeros(n, dtype=bool), "phase_rate": rate, "cadence_ratio": cadence,
+        }
+
+    def _smoothing_weights(self, dt: np.ndarray) -> np.ndarray:
+        """``smoothing_weight`` of each of ``dt`` (math.exp, as ``decide``), once per distinct dt."""
+        values, inverse = np.unique(dt, return_inverse=True)
+        alpha = np.array([smoothing_weight(v, self.phase_rate_tau_s) for v in values.tolist()])
+        return alpha[inverse.reshape(-1)] if values.size else np.zeros(0)
 
     def _choose(self, time_s: float, candidate: int, confidence: float) -> tuple[int, bool]:
         low = self.min_confidence > 0 and confidence < self.min_confidence
@@ -245,16 +301,9 @@ class Supervisor:
     def _phase_rate(self, time_s: float, mode: int, phase: float) -> float:
         last = self._last
         self._last = (time_s, mode, phase)
-        if last is None or last[1] != mode or time_s <= last[0]:
-            return self._rate
-        dt = time_s - last[0]
-        dphi = (phase - last[2] + 0.5) % 1.0 - 0.5
-        inst = dphi / dt
-        if math.isnan(self._rate):
-            self._rate = inst
-        else:
-            alpha = 1.0 - math.exp(-dt / self.phase_rate_tau_s) if self.phase_rate_tau_s > 0 else 1.0
-            self._rate += alpha * (inst - self._rate)
+        if last is not None:
+            alpha = smoothing_weight(time_s - last[0], self.phase_rate_tau_s)
+            self._rate = phase_rate_step(self._rate, last[0], last[1], last[2], time_s, mode, phase, alpha)
         return self._rate
 
 
@@ -270,9 +319,75 @@ def _margin(values: list[float], sse: np.ndarray, candidate: int, argmin: int) -
     return relative_margin(values[candidate], best_other)
 
 
+# The formulas of the decision, one each for decide (Python floats) and decide_many (compiled).
+
+
 def relative_margin(own: float, best_other: float) -> float:
     """The confidence margin (best_other - own) / own of an error ``own`` over the best other
     ``best_other`` (inf when own is 0 and the other is not, 0 when both are)."""
     if own <= 0.0:
         return math.inf if best_other > 0 else 0.0
     return (best_other - own) / own
+
+
+def fit_rms(error: float, window: int, normalized: bool, channels: int) -> float:
+    """RMS error per sample and channel, degrees, of a mode whose matcher error is ``error`` over
+    a window of ``window`` samples (``normalized``: per window sample already) and ``channels``
+    channels."""
+    per_sample = (0.0 if error < 0.0 else error) / (1 if normalized else max(window, 1))
+    return math.sqrt(per_sample / channels)
+
+
+def smoothing_weight(dt: float, tau: float) -> float:
+    """Weight 1 - exp(-dt / tau) of a phase-rate reading ``dt`` s after the previous one."""
+    return 1.0 - math.exp(-dt / tau) if tau > 0 else 1.0
+
+
+def phase_rate_step(rate: float, last_time: float, last_mode: int, last_phase: float, time_s: float, mode: int,
+                    phase: float, alpha: float) -> float:
+    """The smoothed phase rate (strides/s) after a ready step: ``rate`` moved by ``alpha``
+    (``smoothing_weight``) towards the phase change over the time since the previous ready step
+    if both report the same mode (the first such reading sets it); else unchanged."""
+    if last_mode != mode or time_s <= last_time:
+        return rate
+    inst = ((phase - last_phase + 0.5) % 1.0 - 0.5) / (time_s - last_time)
+    return inst if math.isnan(rate) else rate + alpha * (inst - rate)
+
+
+def advanced_phase(phase: float, rate: float, dt: float) -> float:
+    """``phase`` advanced at ``rate`` (strides/s) over ``dt`` seconds, wrapped to [0, 1)."""
+    phase = (phase + rate * dt) % 1.0
+    return 0.0 if phase >= 1.0 else phase
+
+
+_compile = compiled.njit(cache=True, nogil=True)
+_relative_margin, _fit_rms, _phase_rate_step, _advanced_phase = (
+    _compile(f) for f in (relative_margin, fit_rms, phase_rate_step, advanced_phase))
+
+
+@_compile
+def _decided_rows(time_s, err, best, phase, window, ready, other, alpha, state, normalized, channels,
+                  confidence, fit, rate):  # pragma: no cover - compiled
+    """decide's confidence, fit and phase rate for the reported mode ``best`` of each step (its
+    error ``err``, the best other error ``other``); ``state`` = the phase-rate state (known, last
+    time, mode, phase, rate), in place; ``alpha`` per step the smoothing weight."""
+    for g in range(time_s.shape[0]):
+        confidence[g] = _relative_margin(err[g], other[g])
+        fit[g] = _fit_rms(err[g], window[g], normalized, channels)
+        if not ready[g]:
+            rate[g] = np.nan
+            continue
+        if state[0] > 0.0:
+            state[4] = _phase_rate_step(state[4], state[1], int(state[2]), state[3], time_s[g], best[g], phase[g],
+                                        alpha[g])
+        state[0], state[1], state[2], state[3] = 1.0, time_s[g], best[g], phase[g]
+        rate[g] = state[4]
+
+
+@_compile
+def _carried_rows(est_time, time_s, ready, rate, phase):  # pragma: no cover - compiled
+    """``Estimate.at`` of each row: ``phase`` advanced in place."""
+    for i in range(phase.shape[0]):
+        dt = time_s[i] - est_time[i]
+        if dt > 0.0 and ready[i] and math.isfinite(rate[i]):
+            phase[i] = _advanced_phase(phase[i], rate[i], dt)
