@@ -26,7 +26,7 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.parameter import Parameter
 
-from ..analysis.strides import MAX_STRIDE_S
+from ..analysis.strides import MAX_STRIDE_S, detect_peaks
 from ..analysis.teach import (
     HEEL_STRIKE_CHANNEL,
     TEACH_STRIDES,
@@ -81,6 +81,7 @@ class NodeTeacher:
         node.add_post_set_parameters_callback(self._apply)
         if node._library is None:
             self._warm_up()
+        self._warm_up_detection()
         start = node.get_parameter("teach_mode").value
         if start:
             self._start(start)
@@ -93,6 +94,16 @@ class NodeTeacher:
                                              self.node._config)
         for i in range(40):
             estimator.update(i / 100.0, stride[i % 16])
+
+    @staticmethod
+    def _warm_up_detection() -> None:
+        """Import the heel-strike detection (scipy.signal) now: imported at a session's first look
+        for heel strikes, it would hold the input callback for most of a second, long enough for
+        the input queue to overflow and the samples of the first strides to be lost."""
+        try:
+            detect_peaks(np.arange(3.0), np.zeros(3))
+        except ImportError:  # no 'analysis' extra: nothing to warm up
+            pass
 
     # -- parameters
 
