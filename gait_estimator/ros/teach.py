@@ -12,13 +12,15 @@ The other modes keep their state across the library change: the node keeps the i
 the last ``replay_s`` seconds (at least the longest stride at the largest time scale); a new
 ``Estimator`` for the new library replays them, so every mode's window is full at once and holds
 the same samples as before, and then adopts the old estimator's walking calibration (sensor
-offsets, cadence, typical fit). Personalised kernels (``adapt_rate``) are not carried over a
-library change.
+offsets, cadence, typical fit). Kernels personalised so far (``adapt_rate``) are the new
+library's (the taught mode's replaces the personalised one of its name); the new estimator
+personalises from them.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -178,8 +180,9 @@ class NodeTeacher:
     def _finish(self, taught: TaughtMode) -> None:
         node = self.node
         self.session = None
+        old = node._estimator
         try:
-            lib, replaced = with_mode(node._library, taught.kernel)
+            lib, replaced = with_mode(self._base_library(), taught.kernel)
             estimator = node._new_estimator(lib, node._config)
         except (GaitEstimatorError, ValueError, OSError) as exc:
             self._log(f"{taught.kernel.name}: kernel not used: {' '.join(str(exc).split())}", warn=True)
@@ -187,13 +190,12 @@ class NodeTeacher:
             return
         for t, x in self._recent:  # the same window of samples for every mode
             estimator.update(t, x)
-        old = node._estimator
-        dropped = ""
+        kept = ""
         if old is not None:
             estimator.adopt_calibration(old)
             node._resets_before += old.resets
             if old.adapter is not None and old.adapter.accepted.any():
-                dropped = f"; personalised kernels ({int(old.adapter.accepted.sum())} strides) not carried over"
+                kept = f"; personalised kernels ({int(old.adapter.accepted.sum())} strides) kept"
         node._library = lib
         node._set_estimator(estimator)
         copies = near_copies(lib, taught.kernel.name, node._config.effective_weights())
@@ -202,9 +204,18 @@ class NodeTeacher:
         self.taught = [*(n for n in self.taught if n != taught.kernel.name), taught.kernel.name]
         self.last_result = taught.summary() + (f"; near copy of {', '.join(copies)}" if copies else "")
         self._log(change_summary(taught, lib, replaced, copies)
-                  + f"; window refilled from the last {self._recent[-1][0] - self._recent[0][0]:.2f} s" + dropped,
+                  + f"; window refilled from the last {self._recent[-1][0] - self._recent[0][0]:.2f} s" + kept,
                   warn=bool(copies))
         self._clear_parameter()
+
+    def _base_library(self) -> KernelLibrary | None:
+        """The library a taught mode goes into: the running one with the kernels personalised so
+        far (``adapt_rate`` > 0), so that teaching one mode keeps what the others learnt."""
+        node = self.node
+        lib, est = node._library, node._estimator
+        if lib is None or est is None or est.adapter is None or not est.adapter.accepted.any():
+            return lib
+        return replace(est.adapted_library(), path=lib.path)
 
     def _clear_parameter(self) -> None:
         self._clearing = True
