@@ -62,6 +62,8 @@ NEAR_COPY_LENGTH_RATIO = 0.02
 """A taught kernel this close to another mode (shape RMS, degrees; |ln| of the length ratio) is
 reported as a near copy: the estimator's rule for near copies (core/estimator.py)."""
 LIVE_SOURCE = "taught live"
+TAUGHT_LIBRARY = "taught"
+"""Name of the library a node without one (``kernels: ''``) builds from its first taught mode."""
 RATE_DIGITS = 6
 """Significant digits of a rate taken from the samples' stamps (nanosecond stamps of a 230 Hz
 stream give 230.0000046 Hz; the sensor's rate is 230 Hz)."""
@@ -320,7 +322,8 @@ def _piece(uni: Recording, start_s: float, end_s: float) -> Recording:
 # The library
 
 
-def with_mode(library: KernelLibrary | None, kernel: KernelMode, name: str = "taught") -> tuple[KernelLibrary, KernelMode | None]:
+def with_mode(library: KernelLibrary | None, kernel: KernelMode,
+              name: str = TAUGHT_LIBRARY) -> tuple[KernelLibrary, KernelMode | None]:
     """``library`` with ``kernel`` added (a new name, at the end) or in place of the mode of that
     name; a library of that one mode when ``library`` is None.
 

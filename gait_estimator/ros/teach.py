@@ -246,8 +246,10 @@ class NodeTeacher:
     def message_suffix(self) -> str:
         return f"; teaching {self.session.progress()}" if self.session else ""
 
-    def status_without_library(self, name: str, received: int, accepted: int) -> DiagnosticStatus:
-        """Diagnostics before the first mode is taught (``kernels: ''``)."""
+    def status_without_library(self, name: str, received: int, accepted: int,
+                               imu: tuple[dict[str, str], list[str]] | None = None) -> DiagnosticStatus:
+        """Diagnostics before the first mode is taught (``kernels: ''``); ``imu``: the IMU
+        input's values and problems (``input_type: imu``)."""
         message = ("no kernel library: teaching " + self.session.progress() if self.session
                    else "no kernel library: set teach_mode to teach a mode")
         values = {
@@ -255,6 +257,11 @@ class NodeTeacher:
             "samples_received": str(received), "samples_accepted": str(accepted),
             **self.diagnostic_values(),
         }
-        return DiagnosticStatus(level=DiagnosticStatus.OK, name=name, message=message, hardware_id="",
+        level = DiagnosticStatus.OK
+        if imu is not None:
+            values.update(imu[0])
+            if imu[1]:
+                level, message = DiagnosticStatus.WARN, "; ".join(imu[1]) + "; " + message
+        return DiagnosticStatus(level=level, name=name, message=message, hardware_id="",
                                 values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
