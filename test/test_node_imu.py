@@ -221,6 +221,8 @@ def test_imu_input_without_a_library_learns_the_calibration_and_waits_for_teachi
     assert diag["imu_calibration_status"] == "calibrated" and path.is_file()
     assert int(diag["samples_accepted"]) > RATE, "calibrated angles go to teaching"
     assert client.estimate_count == 0
+    answer = call(client, h, RESET_CALIBRATION_SERVICE)
+    assert answer.success and "IMU calibration forgotten" in answer.message and not path.exists()
 
 
 def test_save_library_writes_the_imu_calibration_where_the_next_start_reads_it(ros, tmp_path):

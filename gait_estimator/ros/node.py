@@ -242,8 +242,11 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         """``~/reset_calibration``: forget the learnt sensor offsets and cadence (after
         re-donning, or for another wearer)."""
         est = self._estimator
-        if est is None:
-            response.success, response.message = False, "no library yet: nothing calibrated"
+        if est is None:  # no library yet: only the IMU input may have learnt something
+            response.success = self._imu is not None
+            response.message = ("no library yet" + self._imu.reset_calibration() if self._imu is not None
+                                else "no library yet: nothing calibrated")
+            self.get_logger().info(response.message)
             return response
         before, scale = est.sensor_offset_deg.copy(), est.cadence_scale
         est.reset_calibration()
