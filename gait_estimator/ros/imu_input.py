@@ -172,7 +172,7 @@ class ImuInput:
         node._guard.reject(SampleRejected(NO_FUSION, why))
         if not self.no_fusion:
             self.no_fusion = why
-            node.get_logger().error(f"raw IMU messages (no orientation) dropped: {why}")
+            node.get_logger().error(f"{why}; until then raw messages are dropped (counted as {NO_FUSION})")
 
     def _sample(self, stamp_ns: int, items: list, t0: float) -> None:
         node = self.node
