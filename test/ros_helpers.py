@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import time
 import uuid
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Container, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -204,7 +204,7 @@ class InProcess:
         rclpy.try_shutdown(context=self.context)
 
 
-def in_process_factory(monkeypatch, domains: range) -> Iterator[Callable[[int], InProcess]]:
+def in_process_factory(monkeypatch, domains: Container[int]) -> Iterator[Callable[[int], InProcess]]:
     """For a ``ros`` fixture: ``make(domain_id)`` -> an InProcess harness on that domain (one of
     the test file's ``domains``), LOCALHOST discovery; every harness is closed after the test."""
     made: list[InProcess] = []

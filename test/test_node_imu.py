@@ -1,11 +1,14 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61/62): four
-sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles; learning
-the calibration live, saving and forgetting it; bad messages and a silent sensor."""
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-64, 171-173):
+four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles;
+learning the calibration live (also without a library), saving it (also beside a saved
+library) and forgetting it; bad messages, a silent sensor, raw input without imufusion."""
 
 from __future__ import annotations
 
 import math
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +22,8 @@ from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import STANDARD_GRAVITY
 from gait_estimator.core.imu_learn import learn_calibration
 from gait_estimator.io.imu_stream import ImuPairer, SensorInput, load_calibration, save_calibration
-from gait_estimator.ros.imu_input import CALIBRATE_STANDING_SERVICE
-from gait_estimator.ros.node import RESET_CALIBRATION_SERVICE, StartupError
+from gait_estimator.ros.imu_input import CALIBRATE_STANDING_SERVICE, NO_FUSION
+from gait_estimator.ros.node import RESET_CALIBRATION_SERVICE, SAVE_LIBRARY_SERVICE, StartupError
 
 RATE = 200.0
 BASE_NS = 1_700_000_000 * 1_000_000_000
@@ -30,7 +33,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, range(60, 70))
+    yield from in_process_factory(monkeypatch, [*range(60, 70), *range(171, 174)])
 
 
 def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray, frame: str = "") -> Imu:
@@ -86,14 +89,27 @@ def publishers(client):
     return [client.node.create_publisher(Imu, t, 1000) for t in TOPICS]
 
 
-def test_imu_input_with_a_saved_calibration_equals_offline_processing(ros, tmp_path):
-    rng = np.random.default_rng(3)
-    s = synthesize(gait_angles(RATE, walk_s=6.0), RATE, random_mounts(rng), rng)
+def learnt_calibration(s, path: Path) -> Path:
+    """The calibration learnt offline from the orientations of ``s``, saved at ``path``."""
     ups = np.stack([np.array([SensorInput().convert(1, s.quat_xyzw[c, k], 0.0, (0, 0, 0), (0, 0, 1))[0]
                               for k in range(len(s.time_s))]) for c in range(4)])
     cal, _, missing = learn_calibration(s.time_s, ups)
     assert missing == ""
-    path = save_calibration(cal, tmp_path / "user.imu.yaml")
+    return save_calibration(cal, path)
+
+
+def call(client, h, service: str) -> Trigger.Response:
+    srv = client.node.create_client(Trigger, f"{h.namespace}/{h.node_name}/{service[2:]}")
+    assert srv.wait_for_service(5.0)
+    future = srv.call_async(Trigger.Request())
+    assert client.spin_until(future.done, 5.0)
+    return future.result()
+
+
+def test_imu_input_with_a_saved_calibration_equals_offline_processing(ros, tmp_path):
+    rng = np.random.default_rng(3)
+    s = synthesize(gait_angles(RATE, walk_s=6.0), RATE, random_mounts(rng), rng)
+    path = learnt_calibration(s, tmp_path / "user.imu.yaml")
     h = ros(61)
     node = h.estimator(input_type="imu", imu_calibration_path=str(path))
     client = h.client(node)
@@ -183,3 +199,68 @@ def test_configured_axes_need_no_calibration_file(ros, tmp_path):
     node._imu.reset_calibration()
     assert node._imu.calibrator.add(0.0, [(-1.0, 0.0, 0.0)] * 4, [(0.0,) * 3] * 4, [(0.0, 0.0, 1.0)] * 4) is not None
     assert not path.exists()
+
+
+def test_imu_input_without_a_library_learns_the_calibration_and_waits_for_teaching(ros, tmp_path, monkeypatch):
+    """``kernels: ''``: the node starts, learns the calibration (saved under the taught
+    library's name) and takes the angles for teaching; only diagnostics come out."""
+    monkeypatch.setenv("HOME", str(tmp_path))
+    rng = np.random.default_rng(5)
+    s = synthesize(gait_angles(RATE, walk_s=5.0), RATE, random_mounts(rng), rng)
+    h = ros(171)
+    node = h.estimator(input_type="imu", kernels="")
+    client = h.client(node)
+    pubs = publishers(client)
+    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
+    client.spin_for(1.0)
+    stream(client, pubs, make_messages(s, len(s.time_s)))
+    client.spin_for(0.5)
+    path = tmp_path / ".ros" / "gait_estimator" / "taught.imu.yaml"
+    diag = client.latest_diagnostics(3.0)
+    assert diag["modes"] == "0" and diag["imu_calibration_path"] == str(path)
+    assert diag["imu_calibration_status"] == "calibrated" and path.is_file()
+    assert int(diag["samples_accepted"]) > RATE, "calibrated angles go to teaching"
+    assert client.estimate_count == 0
+    answer = call(client, h, RESET_CALIBRATION_SERVICE)
+    assert answer.success and "IMU calibration forgotten" in answer.message and not path.exists()
+
+
+def test_save_library_writes_the_imu_calibration_where_the_next_start_reads_it(ros, tmp_path):
+    rng = np.random.default_rng(6)
+    s = synthesize(gait_angles(RATE, walk_s=5.0), RATE, random_mounts(rng), rng)
+    learnt = learnt_calibration(s, tmp_path / "learnt.imu.yaml")
+    out = tmp_path / "wearer.yaml"
+    h = ros(172)
+    node = h.estimator(input_type="imu", imu_calibration_path=str(learnt), adapt_rate=0.1,
+                       adapted_library_path=str(out))
+    client = h.client(node)
+    answer = call(client, h, SAVE_LIBRARY_SERVICE)
+    beside = tmp_path / "wearer.imu.yaml"
+    assert answer.success and f"IMU calibration written to {beside}" in answer.message, answer.message
+    for a, b in zip(load_calibration(beside).mounts, load_calibration(learnt).mounts, strict=True):
+        assert np.allclose(a.lateral, b.lateral, atol=1e-6) and np.allclose(a.proximal, b.proximal, atol=1e-6)
+    h.node_name = "restarted"
+    again = h.estimator(input_type="imu", kernels=str(out))
+    assert again._imu.path == beside and again._imu.calibrator.calibration == load_calibration(beside)
+
+
+def test_raw_input_without_imufusion_is_dropped_counted_and_named(ros, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "imufusion", None)  # `import imufusion` raises ImportError
+    rng = np.random.default_rng(7)
+    s = synthesize(gait_angles(RATE, walk_s=1.0), RATE, random_mounts(rng), rng)
+    h = ros(173)
+    for name in ("imu_pairing_tolerance_s", "imu_timeout_s"):
+        with pytest.raises(StartupError, match=f"^{name}: must be >= 0 s, got -0.1$"):
+            h.estimator(input_type="imu", **{name: -0.1})
+    node = h.estimator(input_type="imu", imu_calibration_path=str(tmp_path / "none.imu.yaml"))
+    client = h.client(node)
+    pubs = publishers(client)
+    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
+    client.spin_for(1.0)
+    stream(client, pubs, make_messages(s, 200, raw=True))  # a callback raising would raise here
+    client.spin_for(0.5)
+    diag = client.latest_diagnostics(3.0)
+    assert int(diag[f"imu_rejected_{NO_FUSION}"]) > 400 and int(diag["samples_rejected"]) > 400
+    message = client.received.diagnostics_message[-1]
+    assert "raw IMU message(s) dropped" in message and "pip install 'gait_estimator[imu]'" in message, message
+    assert client.received.diagnostics_level[-1] == 1  # WARN

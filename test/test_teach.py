@@ -11,6 +11,8 @@ import pytest
 
 from gait_estimator.analysis.strides import heel_strikes
 from gait_estimator.analysis.teach import (
+    ANALYSIS_PERIOD_S,
+    KEEP_MARGIN_S,
     StrideCollector,
     TeachOptions,
     change_summary,
@@ -46,9 +48,11 @@ def window(rec: Recording, start_s: float, stop_s: float) -> tuple[np.ndarray, n
 
 
 def offline(rec: Recording, collector: StrideCollector, mode: str):
-    """train on a labels range covering the collector's candidate strides."""
-    bounds = np.array(collector.candidates)
-    labels = np.where((rec.time_s >= bounds[0, 0]) & (rec.time_s < bounds[-1, 1]), mode, "")
+    """train on labels covering exactly the collector's candidate strides."""
+    inside = np.zeros(len(rec.time_s), dtype=bool)
+    for a, b in collector.candidates:
+        inside |= (rec.time_s >= a) & (rec.time_s < b)
+    labels = np.where(inside, mode, "")
     labelled = Recording(rec.time_s, rec.angles_deg, labels=labels, source="Multispeed")
     return train_library([labelled], "offline", TrainOptions(heel_strikes="right_shank", rate_hz=RATE_HZ))
 
@@ -164,3 +168,31 @@ def test_one_taught_mode_estimates_mode_and_phase(rec: Recording) -> None:
             truth = (e.time_s - hs[k]) / (hs[k + 1] - hs[k])
             errors.append(min(abs(e.phase - truth), 1 - abs(e.phase - truth)))
     assert errors and float(np.mean(errors)) < 0.03
+
+
+def test_minutes_without_a_stride_keep_the_buffer_bounded(rec: Recording) -> None:
+    """Ten minutes of standing while teaching: the collector keeps a few seconds of the stream
+    (not ten minutes), and strides before and after the stop still give train's kernel."""
+    t1, x1 = window(rec, 8.0, 14.0)
+    t2, x2 = window(rec, 14.0, 30.0)
+    n = round(600.0 * RATE_HZ)
+    still = x1[-1] + np.random.default_rng(1).normal(0.0, 0.05, (n, 4))
+    t = np.concatenate([t1, t1[-1] + np.arange(1, n + 1) / RATE_HZ, t2 + n / RATE_HZ])
+    x = np.concatenate([x1, still, x2])
+    c = StrideCollector("Slow", TeachOptions(strides=6), rate_hz=RATE_HZ)
+    most, events = 0, []
+    for ti, xi in zip(t, x, strict=True):
+        events += c.push(float(ti), tuple(xi))
+        most = max(most, c.buffered)
+        if c.done:
+            break
+    det = c.options.detection
+    bound = (det.max_stride_s + det.min_stride_s + KEEP_MARGIN_S + 2 * ANALYSIS_PERIOD_S) * RATE_HZ
+    assert most <= bound, f"{most} samples kept (at most {bound:.0f} expected)"
+    assert c.done, events
+    assert sum("no heel strike found in the last" in e for e in events) == 1, events
+    assert c.candidates[0][1] < t1[-1] < c.candidates[-1][0], "strides from before and after the stop"
+    doctored = Recording(t, x)
+    ref = offline(doctored, c, "Slow").library.mode("Slow")
+    assert c.result.kernel.info["strides"] == ref.info["strides"] == 6
+    np.testing.assert_allclose(c.result.kernel.samples, ref.samples, rtol=0, atol=1e-9)

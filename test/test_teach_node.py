@@ -1,7 +1,7 @@
 """Teaching modes in the running estimator_node over real DDS (loopback): from an empty library,
 and replacing a mode of a loaded one while the other modes keep their state.
 
-Domain IDs 70 and 71; LOCALHOST discovery; a namespace unique to the run.
+Domain IDs 70, 71 and 174; LOCALHOST discovery; a namespace unique to the run.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ RATE_HZ = 230.0
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, range(70, 77))
+    yield from in_process_factory(monkeypatch, [*range(70, 77), 174])
 
 
 @pytest.fixture(scope="module")
@@ -188,3 +188,24 @@ def test_replace_a_mode_keeps_the_other_modes_state(ros, multispeed: Recording, 
     # the next 100 samples (0.43 s): until the calibrations read another stride, identical
     span = slice(swap, swap + 100)
     np.testing.assert_allclose(live_sse[span][:, others], expected[span][:, others], rtol=1e-6, atol=1e-6)
+
+
+def test_teaching_keeps_the_personalised_kernels(ros, multispeed: Recording, able_bodied) -> None:
+    """With adapt_rate > 0, the library a taught mode goes into is the personalised one."""
+    h = ros(174)
+    node = h.estimator(teach_strides=3, adapt_rate=0.2)
+    client = h.client(node)
+    remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
+    assert remote.wait_for_services(5.0)
+    assert client.wait_for_node(10.0, settle_s=0.0)
+    _stream(client, multispeed, 8.0, 20.0)
+    adapted = node._estimator.adapted_library()
+    personalised = [m.name for m in adapted.modes if m.info["adapted_strides"]]
+    assert personalised, "Slow strides were adopted"
+    assert _set(client, remote, teach_mode="Taught")[0].successful
+    _stream(client, multispeed, 20.0, 28.0)
+    assert node.library.mode_names == [*able_bodied.mode_names, "Taught"], node._teacher.last_event
+    assert "personalised kernels" in node._teacher.last_event and "kept" in node._teacher.last_event
+    for name in personalised:
+        assert node.library.mode(name).info["adapted_strides"] > 0
+        assert not np.array_equal(node.library.mode(name).samples, able_bodied.mode(name).samples)

@@ -19,6 +19,12 @@ angles in degrees, CHANNELS order) as they arrive and applies ``train``'s rules
   ``train.train_mode`` on the candidates: the same averaging and rejection as ``train`` on a
   labels file covering the same strides.
 
+Memory stays bounded however long nobody walks: each candidate keeps its own stretch of the
+uniform grid (the same grid values ``train`` interpolates), and the stream itself is kept only
+for the last ``max_stride_s + min_stride_s + KEEP_MARGIN_S`` seconds, enough to find the next
+heel strike and the stride that ends there (a last heel strike before a stop whose prominence
+shows only when walking resumes later than that is not used; ``train`` would use its stride).
+
 Every event is returned as a line of text (``push``) for the node's log.
 """
 
@@ -47,11 +53,17 @@ ANALYSIS_PERIOD_S = 0.25
 """Stream time between two looks for new heel strikes."""
 CANDIDATE_FACTOR = 4
 """At most this many times ``strides`` candidate strides are kept (the oldest go first)."""
+KEEP_MARGIN_S = 1.0
+"""Stream kept beyond the longest stride plus the heel-strike confirmation delay (s)."""
+PIECE_MARGIN = 2
+"""Grid samples a candidate keeps beyond each of its heel strikes (interpolation needs one)."""
 NEAR_COPY_RMS_DEG = 1.0
 NEAR_COPY_LENGTH_RATIO = 0.02
 """A taught kernel this close to another mode (shape RMS, degrees; |ln| of the length ratio) is
 reported as a near copy: the estimator's rule for near copies (core/estimator.py)."""
 LIVE_SOURCE = "taught live"
+TAUGHT_LIBRARY = "taught"
+"""Name of the library a node without one (``kernels: ''``) builds from its first taught mode."""
 RATE_DIGITS = 6
 """Significant digits of a rate taken from the samples' stamps (nanosecond stamps of a 230 Hz
 stream give 230.0000046 Hz; the sensor's rate is 230 Hz)."""
@@ -139,6 +151,7 @@ class StrideCollector:
         self._analysed_at = -math.inf
         self.heel_strikes: list[float] = []
         self.candidates: list[tuple[float, float]] = []
+        self._pieces: list[Recording] = []  # per candidate: its stretch of the uniform grid
         self._reasons: list[str] = []
         self._silence_reported = False
         self.result: TaughtMode | None = None
@@ -218,10 +231,13 @@ class StrideCollector:
         for h in new.tolist():
             if self.heel_strikes:
                 a = self.heel_strikes[-1]
-                if h - a <= det.max_stride_s:
+                if h - a <= det.max_stride_s and a >= uni.time_s[0]:
                     self.candidates.append((a, h))
+                    self._pieces.append(_piece(uni, a, h))
                     self._reasons.append("")
                     added = True
+                elif h - a <= det.max_stride_s:  # a heel strike confirmed too late: its start is gone
+                    events.append(f"{self.mode}: stride at {a:.2f} s ({h - a:.2f} s) not used: found too late")
                 else:
                     events.append(f"{self.mode}: {h - a:.2f} s from the heel strike at {a:.2f} s to the next at "
                                   f"{h:.2f} s: not a stride (> {det.max_stride_s:g} s: a stop or a turn), not used")
@@ -237,6 +253,7 @@ class StrideCollector:
             )
         if added:
             events += self._judge(uni)
+        self._forget_before(end - (det.max_stride_s + det.min_stride_s + KEEP_MARGIN_S))
         return events
 
     def _judge(self, uni: Recording) -> list[str]:
@@ -244,13 +261,13 @@ class StrideCollector:
         the kernel once enough strides are good."""
         if len(self.candidates) > CANDIDATE_FACTOR * self.target:
             drop = len(self.candidates) - CANDIDATE_FACTOR * self.target
-            del self.candidates[:drop], self._reasons[:drop]
-            self._trim()
+            del self.candidates[:drop], self._reasons[:drop], self._pieces[:drop]
         rate = float(self.rate_hz)  # type: ignore[arg-type]
         bounds = np.array(self.candidates, dtype=np.float64)
         durations = bounds[:, 1] - bounds[:, 0]
         base_len = max(2, round(float(np.median(durations)) * rate))
-        strides = normalise_strides(uni.time_s, uni.angles_deg, bounds, base_len)
+        strides = np.concatenate([normalise_strides(p.time_s, p.angles_deg, bounds[i:i + 1], base_len)
+                                  for i, p in enumerate(self._pieces)])
         reasons, _ = reject_outliers(durations, strides, self.options.outliers)
         events = []
         before = self._reasons + [""] * (len(reasons) - len(self._reasons))
@@ -267,35 +284,46 @@ class StrideCollector:
         self._reasons = reasons
         events.append(self.progress())
         if self.good >= max(self.target, self.options.min_strides):
-            self._build(uni, rate, bounds)
+            self._build(rate, bounds)
             assert self.result is not None
             events.append(f"{self.mode}: kernel built from " + self.result.summary().split(": ", 1)[1])
         return events
 
-    def _build(self, uni: Recording, rate: float, bounds: np.ndarray) -> None:
+    def _build(self, rate: float, bounds: np.ndarray) -> None:
         opts = self.options
         train = TrainOptions(min_strides=opts.min_strides, detection=opts.detection, outliers=opts.outliers)
-        kernel, infos = train_mode(self.mode, [(LIVE_SOURCE, uni, bounds)], rate, train)
+        parts = [(LIVE_SOURCE, p, bounds[i:i + 1]) for i, p in enumerate(self._pieces)]
+        kernel, infos = train_mode(self.mode, parts, rate, train)
         info = dict(kernel.info)
         info["heel_strikes"] = f"{opts.channel} maxima, taught live"
         info["candidate_strides_s"] = [[round(float(a), 6), round(float(b), 6)] for a, b in bounds]
         self.result = TaughtMode(replace(kernel, info=info), infos, len(self.heel_strikes))
 
-    def _trim(self) -> None:
-        """Forget samples before the oldest candidate (less a margin for the uniform grid)."""
-        if not self.candidates:
-            return
-        keep_from = self.candidates[0][0] - 1.0
+    def _forget_before(self, keep_from: float) -> None:
+        """Drop stream samples before ``keep_from`` (s): no stride still to be found starts there."""
         i = int(np.searchsorted(np.asarray(self._times), keep_from, side="left"))
         if i > 0:
             del self._times[:i], self._samples[:i]
+
+    @property
+    def buffered(self) -> int:
+        """Stream samples kept now (bounded: see the module docstring)."""
+        return len(self._times)
+
+
+def _piece(uni: Recording, start_s: float, end_s: float) -> Recording:
+    """The grid samples of ``uni`` a stride from ``start_s`` to ``end_s`` is interpolated from."""
+    i0, i1 = np.searchsorted(uni.time_s, [start_s, end_s])
+    i0, i1 = max(0, int(i0) - PIECE_MARGIN), min(len(uni), int(i1) + PIECE_MARGIN)
+    return Recording(time_s=uni.time_s[i0:i1].copy(), angles_deg=uni.angles_deg[i0:i1].copy(), source=LIVE_SOURCE)
 
 
 # ---------------------------------------------------------------------------------------------
 # The library
 
 
-def with_mode(library: KernelLibrary | None, kernel: KernelMode, name: str = "taught") -> tuple[KernelLibrary, KernelMode | None]:
+def with_mode(library: KernelLibrary | None, kernel: KernelMode,
+              name: str = TAUGHT_LIBRARY) -> tuple[KernelLibrary, KernelMode | None]:
     """``library`` with ``kernel`` added (a new name, at the end) or in place of the mode of that
     name; a library of that one mode when ``library`` is None.
 

@@ -44,9 +44,10 @@ class NodeDiagnostics:
         """The node's status; rates and processing times cover the time since the previous call."""
         now = time.monotonic()
         if self._estimator is None:
-            self._period_start, self._period_received = now, 0
+            self._period_start, self._period_received, self._period_rejected = now, 0, 0
             return self._teacher.status_without_library(f"{self.get_fully_qualified_name()}: gait estimator",
-                                                        self._received, self._guard.accepted)
+                                                        self._received, self._guard.accepted,
+                                                        self._imu.diagnostics() if self._imu is not None else None)
         elapsed = max(now - self._period_start, 1e-9)
         lib = self.library
         m = self._estimator.matcher

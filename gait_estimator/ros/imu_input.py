@@ -7,7 +7,8 @@ calibration and goes to the node's estimator like any other sample. Until the ca
 complete (saved file, configured axes, or learnt: stand still, then walk a few strides) no sample
 reaches the estimator; a sensor silent for ``imu_timeout_s`` is named in the diagnostics and the
 estimate waits, since no sample pairs without it. Bad messages are dropped, counted and logged
-through the node (throttled).
+through the node (throttled); raw messages while the fusion library (the ``imu`` extra) is missing
+are dropped and counted (``no_fusion``), with one error line.
 
 Services: ``~/calibrate_standing`` takes a new standing pose from the next still second (keeping
 learnt sagittal axes); the node's ``~/reset_calibration`` also forgets the IMU calibration (and
@@ -27,6 +28,7 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
+from ..analysis.teach import TAUGHT_LIBRARY
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import CalibrationError, ImuCalibration, SegmentMount
 from ..core.imu_learn import STILL_S, WALK_S, check_configured
@@ -45,6 +47,8 @@ from ..io.imu_stream import (
 from ..io.stream import SampleRejected
 
 CALIBRATE_STANDING_SERVICE = "~/calibrate_standing"
+NO_FUSION = "no_fusion"
+"""Rejection reason of raw messages (no orientation) while the fusion library is not installed."""
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "imu_topics": (list(DEFAULT_IMU_TOPICS), "sensor_msgs/Imu topics of right_thigh, left_thigh, right_shank, left_shank."),
     "imu_pairing_tolerance_s": (DEFAULT_TOLERANCE_S, "Largest stamp spread (s) of the four messages of one sample."),
@@ -57,7 +61,8 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
                           "proximal joint; '' = learn from the standing pose."),
     "imu_standing_angles_deg": ([0.0] * N_CHANNELS, "Segment angles (deg) taken for the standing pose."),
     "imu_calibration_path": ("", "IMU calibration file (YAML), read at start and written when learnt; '' = beside a "
-                             "user library (<library>.imu.yaml), or ~/.ros/gait_estimator/<library>.imu.yaml."),
+                             "user library (<library>.imu.yaml), or ~/.ros/gait_estimator/<library>.imu.yaml "
+                             f"(<library> = {TAUGHT_LIBRARY} without one)."),
 }
 """Parameters declared (read-only) when ``input_type`` is ``imu``: default and description."""
 
@@ -80,9 +85,12 @@ class ImuInput:
         standing = [float(v) for v in values["imu_standing_angles_deg"]]
         if len(standing) != N_CHANNELS or not all(math.isfinite(v) and abs(v) <= 90 for v in standing):
             raise CalibrationError(f"imu_standing_angles_deg: needs {N_CHANNELS} angles within +-90 deg")
-        lib = node.library
+        for name in ("imu_pairing_tolerance_s", "imu_timeout_s"):
+            if not (math.isfinite(values[name]) and values[name] >= 0):
+                raise CalibrationError(f"{name}: must be >= 0 s, got {values[name]!r}")
+        lib = node._library  # None: no library yet (kernels: ''), the modes are to be taught
         self.path = Path(values["imu_calibration_path"]).expanduser() if values["imu_calibration_path"] else \
-            calibration_path_for(lib.path, lib.name)
+            calibration_path_for(lib.path, lib.name) if lib is not None else calibration_path_for(None, TAUGHT_LIBRARY)
         saved = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
         self.configured = all(a is not None for a in lateral) and all(p is not None for p in proximal)
         from_file = saved is not None
@@ -98,6 +106,8 @@ class ImuInput:
         if saved is not None:
             self._apply_biases(saved)
         self.rejected: Counter = Counter()
+        self.no_fusion = ""
+        """Why raw messages (no orientation) cannot be used: the fusion extra is missing."""
         self.last_arrival = [math.nan] * N_CHANNELS
         self.received = [0] * N_CHANNELS
         self.started = time.monotonic()
@@ -128,9 +138,15 @@ class ImuInput:
         if stamp_ns == 0:
             stamp_ns = node.get_clock().now().nanoseconds
         o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
+        if self.no_fusion and msg.orientation_covariance[0] == -1.0:  # raw, and known not to work
+            self._drop_raw(self.no_fusion)
+            return
         try:
             item = self.inputs[sensor].convert(stamp_ns, (o.x, o.y, o.z, o.w), msg.orientation_covariance[0],
                                                (w.x, w.y, w.z), (a.x, a.y, a.z), msg.header.frame_id)
+        except CalibrationError as exc:  # raw input without the fusion library (the 'imu' extra)
+            self._drop_raw(str(exc))
+            return
         except SampleRejected as exc:
             self.rejected[exc.reason] += 1
             node._received += 1
@@ -144,6 +160,19 @@ class ImuInput:
             self.rejected[UNPAIRED] += 1
             node._reject(SampleRejected(UNPAIRED, f"an IMU message without partners within the pairing tolerance "
                                         f"(dropped so far: {dict(self.pairer.dropped)})"))
+
+    def _drop_raw(self, why: str) -> None:
+        """Count a raw message that cannot be fused; say why once (an error, not a warning per
+        message: every raw message will fail the same way until the extra is installed)."""
+        node = self.node
+        self.rejected[NO_FUSION] += 1
+        node._received += 1
+        node._period_received += 1
+        node._period_rejected += 1
+        node._guard.reject(SampleRejected(NO_FUSION, why))
+        if not self.no_fusion:
+            self.no_fusion = why
+            node.get_logger().error(f"{why}; until then raw messages are dropped (counted as {NO_FUSION})")
 
     def _sample(self, stamp_ns: int, items: list, t0: float) -> None:
         node = self.node
@@ -170,6 +199,19 @@ class ImuInput:
         except OSError as exc:
             where = f"NOT saved ({self.path}: {exc})"
         log.info(f"IMU calibration learnt, {where}: {cal.summary()}")
+
+    def save_beside(self, library_path: Path, library_name: str) -> str:
+        """``~/save_library``: write the learnt calibration where a node started with ``kernels:
+        library_path`` looks for it; what happened, for the service reply ('' when nothing was
+        learnt: configured axes need no file)."""
+        cal = self.calibrator.calibration
+        if cal is None or all(m.source == "configured" for m in cal.mounts):
+            return ""
+        path = calibration_path_for(library_path, library_name)
+        try:
+            return f"; IMU calibration written to {save_calibration(cal, path)}"
+        except OSError as exc:
+            return f"; IMU calibration NOT written ({path}: {' '.join(str(exc).split())})"
 
     def _apply_biases(self, cal: ImuCalibration) -> None:
         for s, m in zip(self.inputs, cal.mounts, strict=True):
@@ -222,4 +264,6 @@ class ImuInput:
             problems.append("IMU silent: " + ", ".join(silent) + " (estimate waits)")
         if cal is None:
             problems.append(f"IMU calibration: {self.calibrator.status}")
+        if self.no_fusion:
+            problems.append(f"{self.rejected[NO_FUSION]} raw IMU message(s) dropped: {self.no_fusion}")
         return values, problems

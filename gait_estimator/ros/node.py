@@ -212,7 +212,8 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
 
     def _save_library(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """``~/save_library``: write the library in use, with its taught modes and personalised
-        kernels, to ``adapted_library_path``."""
+        kernels, to ``adapted_library_path``, and a learnt IMU calibration beside it (where the
+        next start with that library looks for it)."""
         est = self._estimator
         if est is None or (est.adapter is None and not self._teacher.taught):
             response.success = False
@@ -232,7 +233,8 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         response.success = True
         response.message = f"wrote {out} ({len(lib)} modes: {', '.join(lib.mode_names)}" + (
             f"; taught: {', '.join(self._teacher.taught)}" if self._teacher.taught else "") + (
-            "; strides adopted: " + ", ".join(f"{m} {n}" for m, n in strides.items()) if est.adapter else "") + ")"
+            "; strides adopted: " + ", ".join(f"{m} {n}" for m, n in strides.items()) if est.adapter else "") + ")" + (
+            self._imu.save_beside(out, lib.name) if self._imu is not None else "")
         self.get_logger().info(response.message)
         return response
 
@@ -240,8 +242,11 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         """``~/reset_calibration``: forget the learnt sensor offsets and cadence (after
         re-donning, or for another wearer)."""
         est = self._estimator
-        if est is None:
-            response.success, response.message = False, "no library yet: nothing calibrated"
+        if est is None:  # no library yet: only the IMU input may have learnt something
+            response.success = self._imu is not None
+            response.message = ("no library yet" + self._imu.reset_calibration() if self._imu is not None
+                                else "no library yet: nothing calibrated")
+            self.get_logger().info(response.message)
             return response
         before, scale = est.sensor_offset_deg.copy(), est.cadence_scale
         est.reset_calibration()

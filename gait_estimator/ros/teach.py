@@ -12,13 +12,15 @@ The other modes keep their state across the library change: the node keeps the i
 the last ``replay_s`` seconds (at least the longest stride at the largest time scale); a new
 ``Estimator`` for the new library replays them, so every mode's window is full at once and holds
 the same samples as before, and then adopts the old estimator's walking calibration (sensor
-offsets, cadence, typical fit). Personalised kernels (``adapt_rate``) are not carried over a
-library change.
+offsets, cadence, typical fit). Kernels personalised so far (``adapt_rate``) are the new
+library's (the taught mode's replaces the personalised one of its name); the new estimator
+personalises from them.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -26,7 +28,7 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.parameter import Parameter
 
-from ..analysis.strides import MAX_STRIDE_S
+from ..analysis.strides import MAX_STRIDE_S, detect_peaks
 from ..analysis.teach import (
     HEEL_STRIKE_CHANNEL,
     TEACH_STRIDES,
@@ -81,6 +83,7 @@ class NodeTeacher:
         node.add_post_set_parameters_callback(self._apply)
         if node._library is None:
             self._warm_up()
+        self._warm_up_detection()
         start = node.get_parameter("teach_mode").value
         if start:
             self._start(start)
@@ -93,6 +96,16 @@ class NodeTeacher:
                                              self.node._config)
         for i in range(40):
             estimator.update(i / 100.0, stride[i % 16])
+
+    @staticmethod
+    def _warm_up_detection() -> None:
+        """Import the heel-strike detection (scipy.signal) now: imported at a session's first look
+        for heel strikes, it would hold the input callback for most of a second, long enough for
+        the input queue to overflow and the samples of the first strides to be lost."""
+        try:
+            detect_peaks(np.arange(3.0), np.zeros(3))
+        except ImportError:  # no 'analysis' extra: nothing to warm up
+            pass
 
     # -- parameters
 
@@ -167,8 +180,9 @@ class NodeTeacher:
     def _finish(self, taught: TaughtMode) -> None:
         node = self.node
         self.session = None
+        old = node._estimator
         try:
-            lib, replaced = with_mode(node._library, taught.kernel)
+            lib, replaced = with_mode(self._base_library(), taught.kernel)
             estimator = node._new_estimator(lib, node._config)
         except (GaitEstimatorError, ValueError, OSError) as exc:
             self._log(f"{taught.kernel.name}: kernel not used: {' '.join(str(exc).split())}", warn=True)
@@ -176,13 +190,12 @@ class NodeTeacher:
             return
         for t, x in self._recent:  # the same window of samples for every mode
             estimator.update(t, x)
-        old = node._estimator
-        dropped = ""
+        kept = ""
         if old is not None:
             estimator.adopt_calibration(old)
             node._resets_before += old.resets
             if old.adapter is not None and old.adapter.accepted.any():
-                dropped = f"; personalised kernels ({int(old.adapter.accepted.sum())} strides) not carried over"
+                kept = f"; personalised kernels ({int(old.adapter.accepted.sum())} strides) kept"
         node._library = lib
         node._set_estimator(estimator)
         copies = near_copies(lib, taught.kernel.name, node._config.effective_weights())
@@ -191,9 +204,18 @@ class NodeTeacher:
         self.taught = [*(n for n in self.taught if n != taught.kernel.name), taught.kernel.name]
         self.last_result = taught.summary() + (f"; near copy of {', '.join(copies)}" if copies else "")
         self._log(change_summary(taught, lib, replaced, copies)
-                  + f"; window refilled from the last {self._recent[-1][0] - self._recent[0][0]:.2f} s" + dropped,
+                  + f"; window refilled from the last {self._recent[-1][0] - self._recent[0][0]:.2f} s" + kept,
                   warn=bool(copies))
         self._clear_parameter()
+
+    def _base_library(self) -> KernelLibrary | None:
+        """The library a taught mode goes into: the running one with the kernels personalised so
+        far (``adapt_rate`` > 0), so that teaching one mode keeps what the others learnt."""
+        node = self.node
+        lib, est = node._library, node._estimator
+        if lib is None or est is None or est.adapter is None or not est.adapter.accepted.any():
+            return lib
+        return replace(est.adapted_library(), path=lib.path)
 
     def _clear_parameter(self) -> None:
         self._clearing = True
@@ -224,8 +246,10 @@ class NodeTeacher:
     def message_suffix(self) -> str:
         return f"; teaching {self.session.progress()}" if self.session else ""
 
-    def status_without_library(self, name: str, received: int, accepted: int) -> DiagnosticStatus:
-        """Diagnostics before the first mode is taught (``kernels: ''``)."""
+    def status_without_library(self, name: str, received: int, accepted: int,
+                               imu: tuple[dict[str, str], list[str]] | None = None) -> DiagnosticStatus:
+        """Diagnostics before the first mode is taught (``kernels: ''``); ``imu``: the IMU
+        input's values and problems (``input_type: imu``)."""
         message = ("no kernel library: teaching " + self.session.progress() if self.session
                    else "no kernel library: set teach_mode to teach a mode")
         values = {
@@ -233,6 +257,11 @@ class NodeTeacher:
             "samples_received": str(received), "samples_accepted": str(accepted),
             **self.diagnostic_values(),
         }
-        return DiagnosticStatus(level=DiagnosticStatus.OK, name=name, message=message, hardware_id="",
+        level = DiagnosticStatus.OK
+        if imu is not None:
+            values.update(imu[0])
+            if imu[1]:
+                level, message = DiagnosticStatus.WARN, "; ".join(imu[1]) + "; " + message
+        return DiagnosticStatus(level=level, name=name, message=message, hardware_id="",
                                 values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
