@@ -1,7 +1,7 @@
 """Teaching modes in the running estimator_node over real DDS (loopback): from an empty library,
 and replacing a mode of a loaded one while the other modes keep their state.
 
-Domain IDs 70, 71 and 174; LOCALHOST discovery; a namespace unique to the run.
+Domain IDs 70, 71, 75 and 174; LOCALHOST discovery; a namespace unique to the run.
 """
 
 from __future__ import annotations
@@ -126,6 +126,25 @@ def test_teach_from_an_empty_library_then_estimate(ros, multispeed: Recording, t
     h.node_name = "restarted"
     again = h.estimator(kernels=str(out))
     assert again.library.mode_names == ["Slow", "Fast"]
+
+
+def test_teaching_goes_on_after_the_input_stream_restarts(ros, multispeed: Recording) -> None:
+    """Stamps that jump back (a restarted publisher, a bag played again) mid-teaching: the strides
+    collected under the old stamps are dropped, collection starts again, the mode is taught."""
+    h = ros(75)
+    node = h.estimator(kernels="", teach_strides=3)
+    client = h.client(node)
+    remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
+    assert remote.wait_for_services(5.0)
+    assert client.wait_for_node(10.0, settle_s=0.0)
+    assert _set(client, remote, teach_mode="Slow")[0].successful
+    _stream(client, multispeed, 8.0, 12.5)  # about two strides under the first stamps
+    assert node.get_parameter("teach_mode").value == "Slow"
+    _stream(client, multispeed, 4.0, 6.0)  # the stream again from 4 s: stamps jump back 8.5 s
+    assert "collecting its strides again" in node._teacher.last_event, node._teacher.last_event
+    _stream(client, multispeed, 6.0, 18.0)
+    assert node.get_parameter("teach_mode").value == "", node._teacher.last_event
+    assert node.library.mode_names == ["Slow"] and node.library.mode("Slow").info["strides"] == 3
 
 
 def test_replace_a_mode_keeps_the_other_modes_state(ros, multispeed: Recording, able_bodied) -> None:

@@ -344,11 +344,13 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         except SampleRejected as exc:
             self._reject(exc)
             return
+        if restart:  # stamps jumped back by more than restart_back_s: a restarted stream
+            self._teacher.stream_restarted()
         est = self._estimator
         if est is None:  # no library yet (kernels: ''): the samples only teach
             self._teacher.on_sample(t, angles_deg)
             return
-        if restart:  # stamps jumped back by more than restart_back_s: a restarted stream
+        if restart:
             est.reset()
             self._log_restart("back", f"input stamps jumped back by {(prev or t) - t:.3f} s (> {guard.restart_back_s:g} s)")
         resets, recalibrations = est.resets, est.calibration_resets

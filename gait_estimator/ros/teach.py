@@ -170,6 +170,16 @@ class NodeTeacher:
         if session.result is not None:
             self._finish(session.result)
 
+    def stream_restarted(self) -> None:
+        """The input's stamps jumped back (a restarted publisher, a bag played again): the samples
+        kept and a stride collection in progress belong to the old stamps, so both start again."""
+        self._recent.clear()
+        if self.session is not None:
+            mode = self.session.mode
+            self._start(mode)
+            self._log(f"{mode}: input stamps jumped back (a restarted stream): collecting its strides again",
+                      warn=True)
+
     def replay_s(self) -> float:
         """Seconds of input kept for a new estimator: the longest stride a kernel may have (a
         taught one is at most MAX_STRIDE_S) at the largest time scale, plus a margin."""
@@ -184,12 +194,12 @@ class NodeTeacher:
         try:
             lib, replaced = with_mode(self._base_library(), taught.kernel)
             estimator = node._new_estimator(lib, node._config)
+            for t, x in self._recent:  # the same window of samples for every mode
+                estimator.update(t, x)
         except (GaitEstimatorError, ValueError, OSError) as exc:
             self._log(f"{taught.kernel.name}: kernel not used: {' '.join(str(exc).split())}", warn=True)
             self._clear_parameter()
             return
-        for t, x in self._recent:  # the same window of samples for every mode
-            estimator.update(t, x)
         kept = ""
         if old is not None:
             estimator.adopt_calibration(old)
@@ -227,7 +237,10 @@ class NodeTeacher:
     def _log(self, line: str, warn: bool = False) -> None:
         self.last_event = line
         logger = self.node.get_logger()
-        (logger.warn if warn else logger.info)(LOG_PREFIX + line)
+        if warn:  # rclpy fixes a call site's severity at its first call: one site per severity
+            logger.warning(LOG_PREFIX + line)
+        else:
+            logger.info(LOG_PREFIX + line)
 
     # -- diagnostics
 
