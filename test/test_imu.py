@@ -3,6 +3,7 @@ synthetic IMU streams made from known segment angles (test/imu_synth.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import subprocess
 import sys
@@ -123,6 +124,26 @@ def test_raw_input_within_one_degree_after_ten_seconds(angles):
         got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
         late = s.time_s >= 10.0
         assert (rms((got - s.angles_deg)[late]) < 1.0).all(), rms((got - s.angles_deg)[late])
+
+
+def test_live_raw_input_measures_its_rate_as_bag_reading_does(angles):
+    """The node's SensorInput(None) takes the raw sensor's rate from its first stamps (offline
+    reading measures it over the bag): a 100 Hz stream is fused at 100 Hz, not at the 200 Hz guess."""
+    pytest.importorskip("imufusion")
+    rng = np.random.default_rng(7)
+    s = synthesize(angles, 100.0, random_mounts(rng), rng, acc_noise_g=0.02, gyro_noise_dps=0.5)
+    live, known, guess = SensorInput(None), SensorInput(100.0), SensorInput(200.0)
+    ups = {id(x): [] for x in (live, known, guess)}
+    for k in range(min(s.time_s.size, 1000)):
+        ns = round(float(s.time_s[k]) * 1e9) + int(rng.integers(-200_000, 200_000))  # 0.2 ms jitter
+        gyro, acc = np.radians(s.gyro_dps[0][k]), s.acc_g[0][k] * G
+        for x in (live, known, guess):
+            ups[id(x)].append(x.convert(ns, (0.0, 0.0, 0.0, 1.0), -1.0, gyro, acc)[0])
+    assert live._rate_hz == pytest.approx(100.0, rel=0.01) and live.fusion._still_needed == known.fusion._still_needed
+    late = slice(300, None)
+    live_err = np.abs(np.array(ups[id(live)]) - np.array(ups[id(known)]))[late].max()
+    guess_err = np.abs(np.array(ups[id(guess)]) - np.array(ups[id(known)]))[late].max()
+    assert live_err < 1e-6 <= guess_err
 
 
 def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):
@@ -257,10 +278,19 @@ def test_a_restarted_sensor_stream_is_taken_up_again():
         for k in range(40):
             for c in range(4):
                 t = start + k * period
-                inputs[c].convert(t, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+                try:
+                    inputs[c].convert(t, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+                except SampleRejected:
+                    assert k == 0 and start < 50_000_000_000
+                    continue
                 out += [stamp for stamp, _ in p.push(c, t, k)]
-    assert [i.restarts for i in inputs] == [1, 1, 1, 1]
-    assert len(out) == 80 and out[40] == 10_000_000_000 and np.all(np.diff(out[40:]) == period)
+    assert [i.restarts for i in inputs] == [1, 1, 1, 1]  # each sensor's first message back is taken as stray
+    assert len(out) == 79 and out[40] == 10_000_000_000 + period and np.all(np.diff(out[40:]) == period)
+    stray = SensorInput(restart_back_s=1.0)  # one old message between new ones: rejected, no restart
+    for t in (50_000_000_000, 10_000_000_000, 50_005_000_000):
+        with contextlib.suppress(SampleRejected):
+            stray.convert(t, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+    assert stray.restarts == 0 and stray.last_ns == 50_005_000_000
     with pytest.raises(SampleRejected) as err:  # a step back within restart_back_s stays a bad stamp
         inputs[0].convert(10_000_000_000 + 30 * period, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
     assert err.value.reason == NON_INCREASING_STAMP

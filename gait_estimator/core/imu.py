@@ -275,9 +275,20 @@ class RawFusion:
 
     def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0),
                  params: FusionParams = FusionParams()) -> None:
-        fusion = _imufusion()
         self.params = params
-        self._ahrs = fusion.Ahrs()
+        self._ahrs = _imufusion().Ahrs()
+        self._set_rate(rate_hz)
+        self._ahrs.set_settings(self._settings[0])
+        self._still_rate2 = params.still_rate_dps * params.still_rate_dps
+        self._still_acc2 = 2.0 * params.still_acc_g  # |acc|^2 - 1 ~ 2 (|acc| - 1)
+        self._still = 0
+        self.gyro_bias_dps = gyro_bias_dps
+        self._gyro = np.zeros(3)
+        self._acc = np.zeros(3)
+        self._first = True
+
+    def _set_rate(self, rate_hz: float) -> None:
+        fusion, params = _imufusion(), self.params
         self._settings = [fusion.AhrsSettings(
             sample_rate=float(rate_hz),
             convention=fusion.CONVENTION_NWU,
@@ -287,16 +298,14 @@ class RawFusion:
             magnetic_rejection=0.0,
             rejection_timeout=params.rejection_timeout_s,
         ) for gain in (params.gain, params.still_gain)]
-        self._ahrs.set_settings(self._settings[0])
         self._still_needed = max(1, round(params.still_after_s * rate_hz))
-        self._still_rate2 = params.still_rate_dps * params.still_rate_dps
-        self._still_acc2 = 2.0 * params.still_acc_g  # |acc|^2 - 1 ~ 2 (|acc| - 1)
-        self._still = 0
         self._period = 1.0 / rate_hz
-        self.gyro_bias_dps = gyro_bias_dps
-        self._gyro = np.zeros(3)
-        self._acc = np.zeros(3)
-        self._first = True
+
+    def set_rate(self, rate_hz: float) -> None:
+        """Use ``rate_hz`` (Hz) as the nominal rate from now on (a live stream's measured rate)."""
+        self._set_rate(rate_hz)
+        self._ahrs.set_settings(self._settings[int(self._still >= self._still_needed)])
+        self._ahrs.set_sample_period(self._period)
 
     def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> Vec3:
         """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up``."""

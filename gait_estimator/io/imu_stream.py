@@ -39,6 +39,8 @@ the node's default, for sensors sampled together."""
 AUTO_TOLERANCE_PERIODS = 0.9
 """``auto_tolerance_s``: this share of the message period (see there)."""
 MAX_QUEUE = 50
+RATE_STEPS = 16
+"""Stamp steps of a raw sensor whose median gives its rate, when ``SensorInput`` measures it."""
 """Messages kept per sensor while waiting for partners; older ones are dropped (unpaired)."""
 _RAD2DEG = 180.0 / math.pi
 _INF = math.inf
@@ -49,17 +51,22 @@ class SensorInput:
     """One IMU's messages -> (up, gyro deg/s, acc g), sensor frame; see the module docstring.
 
     Args:
-        rate_hz: Nominal rate for the raw-input fusion.
+        rate_hz: Nominal rate for the raw-input fusion (Hz); None = measured from the first
+            RATE_STEPS stamp steps (a live stream; until then 200 Hz).
         frame_id: The ``header.frame_id`` this sensor's messages must carry ('' = any).
         params: Settings of the raw-input fusion.
-        restart_back_s: A stamp more than this (s) before the previous one is a restarted sensor
-            (a driver restart, a bag played again): accepted, with the fusion started afresh and
-            ``restarts`` counted; a smaller step back is rejected (0 = always rejected).
+        restart_back_s: Two messages in a row stamped more than this (s) before the previous
+            accepted one, the second after the first, are a restarted sensor (a driver restart, a
+            bag played again): from the second on they are accepted, the fusion started afresh and
+            ``restarts`` counted; a single such message, or a smaller step back, is rejected (0 =
+            always rejected).
     """
 
-    def __init__(self, rate_hz: float = 200.0, frame_id: str = "", params: FusionParams = DEFAULT_FUSION,
+    def __init__(self, rate_hz: float | None = 200.0, frame_id: str = "", params: FusionParams = DEFAULT_FUSION,
                  restart_back_s: float = STREAM_RESTART_S) -> None:
-        self._rate_hz = rate_hz
+        self._rate_hz = 200.0 if rate_hz is None else rate_hz
+        self._steps: list[int] | None = [] if rate_hz is None else None  # stamp steps (ns) while measuring
+        self.rate_steps = RATE_STEPS
         self.params = params
         self.frame_id = frame_id
         self.restart_back_ns = round(restart_back_s * 1e9)
@@ -67,6 +74,7 @@ class SensorInput:
         self.gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
         self.last_ns: int | None = None
         self.restarts = 0
+        self._restart_from: int | None = None  # stamp of a message far before the previous one
 
     def convert(self, stamp_ns: int, orientation: Any, orientation_cov0: float, gyro_rps: Any,
                 acc_mps2: Any, frame_id: str = "") -> tuple[Vec3, Vec3, Vec3]:
@@ -75,12 +83,20 @@ class SensorInput:
             raise SampleRejected(WRONG_FRAME, f"frame_id {frame_id!r}, expected {self.frame_id!r}")
         last = self.last_ns
         if last is not None and stamp_ns <= last:
-            if not 0 < self.restart_back_ns < last - stamp_ns:
+            candidate, self._restart_from = self._restart_from, None
+            if 0 < self.restart_back_ns < last - stamp_ns:
+                if candidate is None or stamp_ns <= candidate:  # a stray old message, until the next confirms
+                    self._restart_from = stamp_ns
+                    raise SampleRejected(NON_INCREASING_STAMP, f"stamp {stamp_ns * 1e-9:.6f} s is "
+                                         f"{(last - stamp_ns) * 1e-9:.3f} s before the previous (a restart?)")
+                self.restarts += 1  # a second message after the first on the earlier stamps: restarted
+                self.fusion = None
+                last = None
+            else:
                 raise SampleRejected(NON_INCREASING_STAMP,
                                      f"stamp {stamp_ns * 1e-9:.6f} s is not after the previous {last * 1e-9:.6f} s")
-            self.restarts += 1
-            self.fusion = None
-            last = None
+        else:
+            self._restart_from = None
         gx, gy, gz = gyro_rps
         if orientation_cov0 != -1.0:
             x, y, z, w = orientation
@@ -108,6 +124,13 @@ class SensorInput:
         acc = (ax / STANDARD_GRAVITY, ay / STANDARD_GRAVITY, az / STANDARD_GRAVITY)
         up = self.fusion.update(gyro, acc, None if last is None else (stamp_ns - last) * 1e-9)
         self.last_ns = stamp_ns
+        steps = self._steps
+        if steps is not None and last is not None:
+            steps.append(stamp_ns - last)
+            if len(steps) == self.rate_steps:
+                self._rate_hz = 1e9 / float(np.median(steps))
+                self.fusion.set_rate(self._rate_hz)
+                self._steps = None
         return up, gyro, acc
 
     def set_gyro_bias(self, bias_dps: Vec3) -> None:

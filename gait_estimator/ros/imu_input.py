@@ -100,7 +100,7 @@ class ImuInput:
         frames = list(values["imu_frame_ids"])
         if len(frames) != N_CHANNELS:
             raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
-        self.inputs = [SensorInput(frame_id=f.strip()) for f in frames]
+        self.inputs = [SensorInput(None, frame_id=f.strip()) for f in frames]  # raw input: rate from the stamps
         self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
         self.calibrator = ImuCalibrator(lateral, proximal, standing, saved)
         if saved is not None:
