@@ -90,6 +90,19 @@ def test_a_stop_and_a_missing_heel_strike_are_reported_not_used(rec: Recording) 
     assert all(b - a <= 2.5 for a, b in c.candidates)
 
 
+def test_a_heel_strike_not_found_is_named_as_such(rec: Recording) -> None:
+    """Two good strides' time between heel strikes (Med, 2.8 s > 2.5 s; made by stretching one
+    stride in time): not used, and the log says a heel strike between may not have been found."""
+    t, x = window(rec, 22.5, 45.0)
+    hs = heel_strikes(Recording(t, x), "right_shank", RATE_HZ).times_s
+    a, b = hs[5], hs[6]
+    t = np.where((t >= a) & (t < b), a + (t - a) * 2.0, np.where(t >= b, t + (b - a), t))
+    c = StrideCollector("Med", TeachOptions(strides=20), rate_hz=RATE_HZ)
+    events = feed(c, t, x)
+    gap = [e for e in events if "not a stride" in e]
+    assert len(gap) == 1 and gap[0].endswith("a stop or a turn, or a heel strike between not found), not used"), events
+
+
 def test_duration_and_shape_outliers_are_not_used(rec: Recording) -> None:
     t, x = window(rec, 22.5, 45.0)
     hs = heel_strikes(Recording(t, x), "right_shank", RATE_HZ).times_s

@@ -112,6 +112,11 @@ def test_reject_outliers_rule_is_robust():
     d2 = np.array([1.0, 1.0, 1.0, 1.0, 1.08])
     reasons2, _ = reject_outliers(d2, np.zeros((5, 10, 4)), OutlierRule())
     assert not any(reasons2)
+    # two strides' length: a heel strike between was missed, and the reason says so
+    d3 = np.array([1.00, 1.02, 0.98, 1.01, 0.99, 2.03, 1.30])
+    reasons3, _ = reject_outliers(d3, np.zeros((7, 10, 4)), OutlierRule())
+    assert reasons3[5].endswith("(about 2 strides: 1 heel strike between not found)"), reasons3[5]
+    assert reasons3[6] and "heel strike" not in reasons3[6]
 
 
 def test_whole_file_mode_and_label_ranges(able_bodied, tmp_path):

@@ -169,6 +169,14 @@ class StrideCollector:
     def done(self) -> bool:
         return self.result is not None
 
+    def _missed(self, gap_s: float) -> str:
+        """', or a heel strike between not found' when ``gap_s`` is about two good strides long."""
+        good = [b - a for (a, b), r in zip(self.candidates, self._reasons, strict=True) if not r]
+        if not good:
+            return ""
+        med = float(np.median(good))
+        return ", or a heel strike between not found" if abs(gap_s - 2.0 * med) <= 0.2 * med else ""
+
     def progress(self) -> str:
         """``"Slow: 6/10 strides"``."""
         return f"{self.mode}: {self.good}/{self.target} strides"
@@ -240,7 +248,8 @@ class StrideCollector:
                     events.append(f"{self.mode}: stride at {a:.2f} s ({h - a:.2f} s) not used: found too late")
                 else:
                     events.append(f"{self.mode}: {h - a:.2f} s from the heel strike at {a:.2f} s to the next at "
-                                  f"{h:.2f} s: not a stride (> {det.max_stride_s:g} s: a stop or a turn), not used")
+                                  f"{h:.2f} s: not a stride (> {det.max_stride_s:g} s: a stop or a turn"
+                                  f"{self._missed(h - a)}), not used")
             self.heel_strikes.append(h)
             if end - h <= det.max_stride_s:  # walking again (not a heel strike confirmed late, e.g. before a stop)
                 self._silence_reported = False

@@ -131,6 +131,9 @@ def reject_outliers(durations_s: np.ndarray, strides: np.ndarray, rule: OutlierR
     limit = max(rule.duration_sigmas * robust_sigma(d), rule.duration_floor * med)
     for i in np.flatnonzero(np.abs(d - med) > limit):
         reasons[i] = f"duration {d[i]:.3f} s deviates from the median {med:.3f} s by more than {limit:.3f} s"
+        k = round(d[i] / med)
+        if k >= 2 and abs(d[i] - k * med) <= k * limit:  # the length of k strides
+            reasons[i] += f" (about {k} strides: {k - 1} heel strike{'s' if k > 2 else ''} between not found)"
     keep = np.array([not r for r in reasons])
     dist = np.full(d.size, np.nan)
     if keep.sum() >= 2:
