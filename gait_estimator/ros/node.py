@@ -176,6 +176,8 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             qos_overriding_options=QoSOverridingOptions.with_default_policies(),
             raw=msg_type is JointState,  # read from the CDR bytes (io/cdr.py): no message objects
         )
+        subs = self._imu.subscriptions if self._imu is not None else [self._sub]
+        self._input_topics = ", ".join(sub.topic_name for sub in subs)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._save_srv = self.create_service(Trigger, SAVE_LIBRARY_SERVICE, self._save_library)
         self._calib_srv = self.create_service(Trigger, RESET_CALIBRATION_SERVICE, self._reset_calibration)
@@ -189,7 +191,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             "no kernel library (kernels: ''): diagnostics only until a mode is taught (teach_mode)" if lib is None else
             f"library '{lib.name}' ({len(lib)} modes: {', '.join(lib.mode_names)}; window "
             f"{self._estimator.matcher.max_window} samples at {lib.sample_rate_hz:g} Hz) from {lib.path or '?'}; "
-            f"input {self._input_type} on {self._sub.topic_name} in {self._units}"
+            f"input {self._input_type} on {self._input_topics} in {self._units}"
             + (f", joints {', '.join(self._joint_names)}" if self._input_type == "joint_state" else "")
             + f"; options: {self._options_summary()}"
         )
@@ -441,7 +443,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         self._warned_at[exc.reason] = now
         more = self._suppressed.pop(exc.reason, 0)
         self.get_logger().warn(
-            f"dropped sample on {self._sub.topic_name}: {exc.reason}: {exc}"
+            f"dropped sample on {self._input_topics}: {exc.reason}: {exc}"
             + (f" ({more} more {exc.reason} dropped since the last warning)" if more else "")
         )
 
