@@ -13,6 +13,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.exceptions import InvalidHandle
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from ..core.kernels import KernelLibrary
 from .priority import process_priority
 
 DIAGNOSTICS_TOPIC = "/diagnostics"
@@ -72,7 +73,7 @@ class NodeDiagnostics:
             "mode_names": ",".join(lib.mode_names),
             "library_rate_hz": f"{lib.sample_rate_hz:g}",
             "estimator_options": self._options_summary(),
-            "input_topic": self._sub.topic_name,
+            "input_topic": self._input_topics,
             "input_type": self._input_type,
             "input_units": self._units,
             "input_rate_hz": f"{input_rate:.1f}",
@@ -93,9 +94,28 @@ class NodeDiagnostics:
             "adapted_strides": str(int(self._estimator.adapter.accepted.sum())) if self._estimator.adapter else "",
             **self._teacher.diagnostic_values(),
         }
-        problems = []
+        problems = self._problems(stamp_rate, lib, values)
+        if problems:
+            level, message = DiagnosticStatus.WARN, "; ".join(problems)
+        elif shown and e is not None:
+            level, message = DiagnosticStatus.OK, f"ready: {e.mode} phase {e.phase:.2f}"
+        else:
+            level, message = DiagnosticStatus.OK, f"filling window {values['window']}"
+        message += self._teacher.message_suffix()
+        self._start_period(now)
+        return DiagnosticStatus(
+            level=level,
+            name=f"{self.get_fully_qualified_name()}: gait estimator",
+            message=message,
+            hardware_id="",
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
+
+    def _problems(self, stamp_rate: float, lib: KernelLibrary, values: dict[str, str]) -> list[str]:
+        """What the status warns about this period; adds the IMU input's values to ``values``."""
+        problems: list[str] = []
         if self._period_received == 0:
-            problems.append(f"no input on {self._sub.topic_name}")
+            problems.append(f"no input on {self._input_topics}")
         if self._period_rejected:
             problems.append(f"{self._period_rejected} sample(s) rejected")
         if (
@@ -111,25 +131,14 @@ class NodeDiagnostics:
             imu_values, imu_problems = self._imu.diagnostics()
             values.update(imu_values)
             problems += imu_problems
-        if problems:
-            level, message = DiagnosticStatus.WARN, "; ".join(problems)
-        elif shown and e is not None:
-            level, message = DiagnosticStatus.OK, f"ready: {e.mode} phase {e.phase:.2f}"
-        else:
-            level, message = DiagnosticStatus.OK, f"filling window {values['window']}"
-        message += self._teacher.message_suffix()
+        return problems
+
+    def _start_period(self, now: float) -> None:
         self._period_start = now
         self._period_received = self._period_rejected = self._period_accepted = 0
         self._period_first_stamp = self._period_last_stamp = None
         self._proc_sum = self._proc_max = 0.0
         self._proc_count = 0
-        return DiagnosticStatus(
-            level=level,
-            name=f"{self.get_fully_qualified_name()}: gait estimator",
-            message=message,
-            hardware_id="",
-            values=[KeyValue(key=k, value=v) for k, v in values.items()],
-        )
 
     def _publish_diagnostics(self) -> None:
         try:
