@@ -274,7 +274,7 @@ class RawFusion:
     """
 
     def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0),
-                 params: FusionParams = FusionParams()) -> None:
+                 params: FusionParams = DEFAULT_FUSION) -> None:
         self.params = params
         self._ahrs = _imufusion().Ahrs()
         self._set_rate(rate_hz)
@@ -336,7 +336,7 @@ class RawFusion:
 
 
 def fuse_raw(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
-             gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0), params: FusionParams = FusionParams()) -> np.ndarray:
+             gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0), params: FusionParams = DEFAULT_FUSION) -> np.ndarray:
     """``RawFusion`` over a whole stream: (T,), (T, 3), (T, 3) -> up (T, 3)."""
     t = np.asarray(time_s, dtype=np.float64)
     rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 200.0

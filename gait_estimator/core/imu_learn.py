@@ -100,7 +100,7 @@ def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
 
 def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | None = None,
                   acc_g: np.ndarray | None = None, start_s: float | None = None,
-                  still_s: float = STILL_S, params: ImuLearnParams = ImuLearnParams()) -> Standing | None:
+                  still_s: float = STILL_S, params: ImuLearnParams = DEFAULT_LEARN) -> Standing | None:
     """The first still stretch of ``still_s`` seconds (after ``start_s``), or None.
 
     Args:
@@ -160,7 +160,7 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
 
 
 def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3, gyro_dps: np.ndarray | None = None,
-               params: ImuLearnParams = ImuLearnParams()) -> tuple[Vec3 | None, str]:
+               params: ImuLearnParams = DEFAULT_LEARN) -> tuple[Vec3 | None, str]:
     """Sagittal axis (sign undecided) of one sensor while walking: the principal axis of its
     rotation perpendicular to ``proximal`` (which removes turning about the vertical), from the
     gyro (T, 3) when there is one, else from the rotation of its up directions (T, 3); or None
@@ -218,7 +218,7 @@ def learn_calibration(
     acc_g: np.ndarray | None = None,
     walk_s: float = WALK_S,
     still_s: float = STILL_S,
-    params: ImuLearnParams = ImuLearnParams(),
+    params: ImuLearnParams = DEFAULT_LEARN,
 ) -> tuple[ImuCalibration | None, Standing | None, str]:
     """Complete the configured axes into a calibration from a stream.
 

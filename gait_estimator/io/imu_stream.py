@@ -39,9 +39,9 @@ the node's default, for sensors sampled together."""
 AUTO_TOLERANCE_PERIODS = 0.9
 """``auto_tolerance_s``: this share of the message period (see there)."""
 MAX_QUEUE = 50
+"""Messages kept per sensor while waiting for partners; older ones are dropped (unpaired)."""
 RATE_STEPS = 16
 """Stamp steps of a raw sensor whose median gives its rate, when ``SensorInput`` measures it."""
-"""Messages kept per sensor while waiting for partners; older ones are dropped (unpaired)."""
 _RAD2DEG = 180.0 / math.pi
 _INF = math.inf
 NO_RATES: Vec3 = (math.nan, math.nan, math.nan)
@@ -263,6 +263,9 @@ class ImuCalibrator:
 
     def add(self, t: float, ups: list[Vec3], gyro: list[Vec3], acc: list[Vec3]) -> ImuCalibration | None:
         """One paired sample (t in s); returns the calibration when it has just been learnt."""
+        if self._n and t <= self._t[self._n - 1]:  # a restarted stream: what was kept has the old stamps
+            self._standing = None
+            self._clear()
         n = self._n
         if n == len(self._t):
             if t - self._t[0] > self.params.max_buffer_s:  # bounded: drop the oldest half (no standing found)

@@ -100,7 +100,8 @@ class ImuInput:
         frames = list(values["imu_frame_ids"])
         if len(frames) != N_CHANNELS:
             raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
-        self.inputs = [SensorInput(None, frame_id=f.strip()) for f in frames]  # raw input: rate from the stamps
+        back = node._guard.restart_back_s  # a sensor restarts where the node's stream does
+        self.inputs = [SensorInput(None, f.strip(), restart_back_s=back) for f in frames]  # raw: rate from stamps
         self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
         self.calibrator = ImuCalibrator(lateral, proximal, standing, saved)
         if saved is not None:
@@ -212,6 +213,11 @@ class ImuInput:
             return f"; IMU calibration written to {save_calibration(cal, path)}"
         except OSError as exc:
             return f"; IMU calibration NOT written ({path}: {' '.join(str(exc).split())})"
+
+    def set_restart_back(self, seconds: float) -> None:
+        """A jump back of more than ``seconds`` is a restarted sensor (the node's ``restart_back_s``)."""
+        for sensor in self.inputs:
+            sensor.restart_back_ns = round(seconds * 1e9)
 
     def _apply_biases(self, cal: ImuCalibration) -> None:
         for s, m in zip(self.inputs, cal.mounts, strict=True):

@@ -240,6 +240,8 @@ class NodeParameters:
             self._library = lib
         self._config = config
         self._guard.restart_back_s = restart_threshold(config.max_gap_s)
+        if self._imu is not None:
+            self._imu.set_restart_back(self._guard.restart_back_s)
         options = {OPTION_OF_PARAMETER[n] for n in names if n in OPTION_OF_PARAMETER}
         if ("kernels" in names or options - GAP_OPTIONS) and estimator is not None:
             self._resets_before += self._estimator.resets if self._estimator is not None else 0
