@@ -26,7 +26,8 @@ def read_recording(path: str | Path, **options: Any) -> Recording:
     Args:
         path: File or directory.
         **options: Passed to the reader; ``rate_hz`` (Hz) sets the time base of sources without
-            time stamps (the reference CSV; default: the paper's 230 Hz).
+            time stamps (the reference CSV; default: the paper's 230 Hz); ``imu_topics`` reads a
+            bag's four Imu topics even when it also has a segment-angle topic.
 
     Raises:
         RecordingError: one line naming the file and what is wrong.
@@ -34,6 +35,8 @@ def read_recording(path: str | Path, **options: Any) -> Recording:
     p = Path(path)
     if not p.exists():
         raise RecordingError(f"{p}: no such file or directory")
+    if options.get("imu_topics") and is_bag_path(p):  # named IMU topics: read them, whatever else the bag holds
+        return read_imu_bag(p, **options)
     for detect, read in READERS:
         if detect(p):
             return read(p, **options)
