@@ -195,6 +195,13 @@ def test_live_calibrator_learns_from_the_stream(angles):
         assert np.dot(m_live.lateral, m_off.lateral) > math.cos(math.radians(2.0))
     calib.reset()
     assert calib.calibration is None
+    # a stream restarted mid-learning (stamps jump back): learning starts again on the new stamps
+    again = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4)
+    rows = [([tuple(ups[c, k]) for c in range(4)], [tuple(s.gyro_dps[c, k]) for c in range(4)]) for k in range(len(s.time_s))]
+    for k in range(700):  # 3.5 s: standing and the first steps, stamps from 50 s
+        assert again.add(50.0 + float(s.time_s[k]), *rows[k], [nan3] * 4) is None
+    relearnt = next((float(t) for k, t in enumerate(s.time_s) if again.add(10.0 + float(t), *rows[k], [nan3] * 4)), None)
+    assert relearnt is not None and relearnt == learnt_at
 
 
 def test_calibration_file_round_trip_and_bad_files(tmp_path):
@@ -409,6 +416,33 @@ def test_imu_bag_with_driver_topic_names_is_read_with_imu_topics(synthetic_bags,
                         "--out", str(tmp_path / "pred.csv")], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert len(read_predictions_csv(tmp_path / "pred.csv").time_s) == len(s.time_s)
+    # a robot's recording: the same IMUs and a JointState topic; --imu-topics reads the IMUs
+    mixed = _with_joint_states(bag, tmp_path / "mixed")
+    assert len(read_recording(mixed, imu_topics=DRIVER_TOPICS)) == len(s.time_s)
+    r = subprocess.run([*cli, "convert", str(mixed), "--out", str(out), "--imu-topics", ",".join(DRIVER_TOPICS)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert (rms(read_project_csv(out).angles_deg - s.angles_deg) < 0.5).all()
+
+
+def _with_joint_states(src, dst):
+    """A copy of the IMU bag ``src`` with a /joint_states topic beside its Imu topics."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    js = store.types["sensor_msgs/msg/JointState"]
+    header, stamp = store.types["std_msgs/msg/Header"], store.types["builtin_interfaces/msg/Time"]
+    with AnyReader([src], default_typestore=store) as reader, Writer(dst, version=8) as writer:
+        conns = {c.topic: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
+        joints = writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
+        for c, t, raw in reader.messages():
+            writer.write(conns[c.topic], t, raw)
+            if c.topic == DRIVER_TOPICS[0]:
+                msg = js(header(stamp(t // 10**9, t % 10**9), ""), ["knee"], np.zeros(1), np.zeros(0), np.zeros(0))
+                writer.write(joints, t, store.serialize_cdr(msg, js.__msgtype__))
+    return dst
 
 
 @pytest.mark.parametrize("command", [

@@ -1,4 +1,4 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-64, 171-173):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-67):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles;
 learning the calibration live (also without a library), saving it (also beside a saved
 library) and forgetting it; bad messages, a silent sensor, raw input without imufusion."""
@@ -33,7 +33,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, [*range(60, 70), *range(171, 174)])
+    yield from in_process_factory(monkeypatch, range(60, 70))
 
 
 def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray, frame: str = "") -> Imu:
@@ -207,7 +207,7 @@ def test_imu_input_without_a_library_learns_the_calibration_and_waits_for_teachi
     monkeypatch.setenv("HOME", str(tmp_path))
     rng = np.random.default_rng(5)
     s = synthesize(gait_angles(RATE, walk_s=5.0), RATE, random_mounts(rng), rng)
-    h = ros(171)
+    h = ros(65)
     node = h.estimator(input_type="imu", kernels="")
     client = h.client(node)
     pubs = publishers(client)
@@ -230,7 +230,7 @@ def test_save_library_writes_the_imu_calibration_where_the_next_start_reads_it(r
     s = synthesize(gait_angles(RATE, walk_s=5.0), RATE, random_mounts(rng), rng)
     learnt = learnt_calibration(s, tmp_path / "learnt.imu.yaml")
     out = tmp_path / "wearer.yaml"
-    h = ros(172)
+    h = ros(66)
     node = h.estimator(input_type="imu", imu_calibration_path=str(learnt), adapt_rate=0.1,
                        adapted_library_path=str(out))
     client = h.client(node)
@@ -248,7 +248,7 @@ def test_raw_input_without_imufusion_is_dropped_counted_and_named(ros, tmp_path,
     monkeypatch.setitem(sys.modules, "imufusion", None)  # `import imufusion` raises ImportError
     rng = np.random.default_rng(7)
     s = synthesize(gait_angles(RATE, walk_s=1.0), RATE, random_mounts(rng), rng)
-    h = ros(173)
+    h = ros(67)
     for name in ("imu_pairing_tolerance_s", "imu_timeout_s"):
         with pytest.raises(StartupError, match=f"^{name}: must be >= 0 s, got -0.1$"):
             h.estimator(input_type="imu", **{name: -0.1})

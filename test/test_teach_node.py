@@ -1,7 +1,7 @@
 """Teaching modes in the running estimator_node over real DDS (loopback): from an empty library,
 and replacing a mode of a loaded one while the other modes keep their state.
 
-Domain IDs 70, 71, 75 and 174; LOCALHOST discovery; a namespace unique to the run.
+Domain IDs 70, 71, 75 and 76; LOCALHOST discovery; a namespace unique to the run.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ RATE_HZ = 230.0
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, [*range(70, 77), 174])
+    yield from in_process_factory(monkeypatch, range(70, 77))
 
 
 @pytest.fixture(scope="module")
@@ -211,7 +211,7 @@ def test_replace_a_mode_keeps_the_other_modes_state(ros, multispeed: Recording, 
 
 def test_teaching_keeps_the_personalised_kernels(ros, multispeed: Recording, able_bodied) -> None:
     """With adapt_rate > 0, the library a taught mode goes into is the personalised one."""
-    h = ros(174)
+    h = ros(76)
     node = h.estimator(teach_strides=3, adapt_rate=0.2)
     client = h.client(node)
     remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
