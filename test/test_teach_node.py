@@ -44,6 +44,16 @@ def _stream(client, rec: Recording, start_s: float, stop_s: float, speed: float 
     client.spin_for(0.3)
 
 
+def _teaching_node(h, **parameters) -> tuple:
+    """An estimator node with ``parameters``, a client of its outputs and of its parameters."""
+    node = h.estimator(**parameters)
+    client = h.client(node)
+    remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
+    assert remote.wait_for_services(5.0)
+    assert client.wait_for_node(10.0, settle_s=0.0)
+    return node, client, remote
+
+
 def _set(client, remote, **values) -> list:
     future = remote.set_parameters([Parameter(k, value=v) for k, v in values.items()])
     assert client.spin_until(future.done, 5.0)
@@ -61,11 +71,7 @@ def _offline_kernel(rec: Recording, taught, mode: str):
 
 def test_teach_from_an_empty_library_then_estimate(ros, multispeed: Recording, tmp_path: Path) -> None:
     h = ros(70)
-    node = h.estimator(kernels="", teach_strides=4)
-    client = h.client(node)
-    remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
-    assert remote.wait_for_services(5.0)
-    assert client.wait_for_node(10.0, settle_s=0.0)
+    node, client, remote = _teaching_node(h, kernels="", teach_strides=4)
 
     # No library: samples are taken, only diagnostics come out.
     _stream(client, multispeed, 0.0, 8.0)
@@ -132,11 +138,7 @@ def test_teaching_goes_on_after_the_input_stream_restarts(ros, multispeed: Recor
     """Stamps that jump back (a restarted publisher, a bag played again) mid-teaching: the strides
     collected under the old stamps are dropped, collection starts again, the mode is taught."""
     h = ros(75)
-    node = h.estimator(kernels="", teach_strides=3)
-    client = h.client(node)
-    remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
-    assert remote.wait_for_services(5.0)
-    assert client.wait_for_node(10.0, settle_s=0.0)
+    node, client, remote = _teaching_node(h, kernels="", teach_strides=3)
     assert _set(client, remote, teach_mode="Slow")[0].successful
     _stream(client, multispeed, 8.0, 12.5)  # about two strides under the first stamps
     assert node.get_parameter("teach_mode").value == "Slow"
@@ -151,11 +153,7 @@ def test_replace_a_mode_keeps_the_other_modes_state(ros, multispeed: Recording, 
     """Teaching an existing name replaces its kernel; every other mode's estimate goes on as if
     nothing had changed (the new estimator replays the kept window and adopts the calibration)."""
     h = ros(71)
-    node = h.estimator(teach_strides=3)
-    client = h.client(node)
-    remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
-    assert remote.wait_for_services(5.0)
-    assert client.wait_for_node(10.0, settle_s=0.0)
+    node, client, remote = _teaching_node(h, teach_strides=3)
 
     # Guard rails at the parameter level.
     (bad,) = _set(client, remote, teach_strides=2)
@@ -212,11 +210,7 @@ def test_replace_a_mode_keeps_the_other_modes_state(ros, multispeed: Recording, 
 def test_teaching_keeps_the_personalised_kernels(ros, multispeed: Recording, able_bodied) -> None:
     """With adapt_rate > 0, the library a taught mode goes into is the personalised one."""
     h = ros(76)
-    node = h.estimator(teach_strides=3, adapt_rate=0.2)
-    client = h.client(node)
-    remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
-    assert remote.wait_for_services(5.0)
-    assert client.wait_for_node(10.0, settle_s=0.0)
+    node, client, remote = _teaching_node(h, teach_strides=3, adapt_rate=0.2)
     _stream(client, multispeed, 8.0, 20.0)
     adapted = node._estimator.adapted_library()
     personalised = [m.name for m in adapted.modes if m.info["adapted_strides"]]
