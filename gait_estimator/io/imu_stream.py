@@ -52,7 +52,7 @@ class SensorInput:
 
     Args:
         rate_hz: Nominal rate for the raw-input fusion (Hz); None = measured from the first
-            RATE_STEPS stamp steps (a live stream; until then 200 Hz).
+            ``rate_steps`` stamp steps (a live stream; until then 200 Hz).
         frame_id: The ``header.frame_id`` this sensor's messages must carry ('' = any).
         params: Settings of the raw-input fusion.
         restart_back_s: Two messages in a row stamped more than this (s) before the previous
@@ -63,10 +63,10 @@ class SensorInput:
     """
 
     def __init__(self, rate_hz: float | None = 200.0, frame_id: str = "", params: FusionParams = DEFAULT_FUSION,
-                 restart_back_s: float = STREAM_RESTART_S) -> None:
+                 restart_back_s: float = STREAM_RESTART_S, rate_steps: int = RATE_STEPS) -> None:
         self._rate_hz = 200.0 if rate_hz is None else rate_hz
         self._steps: list[int] | None = [] if rate_hz is None else None  # stamp steps (ns) while measuring
-        self.rate_steps = RATE_STEPS
+        self.rate_steps = rate_steps
         self.params = params
         self.frame_id = frame_id
         self.restart_back_ns = round(restart_back_s * 1e9)
