@@ -3,14 +3,18 @@
 
     python benchmarks/performance.py          # tables only (part of `make docs`)
     python benchmarks/performance.py --run    # first rerun bench.json (both cores, about 10 min)
+    python benchmarks/performance.py --offline TREE  # first rerun offline.json (about 1 min)
 
 Reads, in benchmarks/results/performance/ (a missing report leaves its section out):
 
 * ``bench.json``: ``gait-estimator bench --modes 7,70,700 --drift-steps 1000000 --json ...`` on a
   quiet machine (both cores);
-* ``bench_one_core.json``: ``taskset -c 0 gait-estimator bench --modes 7,70,700 --json ...``.
+* ``bench_one_core.json``: ``taskset -c 0 gait-estimator bench --modes 7,70,700 --json ...``;
+* ``offline.json``: ``python benchmarks/performance.py --offline TREE`` (benchmarks/offline.py:
+  offline throughput against the checkout TREE of older code, and its ceiling).
 
-Writes ``tables.md`` with the sections ``Two cores`` and ``One core`` (docs/performance.md).
+Writes ``tables.md`` with the sections ``Two cores``, ``One core`` and ``Offline throughput``
+(docs/performance.md).
 Timings are noisy on a shared machine: rerun on a quiet one, and compare ratios within one run.
 """
 
@@ -96,13 +100,11 @@ def two_cores(report: dict[str, Any]) -> str:
             notes.append(f"M = {m}: while the default preset calibrates (samples {calibrating['timed_from_sample']:,}–"
                          f"{calibrating['timed_from_sample'] + calibrating['steps_timed']:,}: every time scale) an update "
                          f"takes {calibrating['step_us_median']:,.1f} µs (median), p99 {calibrating['step_us_p99']:,.1f} µs")
-        for preset in ("paper", "default"):
-            proc = by.get((m, "process", preset))
-            if proc:
-                notes.append(f"M = {m}: offline processing (`run_estimator`, behind `process`), {preset} preset: "
-                             f"{proc['samples_per_s']:,.0f} samples/s in bulk, {proc['streaming_samples_per_s']:,.0f} "
-                             f"sample by sample ({proc['speedup']:.1f}×; {proc['samples']:,} samples, calibrations "
-                             "included" + ("" if proc["same_estimates"] else "; DIFFERENT ESTIMATES") + ")")
+        proc = [(p, by[(m, "process", p)]) for p in ("paper", "default") if (m, "process", p) in by]
+        if proc:
+            notes.append(f"M = {m}: `run_estimator` (behind `process`) in bulk: " + ", ".join(
+                f"{p} preset {r['samples_per_s']:,.0f} samples/s ({r['speedup']:.1f}× sample by sample"
+                + ("" if r["same_estimates"] else "; DIFFERENT ESTIMATES") + ")" for p, r in proc))
         fallback = by.get((m, "estimator (numpy)", "default"))
         if fallback and est["default"]:
             notes.append(f"M = {m}: without numba (the numpy fallback) a whole default-preset update takes "
@@ -141,6 +143,12 @@ def one_core(report: dict[str, Any]) -> str:
             + results_table(report) + "\n")
 
 
+def offline_section(report: dict[str, Any]) -> str:
+    from offline import section
+
+    return section(report)
+
+
 def run_bench(note: str | None = None) -> None:
     """Rerun bench.json: ``gait-estimator bench --modes 7,70,700 --drift-steps 1000000 --json``;
     ``note`` describes the machine's state (default: quiet development machine)."""
@@ -160,11 +168,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--run", action="store_true", help="rerun bench.json first (about 10 min), then the tables")
     ap.add_argument("--note", help="with --run: the machine's state, e.g. 'development machine, shared with other "
                     "jobs' (default: quiet development machine)")
+    ap.add_argument("--offline", type=Path, metavar="TREE", help="rerun offline.json first, against the older "
+                    "code checked out in TREE (e.g. git worktree add /tmp/old 5b851d2)")
     args = ap.parse_args(argv)
     if args.run:
         run_bench(args.note)
+    if args.offline:
+        from offline import run
+
+        DIR.mkdir(parents=True, exist_ok=True)
+        run(args.offline, DIR / "offline.json")
     parts = []
-    for name, fn in (("bench.json", two_cores), ("bench_one_core.json", one_core)):
+    for name, fn in (("bench.json", two_cores), ("bench_one_core.json", one_core), ("offline.json", offline_section)):
         report = load(name)
         if report is not None:
             parts.append(fn(report))

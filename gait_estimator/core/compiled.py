@@ -272,9 +272,10 @@ def run_steps(  # pragma: no cover - compiled
     track, near, mid_lo, mid_hi, ready_from,
 ):
     """Matcher steps ``start`` .. ``stop`` - 1 of ``samples`` (G, 4) (weighted; ``squares`` their
-    squared norms) through step_rows, on one thread, the matcher's state in place from ``count``
-    samples on. Per step: every mode's score and phase into out_sse/out_phase (G, M), the best
-    mode and its variant, column and window.
+    squared norms) through step_rows (``run_steps_parallel``: step_rows_parallel, the rows of each
+    step over numba's threads), the matcher's state in place from ``count`` samples on. Per step:
+    every mode's score and phase into out_sse/out_phase (G, M), the best mode and its variant,
+    column and window.
 
     The walking calibrations' stride tracker (``WalkingCalibration._confident_stride_end`` without
     its confidence test) runs along on the best mode and its phase: ``track`` = (valid, mode, phase,
@@ -307,5 +308,15 @@ def run_steps(  # pragma: no cover - compiled
     return stop, False
 
 
-run_steps = njit(cache=True, nogil=True)(run_steps)
+def _calling(fn, name, **callees):  # type: ignore[no-untyped-def]
+    """A compiled copy of ``fn`` named ``name`` whose global names ``callees`` refer to other functions."""
+    twin = types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, name)
+    twin.__qualname__ = name
+    return njit(cache=True, nogil=True)(twin)
+
+
+run_steps, run_steps_parallel = (
+    njit(cache=True, nogil=True)(run_steps),
+    _calling(run_steps, "run_steps_parallel", step_rows=step_rows_parallel),
+)
 

@@ -301,7 +301,8 @@ class IncrementalMatcher(_MatcherBase):
         near = np.zeros((self.n_modes, self.n_modes), dtype=bool) if near is None else near
         scratch_v, scratch_c, scratch_w = np.empty((3, self.n_modes), dtype=np.int64)
         count = self._count
-        done, ended = compiled.run_steps(  # one thread: the rows' results do not depend on it
+        threaded = self._compiled_step is compiled.step_rows_parallel  # the rows' results do not depend on it
+        done, ended = (compiled.run_steps_parallel if threaded else compiled.run_steps)(
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, count, samples, squares, start, stop,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
