@@ -236,6 +236,10 @@ class FusionParams:
             the last movement.
         still_rate_dps, still_acc_g, still_after_s: A sensor is still after ``still_after_s`` (s)
             with |gyro - bias| < ``still_rate_dps`` (deg/s) and ||acc| - 1 g| < ``still_acc_g`` (g).
+        quasi_gain: Gain while the sensor turns slowly (|gyro - bias| < ``quasi_rate_dps``) and
+            ||acc| - 1 g| < ``quasi_acc_g`` without being still (a shank in mid-stance: little
+            acceleration besides gravity); None = ``gain``.
+        quasi_rate_dps, quasi_acc_g: The limits of ``quasi_gain`` (deg/s, g).
     """
 
     gain: float = 0.5
@@ -245,10 +249,18 @@ class FusionParams:
     still_rate_dps: float = 10.0
     still_acc_g: float = 0.05
     still_after_s: float = 0.1
+    quasi_gain: float | None = None
+    quasi_rate_dps: float = 60.0
+    quasi_acc_g: float = 0.1
 
 
 DEFAULT_FUSION = FusionParams()
-"""The default fusion settings (a default argument value)."""
+"""The default fusion settings (a default argument value); the thighs' settings."""
+SHANK_FUSION = FusionParams(gain=0.2, quasi_gain=2.0)
+"""The shanks' fusion settings: swing accelerations of the shank are larger, its mid-stance
+quieter than the thigh's, so the accelerometer weighs little except while it turns slowly."""
+FUSION_BY_CHANNEL = (DEFAULT_FUSION, DEFAULT_FUSION, SHANK_FUSION, SHANK_FUSION)
+"""Fusion settings per sensor, CHANNELS order (right_thigh, left_thigh, right_shank, left_shank)."""
 
 
 def _tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
@@ -281,7 +293,11 @@ class RawFusion:
         self._ahrs.set_settings(self._settings[0])
         self._still_rate2 = params.still_rate_dps * params.still_rate_dps
         self._still_acc2 = 2.0 * params.still_acc_g  # |acc|^2 - 1 ~ 2 (|acc| - 1)
+        quasi = params.quasi_gain is not None and params.quasi_gain != params.gain
+        self._quasi_rate2 = params.quasi_rate_dps * params.quasi_rate_dps if quasi else -1.0
+        self._quasi_acc2 = 2.0 * params.quasi_acc_g
         self._still = 0
+        self._tier = 0  # settings in use: 0 moving, 1 turning slowly, 2 still
         self.gyro_bias_dps = gyro_bias_dps
         self._gyro = np.zeros(3)
         self._acc = np.zeros(3)
@@ -297,14 +313,15 @@ class RawFusion:
             acceleration_rejection=params.acceleration_rejection_deg,
             magnetic_rejection=0.0,
             rejection_timeout=params.rejection_timeout_s,
-        ) for gain in (params.gain, params.still_gain)]
+        ) for gain in (params.gain, params.gain if params.quasi_gain is None else params.quasi_gain,
+                       params.still_gain)]
         self._still_needed = max(1, round(params.still_after_s * rate_hz))
         self._period = 1.0 / rate_hz
 
     def set_rate(self, rate_hz: float) -> None:
         """Use ``rate_hz`` (Hz) as the nominal rate from now on (a live stream's measured rate)."""
         self._set_rate(rate_hz)
-        self._ahrs.set_settings(self._settings[int(self._still >= self._still_needed)])
+        self._ahrs.set_settings(self._settings[self._tier])
         self._ahrs.set_sample_period(self._period)
 
     def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> Vec3:
@@ -321,15 +338,17 @@ class RawFusion:
             self._first = False
             self._ahrs.set_quaternion(_tilt_quaternion_wxyz(a))
             self._ahrs.skip_startup()
-        rate2, acc2 = self._still_rate2, self._still_acc2
-        if gx * gx + gy * gy + gz * gz < rate2 and -acc2 < ax * ax + ay * ay + az * az - 1.0 < acc2:
+        r2, m2 = gx * gx + gy * gy + gz * gz, ax * ax + ay * ay + az * az - 1.0
+        acc2 = self._still_acc2
+        if r2 < self._still_rate2 and -acc2 < m2 < acc2:
             self._still += 1
-            if self._still == self._still_needed:
-                self._ahrs.set_settings(self._settings[1]).set_sample_period(self._period)
-        elif self._still:
-            if self._still >= self._still_needed:
-                self._ahrs.set_settings(self._settings[0]).set_sample_period(self._period)
+        else:
             self._still = 0
+        acc2 = self._quasi_acc2
+        tier = 2 if self._still >= self._still_needed else int(r2 < self._quasi_rate2 and -acc2 < m2 < acc2)
+        if tier != self._tier:
+            self._tier = tier
+            self._ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)
         self._ahrs.update_no_magnetometer(g, a)
         x, y, z = self._ahrs.get_gravity().tolist()
         return x, y, z

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ import numpy as np
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
-from ..core.imu import DEFAULT_FUSION, CalibrationError, FusionParams, ImuCalibration
+from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, FusionParams, ImuCalibration
 from ..core.imu_learn import DEFAULT_LEARN, STILL_S, ImuLearnParams, check_configured, learn_calibration
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
 from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
@@ -79,9 +80,10 @@ def is_imu_bag(p: Path) -> bool:
 
 
 def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list | None, tolerance_s: float,
-               fusion: FusionParams):
+               fusion: FusionParams | Sequence[FusionParams]):
     """Messages (sensor, log_ns, msg) -> paired (stamp_ns, log_ns, ups, gyro, acc) and rejections."""
-    inputs = [SensorInput(rate_hz, params=fusion, restart_back_s=0.0) for _ in range(N_CHANNELS)]  # one recording
+    per_sensor = [fusion] * N_CHANNELS if isinstance(fusion, FusionParams) else list(fusion)
+    inputs = [SensorInput(rate_hz, params=f, restart_back_s=0.0) for f in per_sensor]  # one recording
     if bias is not None:
         for s, b in zip(inputs, bias, strict=False):
             s.set_gyro_bias(b)
@@ -113,7 +115,7 @@ def read_imu_bag(
     imu_standing_deg: list[float] | None = None,
     imu_tolerance_s: float | None = None,
     max_gap_s: float = 0.5,
-    fusion_params: FusionParams = DEFAULT_FUSION,
+    fusion_params: FusionParams | Sequence[FusionParams] = FUSION_BY_CHANNEL,
     learn_params: ImuLearnParams = DEFAULT_LEARN,
     **_: Any,
 ) -> ImuBagRecording:
@@ -126,7 +128,8 @@ def read_imu_bag(
         imu_lateral_axes, imu_proximal_axes: Configured sensor axes per segment ('' = learn).
         imu_standing_deg: Angle of each segment in the standing pose (deg; default 0).
         imu_tolerance_s: Pairing tolerance (s, >= 0); None = measured (module docstring).
-        fusion_params, learn_params: Raw-input fusion and mount-learning settings.
+        fusion_params: Raw-input fusion settings, one for all sensors or per sensor (CHANNELS order).
+        learn_params: Mount-learning settings.
 
     Raises:
         RecordingError: one line (missing topics, unusable messages, no calibration possible).

@@ -30,7 +30,7 @@ from std_srvs.srv import Trigger
 
 from ..analysis.teach import TAUGHT_LIBRARY
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.imu import CalibrationError, ImuCalibration, SegmentMount
+from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount
 from ..core.imu_learn import STILL_S, WALK_S, check_configured
 from ..io.cdr import Stamp
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
@@ -101,7 +101,8 @@ class ImuInput:
         if len(frames) != N_CHANNELS:
             raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
         back = node._guard.restart_back_s  # a sensor restarts where the node's stream does
-        self.inputs = [SensorInput(None, f.strip(), restart_back_s=back) for f in frames]  # raw: rate from stamps
+        self.inputs = [SensorInput(None, f.strip(), fusion, back)  # raw: rate from stamps
+                       for f, fusion in zip(frames, FUSION_BY_CHANNEL, strict=True)]
         self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
         self.calibrator = ImuCalibrator(lateral, proximal, standing, saved)
         if saved is not None:
