@@ -46,7 +46,14 @@ sys.path.insert(0, str(REPO / "test"))
 from gait_estimator.analysis.evaluate import PredictionTable, evaluate  # noqa: E402
 from gait_estimator.analysis.strides import heel_strikes  # noqa: E402
 from gait_estimator.analysis.train import TrainOptions, train_library  # noqa: E402
-from gait_estimator.core.imu import STANDARD_GRAVITY, ImuCalibration, SegmentMount, fuse_raw  # noqa: E402
+from gait_estimator.core.imu import (  # noqa: E402
+    FUSION_BY_CHANNEL,
+    STANDARD_GRAVITY,
+    FusionParams,
+    ImuCalibration,
+    SegmentMount,
+    fuse_raw,
+)
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag  # noqa: E402
 from gait_estimator.io.imu_stream import ImuPairer, SensorInput  # noqa: E402
 from gait_estimator.io.process import predict  # noqa: E402
@@ -141,11 +148,57 @@ def trial_imu(path: Path, tmp: Path) -> dict:
         clean = walk & ~shank_faults(rec, path.stem)
         out[kind]["shank_clean"] = float(np.sqrt(np.mean((a[clean, 2] - mocap[clean, 2]) ** 2)))
         out[kind]["shank_clean_share"] = float(clean.sum() / walk.sum())
+        after = t > t[stand][-1]  # what the node puts out: nothing before its standing pose
+        for seg, c in RIGHT.items():
+            sel = after & (clean if c == 2 else walk)
+            out[kind][f"{seg}_after"] = float(np.sqrt(np.mean((a[sel, c] - mocap[sel, c]) ** 2)))
         out[kind + "_r"] = {seg: float(np.corrcoef(a[walk, c], mocap[walk, c])[0, 1]) for seg, c in RIGHT.items()}
         out[kind + "_calibration"] = got.calibration.summary().split("; left_thigh")[0] + "; " + \
             got.calibration.summary().split("; ")[2]
         angles[kind] = a
-    return {"stats": out, "angles": angles, "rec": rec}
+        if kind == "raw":
+            mounts = {c: got.calibration.mounts[c] for c in RIGHT.values()}
+    return {"stats": out, "angles": angles, "rec": rec, "gyro": gyro, "acc_g": acc / STANDARD_GRAVITY, "mounts": mounts}
+
+
+FUSION_GRID = [FusionParams(gain=g) for g in (0.2, 0.3, 0.5, 1.0)] + [
+    FusionParams(gain=g, quasi_gain=q, quasi_rate_dps=r)
+    for g in (0.2, 0.3, 0.5) for q in (1.0, 2.0, 5.0) for r in (30.0, 60.0) if q > g]
+"""Fusion settings tried per segment by ``select_fusion``."""
+
+
+def _fusion_rms(tr: dict, c: int, params: FusionParams) -> float:
+    """RMS (deg) of one right segment's raw-input angle vs mocap, walking, tared as ``trial_imu``
+    (shank: without the data set's faults), with ``params`` and the mount learnt from the bag."""
+    rec, m = tr["rec"], tr["mounts"][c]
+    a = m.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], m.gyro_bias_dps, params))
+    stand, mocap = first_stand(rec), rec.angles_deg[:, c]
+    a -= (a[stand] - mocap[stand]).mean()
+    sel = rec.labels != "stand"
+    if c == 2:
+        sel &= ~shank_faults(rec, tr["stats"]["trial"])
+    return float(np.sqrt(np.mean((a[sel] - mocap[sel]) ** 2)))
+
+
+def select_fusion(trials: list[dict]) -> dict:
+    """Leave-one-trial-out choice of the fusion settings per segment from FUSION_GRID: for each
+    trial, the settings best on the other four, scored on it (held out); and the settings best
+    on all five (in-sample)."""
+    def name(p: FusionParams) -> str:
+        return f"gain {p.gain:g}" + ("" if p.quasi_gain is None else f", {p.quasi_gain:g} below {p.quasi_rate_dps:g} deg/s")
+
+    out = {}
+    for seg, c in RIGHT.items():
+        rms = np.array([[_fusion_rms(tr, c, p) for tr in trials] for p in FUSION_GRID])  # (settings, trials)
+        held = {}
+        for k, tr in enumerate(trials):
+            best = int(np.argmin(np.delete(rms, k, axis=1).mean(axis=1)))
+            held[tr["stats"]["trial"]] = {"settings": name(FUSION_GRID[best]), "rms_deg": float(rms[best, k])}
+        best = int(np.argmin(rms.mean(axis=1)))
+        out[seg] = {"held_out": held, "held_out_mean_deg": float(np.mean([h["rms_deg"] for h in held.values()])),
+                    "in_sample": name(FUSION_GRID[best]), "in_sample_mean_deg": float(rms[best].mean()),
+                    "shipped": name(FUSION_BY_CHANNEL[c])}
+    return out
 
 
 def halves(rec: Recording, angles: np.ndarray, unscored: np.ndarray | None = None) -> tuple[Recording, Recording]:
@@ -276,12 +329,13 @@ def main(argv: list[str] | None = None) -> int:
         "trials": [tr["stats"] for tr in trials],
         "estimator": estimator_runs(trials),
         "estimator_without_faults": estimator_runs(trials, skip_faults=True),
+        "fusion_selection": select_fusion(trials),
         "synthetic": synthetic(),
         "cost": conversion_cost(),
     }
     for kind in ("orientation", "raw"):
         result[f"mean_rms_{kind}"] = {seg: float(np.mean([tr["stats"][kind][seg] for tr in trials]))
-                                      for seg in (*RIGHT, "shank_clean")}
+                                      for seg in (*RIGHT, "shank_clean", "thigh_after", "shank_after")}
     result["seconds"] = round(time.time() - started, 1)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "imu.json").write_text(json.dumps(result, indent=1) + "\n")
@@ -294,6 +348,7 @@ def write_tables(out: Path) -> str:
     (``imu#Angles``, ``imu#Estimator``, ``imu#Cost``); returns it."""
     r = json.loads((out / "imu.json").read_text(encoding="utf-8"))
     text = "\n".join(["### Per trial", "", per_trial(r), "### Angles", "", angles_table(r), "",
+                      "### Fusion settings, leave-one-trial-out", "", selection_table(r), "",
                       "### Estimator", "", estimator_table(r), "", "### Cost", "", cost_table(r)])
     (out / "tables.md").write_text(text + "\n", encoding="utf-8")
     return text
@@ -301,11 +356,26 @@ def write_tables(out: Path) -> str:
 
 def angles_table(r: dict) -> str:
     """Mean of the trials' RMS IMU - mocap (deg), per input."""
-    rows = ["| input | right thigh | right shank | shank without the data set's IMU faults |", "|---|---|---|---|"]
+    rows = ["| input | right thigh | right shank | shank without the data set's IMU faults | after the first "
+            "standing (what the node puts out): thigh, shank without faults |", "|---|---|---|---|---|"]
     for kind, name in (("raw", "raw (the node's fusion)"),
                        ("orientation", "orientation from imufusion, defaults (as a Fusion-based driver would publish it)")):
         m = r[f"mean_rms_{kind}"]
-        rows.append(f"| {name} | {m['thigh']:.1f}° | {m['shank']:.1f}° | {m['shank_clean']:.1f}° |")
+        rows.append(f"| {name} | {m['thigh']:.1f}° | {m['shank']:.1f}° | {m['shank_clean']:.1f}° | "
+                    f"{m['thigh_after']:.1f}°, {m['shank_after']:.1f}° |")
+    return "\n".join(rows)
+
+
+def selection_table(r: dict) -> str:
+    """Leave-one-trial-out fusion settings per segment (``select_fusion``)."""
+    sel = r["fusion_selection"]
+    rows = ["| segment | held-out trial: settings chosen on the other four, RMS there | held-out mean | best on all "
+            "five (in-sample) | shipped |", "|---|---|---|---|---|"]
+    for seg, v in sel.items():
+        held = "; ".join(f"{k.removeprefix('levelground_')}: {h['settings']}, {h['rms_deg']:.1f}°"
+                         for k, h in v["held_out"].items())
+        rows.append(f"| {seg} | {held} | {v['held_out_mean_deg']:.1f}° | {v['in_sample']}, "
+                    f"{v['in_sample_mean_deg']:.1f}° | {v['shipped']} |")
     return "\n".join(rows)
 
 
@@ -332,15 +402,18 @@ def cost_table(r: dict) -> str:
 def per_trial(r: dict) -> str:
     lines = [f"Measured {r['date']} on {r['machine']} with `{r['command']}` ({r['seconds']} s).", "",
              "| camargo_ab06 trial | input | right thigh RMS deg (r) | right shank RMS deg (r) | shank without the data "
-             "set's IMU faults (share of walking kept) |", "|---|---|---|---|---|"]
+             "set's IMU faults (share of walking kept) | after the first standing: thigh, shank without faults |",
+             "|---|---|---|---|---|---|"]
     for tr in r["trials"]:
         for kind in ("orientation", "raw"):
             lines.append(f"| {tr['trial']} | {kind} | {tr[kind]['thigh']:.1f} ({tr[kind + '_r']['thigh']:.3f}) | "
                          f"{tr[kind]['shank']:.1f} ({tr[kind + '_r']['shank']:.3f}) | {tr[kind]['shank_clean']:.1f} "
-                         f"({100 * tr[kind]['shank_clean_share']:.0f} %) |")
+                         f"({100 * tr[kind]['shank_clean_share']:.0f} %) | {tr[kind]['thigh_after']:.1f}, "
+                         f"{tr[kind]['shank_after']:.1f} |")
     for kind in ("orientation", "raw"):
         m = r[f"mean_rms_{kind}"]
-        lines.append(f"| **mean of 5** | {kind} | **{m['thigh']:.1f}** | **{m['shank']:.1f}** | **{m['shank_clean']:.1f}** |")
+        lines.append(f"| **mean of 5** | {kind} | **{m['thigh']:.1f}** | **{m['shank']:.1f}** | **{m['shank_clean']:.1f}** | "
+                     f"**{m['thigh_after']:.1f}**, **{m['shank_after']:.1f}** |")
     lines += ["", "| kernels from -> tested with | accuracy | phase error (mean, % of stride) | samples |", "|---|---|---|---|"]
     for key, note in (("estimator", ""), ("estimator_without_faults", ", shank IMU faults not used")):
         for k, v in r[key].items():

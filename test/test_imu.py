@@ -162,6 +162,25 @@ def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):
     assert np.array_equal(base, fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k], params=FusionParams()))
     other = fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k], params=FusionParams(gain=0.05, still_gain=0.05))
     assert not np.array_equal(base, other)
+    same = FusionParams(quasi_gain=FusionParams().gain)  # the slow-turning tier at the moving gain: no change
+    assert np.array_equal(base, fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k], params=same))
+    quasi = fuse_raw(s.time_s[k], s.gyro_dps[0, k], s.acc_g[0, k], params=FusionParams(quasi_gain=3.0))
+    assert not np.array_equal(base, quasi)
+
+
+def test_shanks_fuse_with_their_own_settings_in_the_node_and_offline():
+    """FUSION_BY_CHANNEL: thighs DEFAULT_FUSION, shanks SHANK_FUSION, in read_imu_bag as in the node."""
+    import inspect
+
+    from gait_estimator.core.imu import DEFAULT_FUSION, FUSION_BY_CHANNEL, SHANK_FUSION
+
+    assert FUSION_BY_CHANNEL == (DEFAULT_FUSION, DEFAULT_FUSION, SHANK_FUSION, SHANK_FUSION)
+    assert SHANK_FUSION.quasi_gain is not None and SHANK_FUSION.gain < DEFAULT_FUSION.gain
+    assert inspect.signature(read_imu_bag).parameters["fusion_params"].default is FUSION_BY_CHANNEL
+    pytest.importorskip("rclpy")
+    import gait_estimator.ros.imu_input as node_input
+
+    assert "FUSION_BY_CHANNEL" in inspect.getsource(node_input.ImuInput.__init__)
 
 
 def test_learning_says_what_is_missing(angles):
