@@ -357,9 +357,9 @@ def write_tables(out: Path) -> str:
 def angles_table(r: dict) -> str:
     """Mean of the trials' RMS IMU - mocap (deg), per input."""
     rows = ["| input | right thigh | right shank | shank without the data set's IMU faults | after the first "
-            "standing (what the node puts out): thigh, shank without faults |", "|---|---|---|---|---|"]
+            "standing: thigh, shank without faults |", "|---|---|---|---|---|"]
     for kind, name in (("raw", "raw (the node's fusion)"),
-                       ("orientation", "orientation from imufusion, defaults (as a Fusion-based driver would publish it)")):
+                       ("orientation", "orientation of imufusion's defaults (as from a Fusion-based driver)")):
         m = r[f"mean_rms_{kind}"]
         rows.append(f"| {name} | {m['thigh']:.1f}° | {m['shank']:.1f}° | {m['shank_clean']:.1f}° | "
                     f"{m['thigh_after']:.1f}°, {m['shank_after']:.1f}° |")
