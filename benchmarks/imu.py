@@ -21,6 +21,7 @@ synthetic checks and the per-sample conversion cost. One command:
   raw-input IMU angles or with the mocap angles.
 * Synthetic (test/imu_synth.py): random mountings, exact quaternions; raw input with noise and
   gyro bias.
+* Fusion settings: per segment, chosen leave-one-trial-out from FUSION_GRID (``select_fusion``).
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
   (best of 3 rounds by median).
 """
