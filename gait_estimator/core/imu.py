@@ -143,6 +143,13 @@ class SegmentMount:
             raise CalibrationError(f"{what}: {exc}") from None
 
 
+def _angle(row: tuple[float, ...], up: Vec3, atan2: Any = math.atan2, degrees: Any = math.degrees) -> float:
+    """``SegmentMount.angle_deg`` from a row (forward, proximal, standing_deg) of ImuCalibration."""
+    f0, f1, f2, p0, p1, p2, standing = row
+    x, y, z = up
+    return standing + degrees(atan2(f0 * x + f1 * y + f2 * z, p0 * x + p1 * y + p2 * z))
+
+
 @dataclass(frozen=True)
 class ImuCalibration:
     """The four mounts, CHANNELS order (right_thigh, left_thigh, right_shank, left_shank)."""
@@ -157,11 +164,9 @@ class ImuCalibration:
     def angles_deg(self, ups: Any) -> tuple[float, float, float, float]:
         """Four segment angles (deg) from four up vectors (sensor frames), CHANNELS order; the
         same values as each mount's ``angle_deg``."""
-        out = []
-        for (f0, f1, f2, p0, p1, p2, stand), (x, y, z) in zip(self._rows, ups, strict=True):  # type: ignore[attr-defined]
-            out.append(stand + math.degrees(math.atan2(f0 * x + f1 * y + f2 * z, p0 * x + p1 * y + p2 * z)))
-        a, b, c, d = out
-        return a, b, c, d
+        r0, r1, r2, r3 = self._rows  # type: ignore[attr-defined]
+        u0, u1, u2, u3 = ups
+        return _angle(r0, u0), _angle(r1, u1), _angle(r2, u2), _angle(r3, u3)
 
     def summary(self) -> str:
         """One line: each segment's lateral and proximal axes and standing angle."""
@@ -299,8 +304,6 @@ class RawFusion:
         self._still = 0
         self._tier = 0  # settings in use: 0 moving, 1 turning slowly, 2 still
         self.gyro_bias_dps = gyro_bias_dps
-        self._gyro = np.zeros(3)
-        self._acc = np.zeros(3)
         self._first = True
 
     def _set_rate(self, rate_hz: float) -> None:
@@ -326,31 +329,33 @@ class RawFusion:
 
     def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> Vec3:
         """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up``."""
-        g, a, b = self._gyro, self._acc, self.gyro_bias_dps
-        gx, gy, gz = gyro_dps[0] - b[0], gyro_dps[1] - b[1], gyro_dps[2] - b[2]  # Python floats: numpy
-        ax, ay, az = acc_g  # scalars would make the arithmetic below several times slower
-        g[0], g[1], g[2] = gx, gy, gz
-        a[0], a[1], a[2] = ax, ay, az
-        if dt_s is not None and dt_s > 0 and abs(dt_s - self._period) > 1e-6:
+        # Python floats throughout (this runs for every message): numpy for a 3-vector costs more
+        # than the arithmetic, and imufusion takes tuples as it takes arrays.
+        b0, b1, b2 = self.gyro_bias_dps
+        g0, g1, g2 = gyro_dps
+        gx, gy, gz = g0 - b0, g1 - b1, g2 - b2
+        ax, ay, az = acc_g
+        ahrs = self._ahrs
+        if dt_s is not None and not -1e-6 <= dt_s - self._period <= 1e-6 and dt_s > 0:
             self._period = dt_s
-            self._ahrs.set_sample_period(dt_s)
+            ahrs.set_sample_period(dt_s)
         if self._first:  # start from the accelerometer's tilt, not from a level sensor
             self._first = False
-            self._ahrs.set_quaternion(_tilt_quaternion_wxyz(a))
-            self._ahrs.skip_startup()
+            ahrs.set_quaternion(_tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64)))
+            ahrs.skip_startup()
         r2, m2 = gx * gx + gy * gy + gz * gz, ax * ax + ay * ay + az * az - 1.0
         acc2 = self._still_acc2
         if r2 < self._still_rate2 and -acc2 < m2 < acc2:
-            self._still += 1
+            self._still = still = self._still + 1
         else:
-            self._still = 0
+            self._still = still = 0
         acc2 = self._quasi_acc2
-        tier = 2 if self._still >= self._still_needed else int(r2 < self._quasi_rate2 and -acc2 < m2 < acc2)
+        tier = 2 if still >= self._still_needed else int(r2 < self._quasi_rate2 and -acc2 < m2 < acc2)
         if tier != self._tier:
             self._tier = tier
-            self._ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)
-        self._ahrs.update_no_magnetometer(g, a)
-        x, y, z = self._ahrs.get_gravity().tolist()
+            ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)
+        ahrs.update_no_magnetometer((gx, gy, gz), (ax, ay, az))
+        x, y, z = ahrs.get_gravity().tolist()
         return x, y, z
 
 

@@ -44,6 +44,7 @@ RATE_STEPS = 16
 """Stamp steps of a raw sensor whose median gives its rate, when ``SensorInput`` measures it."""
 _RAD2DEG = 180.0 / math.pi
 _INF = math.inf
+_G = STANDARD_GRAVITY
 NO_RATES: Vec3 = (math.nan, math.nan, math.nan)
 
 
@@ -95,7 +96,7 @@ class SensorInput:
             else:
                 raise SampleRejected(NON_INCREASING_STAMP,
                                      f"stamp {stamp_ns * 1e-9:.6f} s is not after the previous {last * 1e-9:.6f} s")
-        else:
+        elif self._restart_from is not None:
             self._restart_from = None
         gx, gy, gz = gyro_rps
         if orientation_cov0 != -1.0:
@@ -112,26 +113,34 @@ class SensorInput:
             self.last_ns = stamp_ns
             return up, gyro, NO_RATES  # the accelerometer is the orientation filter's business
         ax, ay, az = acc_mps2
-        inf = _INF
-        if not (-inf < gx < inf and -inf < gy < inf and -inf < gz < inf and -inf < ax < inf and -inf < ay < inf
-                and -inf < az < inf):
-            raise SampleRejected(NON_FINITE, f"non-finite rate or acceleration ({gx}, {gy}, {gz}; {ax}, {ay}, {az})")
+        if (gx + gy + gz + ax + ay + az) * 0.0 != 0.0:  # nan unless all six are finite (or the sum overflows)
+            inf = _INF
+            if not (-inf < gx < inf and -inf < gy < inf and -inf < gz < inf and -inf < ax < inf
+                    and -inf < ay < inf and -inf < az < inf):
+                raise SampleRejected(NON_FINITE, f"non-finite rate or acceleration ({gx}, {gy}, {gz}; {ax}, {ay}, {az})")
         if ax * ax + ay * ay + az * az < 1e-6:
             raise SampleRejected(ZERO_NORM, "zero acceleration (no gravity in the accelerometer)")
-        if self.fusion is None:
-            self.fusion = RawFusion(self._rate_hz, self.gyro_bias_dps, self.params)
+        fusion = self.fusion
+        if fusion is None:
+            fusion = self.fusion = RawFusion(self._rate_hz, self.gyro_bias_dps, self.params)
         gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG)
-        acc = (ax / STANDARD_GRAVITY, ay / STANDARD_GRAVITY, az / STANDARD_GRAVITY)
-        up = self.fusion.update(gyro, acc, None if last is None else (stamp_ns - last) * 1e-9)
+        acc = (ax / _G, ay / _G, az / _G)
+        up = fusion.update(gyro, acc, None if last is None else (stamp_ns - last) * 1e-9)
         self.last_ns = stamp_ns
-        steps = self._steps
-        if steps is not None and last is not None:
-            steps.append(stamp_ns - last)
-            if len(steps) == self.rate_steps:
-                self._rate_hz = 1e9 / float(np.median(steps))
-                self.fusion.set_rate(self._rate_hz)
-                self._steps = None
+        if self._steps is not None and last is not None:
+            self._measure_rate(stamp_ns - last)
         return up, gyro, acc
+
+    def _measure_rate(self, step_ns: int) -> None:
+        """One more stamp step while the rate is measured (``rate_hz`` None): the fusion's rate
+        from the median of ``rate_steps`` of them."""
+        steps = self._steps
+        assert steps is not None and self.fusion is not None
+        steps.append(step_ns)
+        if len(steps) == self.rate_steps:
+            self._rate_hz = 1e9 / float(np.median(steps))
+            self.fusion.set_rate(self._rate_hz)
+            self._steps = None
 
     def set_gyro_bias(self, bias_dps: Vec3) -> None:
         self.gyro_bias_dps = bias_dps
@@ -175,43 +184,45 @@ class ImuPairer:
         self.max_queue = max_queue
         self.queues: list[deque] = [deque() for _ in range(N_CHANNELS)]
         self.dropped: Counter = Counter()  # unpaired messages per sensor name
+        self.unpaired = 0
+        """Unpaired messages, all sensors (the sum of ``dropped``)."""
         self._newest = [-1] * N_CHANNELS
 
     def push(self, sensor: int, stamp_ns: int, item: Any) -> list[tuple[int, list[Any]]]:
         """Add one accepted message; returns the samples it completes: (stamp_ns = the latest
         of the four, [item per sensor])."""
-        queues = self.queues
-        if stamp_ns < self._newest[sensor]:  # a restarted sensor: drop what was queued under the old stamps
+        queues, newest = self.queues, self._newest
+        if stamp_ns < newest[sensor]:  # a restarted sensor: drop what was queued under the old stamps
             limit = stamp_ns + self.tolerance_ns
             for i, old in enumerate(queues):
                 kept = [m for m in old if m[0] <= limit]
                 self.dropped[CHANNELS[i]] += len(old) - len(kept)
+                self.unpaired += len(old) - len(kept)
                 queues[i] = deque(kept)
-        self._newest[sensor] = stamp_ns
+        newest[sensor] = stamp_ns
         q = queues[sensor]
         q.append((stamp_ns, item))
         if len(q) > self.max_queue:
             q.popleft()
             self.dropped[CHANNELS[sensor]] += 1
+            self.unpaired += 1
         q0, q1, q2, q3 = queues
         if not (q0 and q1 and q2 and q3):
             return []
         out = []
         tol = self.tolerance_ns
         while q0 and q1 and q2 and q3:
-            heads = (q0[0][0], q1[0][0], q2[0][0], q3[0][0])
-            lo, hi = min(heads), max(heads)
+            (s0, i0), (s1, i1), (s2, i2), (s3, i3) = q0[0], q1[0], q2[0], q3[0]
+            lo, hi = min(s0, s1, s2, s3), max(s0, s1, s2, s3)
             if hi - lo <= tol:
-                out.append((hi, [q0.popleft()[1], q1.popleft()[1], q2.popleft()[1], q3.popleft()[1]]))
+                q0.popleft(), q1.popleft(), q2.popleft(), q3.popleft()
+                out.append((hi, [i0, i1, i2, i3]))
                 continue
-            oldest = heads.index(lo)
+            oldest = (s0, s1, s2, s3).index(lo)
             queues[oldest].popleft()
             self.dropped[CHANNELS[oldest]] += 1
+            self.unpaired += 1
         return out
-
-    @property
-    def unpaired(self) -> int:
-        return int(sum(self.dropped.values()))
 
     def clear(self) -> None:
         for q in self.queues:
