@@ -1,6 +1,6 @@
-"""io/cdr.py: JointState fields read from CDR bytes equal what rosbags' serialiser wrote
+"""io/cdr.py: JointState and Imu fields read from CDR bytes equal what rosbags' serialiser wrote
 (both byte orders, frame ids and names of every alignment); bad bytes raise CdrError. ROS-free;
-test_node checks the node's serialised input path over DDS against rclpy's serialiser."""
+test_node and test_node_imu check the node's serialised input paths over DDS against rclpy's."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from gait_estimator.io.bag import typestore
 from gait_estimator.io.bag_write import JOINT_STATE
-from gait_estimator.io.cdr import CdrError, read_joint_state, read_stamp
+from gait_estimator.io.cdr import CdrError, read_imu, read_joint_state, read_stamp
 
 
 def _cdr(frame_id: str, names: list[str], positions: list[float], velocity: list[float], little: bool,
@@ -63,3 +63,48 @@ def test_bad_bytes_raise_cdr_error() -> None:
     for data in (b"", b"\x00\x01" + bytes(9), b"\x00\x07" + good[2:]):
         with pytest.raises(CdrError):
             read_stamp(data)
+
+
+def _imu_cdr(frame_id: str, values: np.ndarray, little: bool, sec: int = 1_763_900_000, nanosec: int = 5) -> bytes:
+    """An Imu whose 37 float fields (orientation x y z w, its covariance, angular velocity, its
+    covariance, linear acceleration, its covariance) are ``values``."""
+    ts = typestore()
+    t = ts.types
+    v = values.tolist()
+    vec = t["geometry_msgs/msg/Vector3"]
+    msg = t["sensor_msgs/msg/Imu"](
+        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame_id),
+        orientation=t["geometry_msgs/msg/Quaternion"](x=v[0], y=v[1], z=v[2], w=v[3]),
+        orientation_covariance=values[4:13].copy(),
+        angular_velocity=vec(x=v[13], y=v[14], z=v[15]),
+        angular_velocity_covariance=values[16:25].copy(),
+        linear_acceleration=vec(x=v[25], y=v[26], z=v[27]),
+        linear_acceleration_covariance=values[28:37].copy(),
+    )
+    return bytes(ts.serialize_cdr(msg, "sensor_msgs/msg/Imu", little_endian=little))
+
+
+@pytest.mark.parametrize("little", [True, False])
+@pytest.mark.parametrize("frame_id", ["", "a", "abc", "imu_link", "right_thigh", "Oberschenkel_rechts_ä"])
+def test_imu_fields_equal_the_serialised_message(little: bool, frame_id: str) -> None:
+    rng = np.random.default_rng(len(frame_id))
+    for k in range(3):
+        v = rng.normal(size=37)
+        if k == 1:  # no orientation (REP 145), non-finite values
+            v[4], v[0], v[14], v[27] = -1.0, np.nan, np.inf, -np.inf
+        got = read_imu(_imu_cdr(frame_id, v, little, sec=-3 + k, nanosec=999_999_999))
+        assert got.stamp == (-3 + k, 999_999_999) and got.frame_id == frame_id
+        assert np.array_equal((*got.orientation, got.orientation_cov0), v[0:5], equal_nan=True)
+        assert np.array_equal(got.angular_velocity, v[13:16]) and np.array_equal(got.linear_acceleration, v[25:28])
+        assert all(type(x) is float for x in (*got.orientation, *got.angular_velocity, *got.linear_acceleration))
+
+
+def test_bad_imu_bytes_raise_cdr_error() -> None:
+    good = _imu_cdr("imu", np.arange(37.0), True)
+    assert read_imu(good).linear_acceleration == (25.0, 26.0, 27.0)
+    bad = [b"", b"\x00\x01", good[:-1], good[:20], b"\x00\x07" + good[2:], good[:12] + b"\xff" * 40,
+           good[:12] + bytes(4) + good[16:],  # a frame_id of length 0 (no NUL)
+           good[:16] + b"\xff\xfe\xfd" + good[19:]]  # not UTF-8
+    for data in bad:
+        with pytest.raises(CdrError):
+            read_imu(data)

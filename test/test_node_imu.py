@@ -1,7 +1,8 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-67):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-67, 85):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles;
 learning the calibration live (also without a library), saving it (also beside a saved
-library) and forgetting it; bad messages, a silent sensor, raw input without imufusion."""
+library) and forgetting it; bad messages, a silent sensor, raw input without imufusion; the
+node's reading of serialised Imu messages (io/cdr.py) against rclpy's, and undecodable bytes."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from imu_synth import gait_angles, random_mounts, synthesize
+from rclpy.serialization import serialize_message
 from ros_helpers import answered_indices, assert_same_trace, in_process_factory, offline, wait_all_answered
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
@@ -21,6 +23,7 @@ from gait_estimator import load_library
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import STANDARD_GRAVITY
 from gait_estimator.core.imu_learn import learn_calibration
+from gait_estimator.io.cdr import read_imu
 from gait_estimator.io.imu_stream import ImuPairer, SensorInput, load_calibration, save_calibration
 from gait_estimator.ros.imu_input import CALIBRATE_STANDING_SERVICE, NO_FUSION
 from gait_estimator.ros.node import RESET_CALIBRATION_SERVICE, SAVE_LIBRARY_SERVICE, StartupError
@@ -34,6 +37,11 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 @pytest.fixture
 def ros(monkeypatch):
     yield from in_process_factory(monkeypatch, range(60, 70))
+
+
+@pytest.fixture
+def ros_cdr(monkeypatch):
+    yield from in_process_factory(monkeypatch, range(85, 90))
 
 
 def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray, frame: str = "") -> Imu:
@@ -264,3 +272,41 @@ def test_raw_input_without_imufusion_is_dropped_counted_and_named(ros, tmp_path,
     message = client.received.diagnostics_message[-1]
     assert "raw IMU message(s) dropped" in message and "pip install 'gait_estimator[imu]'" in message, message
     assert client.received.diagnostics_level[-1] == 1  # WARN
+
+
+def test_serialised_imu_messages_read_as_rclpy_builds_them():
+    """The node reads its Imu input from the CDR bytes (io/cdr.py): the same fields as rclpy's
+    message objects, for the messages of the tests above (orientation or none, NaN and zero
+    quaternions, frame ids of every length, stamps before 1970)."""
+    rng = np.random.default_rng(8)
+    s = synthesize(gait_angles(RATE, walk_s=0.2), RATE, random_mounts(rng), rng)
+    msgs = [m for four in make_messages(s, 20) + make_messages(s, 20, raw=True) for m in four]
+    msgs.append(imu_msg(BASE_NS + 1, [math.nan, 0, 0, 1], s.gyro_dps[0, 0], s.acc_g[0, 0], "thigh_r_imu"))
+    msgs += [imu_msg(BASE_NS + 2, [0, 0, 0, 0], s.gyro_dps[0, 0] * math.nan, s.acc_g[0, 0], "a" * k) for k in range(9)]
+    msgs[-1].header.stamp.sec = -5
+    for m in msgs:
+        got = read_imu(serialize_message(m))
+        o, w, a = m.orientation, m.angular_velocity, m.linear_acceleration
+        want = ((m.header.stamp.sec, m.header.stamp.nanosec), m.header.frame_id, (o.x, o.y, o.z, o.w),
+                float(m.orientation_covariance[0]), (w.x, w.y, w.z), (a.x, a.y, a.z))
+        assert repr((tuple(got.stamp), *got[1:])) == repr(want)  # bit for bit, nan included
+
+
+def test_undecodable_imu_bytes_are_dropped_and_counted(ros_cdr, tmp_path):
+    h = ros_cdr(85)
+    node = h.estimator(input_type="imu", imu_lateral_axes=["+z"] * 4, imu_proximal_axes=["-x"] * 4,
+                       imu_calibration_path=str(tmp_path / "never.imu.yaml"))
+    client = h.client(node)
+    pubs = publishers(client)
+    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
+    client.spin_for(1.0)
+    good = imu_msg(BASE_NS, [0.0, 0.0, 0.0, 1.0], np.zeros(3), np.array([0.0, 0.0, 1.0]))
+    data = serialize_message(good)
+    for raw in (b"\x00\x01\x00\x00" + b"\xff" * 40, data[:40]):  # absurd frame_id length, cut short
+        pubs[1].publish(raw)
+    assert client.spin_until(lambda: node.rejected["malformed"] == 2, 5.0)
+    for c in range(4):
+        pubs[c].publish(good)  # still taken after them
+    assert client.spin_until(lambda: node.samples_received == 3, 5.0)
+    diag = client.latest_diagnostics(3.0)
+    assert diag["rejected_malformed"] == "2" and diag["imu_rejected_malformed"] == "2"

@@ -95,3 +95,42 @@ def read_joint_state(data: bytes) -> JointStateFields:
     except (struct.error, UnicodeDecodeError) as exc:
         raise CdrError(f"invalid JointState: {exc}") from None
     return JointStateFields(stamp, names, positions)
+
+
+class ImuFields(NamedTuple):
+    """The fields of a ``sensor_msgs/Imu`` the IMU input uses (quaternion x, y, z, w; rad/s;
+    m/s^2)."""
+
+    stamp: Stamp
+    frame_id: str
+    orientation: tuple[float, float, float, float]
+    orientation_cov0: float
+    angular_velocity: tuple[float, float, float]
+    linear_acceleration: tuple[float, float, float]
+
+
+# orientation (4 doubles), orientation_covariance[0] (the rest skipped), angular_velocity, its
+# covariance (skipped), linear_acceleration, its covariance (skipped): 37 doubles, 8-aligned.
+_IMU_TAIL = (struct.Struct(">5d64x3d72x3d72x"), struct.Struct("<5d64x3d72x3d72x"))
+
+
+def read_imu(data: bytes) -> ImuFields:
+    """Stamp, frame_id, orientation, ``orientation_covariance[0]``, angular velocity and linear
+    acceleration of a CDR-serialised ``sensor_msgs/Imu``.
+
+    Raises:
+        CdrError: not plain CDR (XCDR1), or truncated or invalid bytes.
+    """
+    little = _byte_order(data)
+    try:
+        sec, nanosec = _TIME[little].unpack_from(data, _BODY)
+        n = _U32[little].unpack_from(data, _BODY + 8)[0]
+        p = _BODY + 12 + n
+        if n == 0 or p > len(data):  # a CDR string holds at least its terminating NUL
+            raise CdrError(f"invalid frame_id length {n}")
+        frame_id = data[_BODY + 12 : p - 1].decode("utf-8")
+        p += -(p - _BODY) % 8
+        ox, oy, oz, ow, cov0, gx, gy, gz, ax, ay, az = _IMU_TAIL[little].unpack_from(data, p)
+    except (struct.error, UnicodeDecodeError) as exc:
+        raise CdrError(f"invalid Imu: {exc}") from None
+    return ImuFields(Stamp(sec, nanosec), frame_id, (ox, oy, oz, ow), cov0, (gx, gy, gz), (ax, ay, az))
