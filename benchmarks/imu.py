@@ -24,6 +24,8 @@ synthetic checks and the per-sample conversion cost. One command:
 * Fusion settings: per segment, chosen leave-one-trial-out from FUSION_GRID (``select_fusion``).
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
   (best of 3 rounds by median); the message fields as Python floats, as the node reads them.
+  With rclpy installed also the node's decoding of one serialised Imu message (``read_imu``
+  from its CDR bytes) next to rclpy's ``deserialize_message`` and field access, interleaved.
 """
 
 from __future__ import annotations
@@ -305,6 +307,42 @@ def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
     return out
 
 
+def decode_cost(n: int = 5000, rounds: int = 3) -> dict:
+    """us per Imu message: the node's ``read_imu`` vs rclpy (median, p99; best round by median);
+    empty without rclpy."""
+    try:
+        from rclpy.serialization import deserialize_message, serialize_message
+        from sensor_msgs.msg import Imu
+    except ImportError:
+        return {}
+    from gait_estimator.io.cdr import read_imu
+
+    m = Imu()
+    m.header.frame_id, m.header.stamp.sec = "right_thigh", 1_700_000_000
+    m.orientation_covariance[0], m.angular_velocity.x, m.linear_acceleration.z = -1.0, 0.3, 9.8
+    data = serialize_message(m)
+
+    def with_rclpy(b: bytes) -> tuple:
+        msg = deserialize_message(b, Imu)
+        o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
+        return (msg.header.stamp, msg.header.frame_id, (o.x, o.y, o.z, o.w), msg.orientation_covariance[0],
+                (w.x, w.y, w.z), (a.x, a.y, a.z))
+
+    out: dict = {}
+    clock = time.perf_counter_ns
+    for _ in range(rounds):
+        for name, fn in (("read_imu (the node)", read_imu), ("rclpy deserialize_message", with_rclpy)):
+            times = np.empty(n)
+            for i in range(n):
+                t0 = clock()
+                fn(data)
+                times[i] = clock() - t0
+            this = {"median_us": float(np.median(times)) / 1e3, "p99_us": float(np.percentile(times, 99)) / 1e3}
+            if name not in out or this["median_us"] < out[name]["median_us"]:
+                out[name] = this
+    return out
+
+
 def machine() -> str:
     cpu = platform.processor() or platform.machine()
     try:
@@ -335,6 +373,7 @@ def main(argv: list[str] | None = None) -> int:
         "fusion_selection": select_fusion(trials),
         "synthetic": synthetic(),
         "cost": conversion_cost(),
+        "decode": decode_cost(),
     }
     for kind in ("orientation", "raw"):
         result[f"mean_rms_{kind}"] = {seg: float(np.mean([tr["stats"][kind][seg] for tr in trials]))
@@ -397,8 +436,9 @@ def estimator_table(r: dict) -> str:
 
 
 def cost_table(r: dict) -> str:
-    rows = ["| input | median µs | p99 µs |", "|---|---|---|"]
-    rows += [f"| {k} | {v['median_us']:.1f} | {v['p99_us']:.1f} |" for k, v in r["cost"].items()]
+    rows = ["| per four-sensor sample, input; per message, decoding | median µs | p99 µs |", "|---|---|---|"]
+    rows += [f"| {k} | {v['median_us']:.1f} | {v['p99_us']:.1f} |"
+             for k, v in (*r["cost"].items(), *r.get("decode", {}).items())]
     return "\n".join(rows)
 
 
