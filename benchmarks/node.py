@@ -14,9 +14,10 @@ Reads, in benchmarks/results/node/ (a missing report leaves its column or sectio
 * ``bench_node_one_core.json``: ``taskset -c 0 gait-estimator bench-node --profile --json ...``;
 * ``bench_node_700.json``: ``gait-estimator bench-node --modes 700 --preset paper --executor events
   --outputs estimate --rates 250,500,1000 --profile --json ...``;
-* ``bench_node_imu.json``, ``bench_node_imu_raw.json``, ``bench_node_imu_joint_state.json``:
-  ``gait-estimator bench-node --input imu|imu-raw|joint_state --profile --json ...`` one after the
-  other on a quiet machine (IMU input; JointState in the same sitting, for comparison).
+* ``bench_node_imu1_{joint_state,imu,imu_raw}.json``: ``gait-estimator bench-node --input
+  joint_state|imu|imu-raw --profile --json ...`` one after the other on a quiet machine (IMU input,
+  JointState in the same sitting for comparison); ``bench_node_imu2_*.json``: a second sitting, in
+  the reverse order.
 
 Writes ``tables.md`` with the sections ``Two cores``, ``One core``, ``700 modes`` and ``IMU input``
 (docs/performance.md, docs/imu.md).
@@ -38,10 +39,9 @@ NODE = ROOT / "benchmarks" / "results" / "node"
 REPORTS = {"quiet": "bench_node.json", "busy": "bench_node_busy.json", "busy_rt": "bench_node_busy_rt.json",
            "busy_priority": "bench_node_busy_priority.json",
            "one_core": "bench_node_one_core.json", "modes_700": "bench_node_700.json",
-           "imu_joint_state": "bench_node_imu_joint_state.json", "imu": "bench_node_imu.json",
-           "imu_raw": "bench_node_imu_raw.json"}
-IMU_RUNS = {"imu_joint_state": ("JointState", "joint_state"), "imu": ("Imu ×4, orientations", "imu"),
-            "imu_raw": ("Imu ×4, gyro + accelerometer", "imu-raw")}
+           **{f"imu{n}_{k}": f"bench_node_imu{n}_{k}.json" for n in (1, 2) for k in ("joint_state", "imu", "imu_raw")}}
+IMU_RUNS = {"joint_state": "JointState", "imu": "Imu ×4, orientations", "imu_raw": "Imu ×4, gyro + accelerometer"}
+"""IMU input runs (``--input``; file names with ``_``) and their column labels."""
 PERIODS_MS = {230: 1000 / 230, 1000: 1.0}
 STAGES = {
     "dds_in_and_executor": "input published → node starts handling it (DDS in, executor wake-up, take)",
@@ -256,15 +256,16 @@ def modes_700(r: dict[str, Any]) -> str:
 
 def imu_input(reports: dict[str, dict[str, Any]]) -> str:
     """The node fed four Imu topics (configured mounting) vs JointState, one sitting."""
-    runs = [(label, file, reports[k]) for k, (label, file) in IMU_RUNS.items() if k in reports]
+    runs = [(f"{label}, sitting {n}", {"imu_raw": "imu-raw"}.get(k, k), reports[f"imu{n}_{k}"])
+            for n in (1, 2) for k, label in IMU_RUNS.items() if f"imu{n}_{k}" in reports]
     vs = [(label, variant(r, r["executor"], r["outputs"])) for label, _, r in runs]
     first = runs[0][2]
     out = ["## IMU input", "",
            "`gait-estimator bench-node --input INPUT --profile --json benchmarks/results/node/bench_node_imu*.json` "
-           f"for INPUT {', '.join(f'`{f}`' for _, f, _ in runs)}, one after the other on the development machine "
+           f"for INPUT {', '.join(f'`{f}`' for _, f, _ in runs[:3])}, one after the other on the development machine "
            f"({first.get('date', '')}, {first['machine']['processor']}, {first['machine']['cpus']} vCPUs; loads in the "
-           "last row). IMU: `input_type: imu` with configured mounting, per sample four Imu messages with one "
-           "stamp; latency from the publication of the last of them; a rate counts samples. Executor "
+           "last row); sitting 2 in the reverse order. IMU: `input_type: imu` with configured mounting, per sample "
+           "four Imu messages with one stamp; latency from the publication of the last of them; a rate counts samples. Executor "
            f"`{first['executor']}`, the bench subscribing to `estimate`.", ""]
     rows = [
         ["latency at 230 Hz to the bench's DDS reader, p50 / p90 / p99 / max", *(lat4(v["latency"], "dds_") for _, v in vs)],
@@ -313,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         parts.append(one_core(reports["one_core"]))
     if "modes_700" in reports:
         parts.append(modes_700(reports["modes_700"]))
-    if "imu" in reports or "imu_raw" in reports:
+    if any(k.startswith("imu1_") for k in reports):
         parts.append(imu_input(reports))
     (NODE / "tables.md").write_text("\n".join(parts), encoding="utf-8")
     print(f"wrote {(NODE / 'tables.md').relative_to(ROOT)}")
