@@ -13,9 +13,14 @@ Reads, in benchmarks/results/node/ (a missing report leaves its column or sectio
   ``bench_node_busy_priority.json``: the same with ``--thread-priority`` instead of chrt;
 * ``bench_node_one_core.json``: ``taskset -c 0 gait-estimator bench-node --profile --json ...``;
 * ``bench_node_700.json``: ``gait-estimator bench-node --modes 700 --preset paper --executor events
-  --outputs estimate --rates 250,500,1000 --profile --json ...``.
+  --outputs estimate --rates 250,500,1000 --profile --json ...``;
+* ``bench_node_imu1_{joint_state,imu,imu_raw}.json``: ``gait-estimator bench-node --input
+  joint_state|imu|imu-raw --profile --json ...`` one after the other on a quiet machine (IMU input,
+  JointState in the same sitting for comparison); ``bench_node_imu2_*.json``: a second sitting, in
+  the reverse order.
 
-Writes ``tables.md`` with the sections ``Two cores``, ``One core`` and ``700 modes`` (docs/performance.md).
+Writes ``tables.md`` with the sections ``Two cores``, ``One core``, ``700 modes`` and ``IMU input``
+(docs/performance.md, docs/imu.md).
 """
 
 from __future__ import annotations
@@ -33,7 +38,10 @@ ROOT = Path(__file__).resolve().parents[1]
 NODE = ROOT / "benchmarks" / "results" / "node"
 REPORTS = {"quiet": "bench_node.json", "busy": "bench_node_busy.json", "busy_rt": "bench_node_busy_rt.json",
            "busy_priority": "bench_node_busy_priority.json",
-           "one_core": "bench_node_one_core.json", "modes_700": "bench_node_700.json"}
+           "one_core": "bench_node_one_core.json", "modes_700": "bench_node_700.json",
+           **{f"imu{n}_{k}": f"bench_node_imu{n}_{k}.json" for n in (1, 2) for k in ("joint_state", "imu", "imu_raw")}}
+IMU_RUNS = {"joint_state": "JointState", "imu": "Imu ×4, orientations", "imu_raw": "Imu ×4, gyro + accelerometer"}
+"""IMU input runs (``--input``; file names with ``_``) and their column labels."""
 PERIODS_MS = {230: 1000 / 230, 1000: 1.0}
 STAGES = {
     "dds_in_and_executor": "input published → node starts handling it (DDS in, executor wake-up, take)",
@@ -246,6 +254,34 @@ def modes_700(r: dict[str, Any]) -> str:
     return "\n".join(out).rstrip() + "\n"
 
 
+def imu_input(reports: dict[str, dict[str, Any]]) -> str:
+    """The node fed four Imu topics (configured mounting) vs JointState, one sitting."""
+    runs = [(f"{label}, sitting {n}", {"imu_raw": "imu-raw"}.get(k, k), reports[f"imu{n}_{k}"])
+            for n in (1, 2) for k, label in IMU_RUNS.items() if f"imu{n}_{k}" in reports]
+    vs = [(label, variant(r, r["executor"], r["outputs"])) for label, _, r in runs]
+    first = runs[0][2]
+    out = ["## IMU input", "",
+           "`gait-estimator bench-node --input INPUT --profile --json benchmarks/results/node/bench_node_imu*.json` "
+           f"for INPUT {', '.join(f'`{f}`' for _, f, _ in runs[:3])}, one after the other on the development machine "
+           f"({first.get('date', '')}, {first['machine']['processor']}, {first['machine']['cpus']} vCPUs; loads in the "
+           "last row); sitting 2 in the reverse order. IMU: `input_type: imu` with configured mounting, per sample "
+           "four Imu messages with one stamp; latency from the publication of the last of them; a rate counts samples. Executor "
+           f"`{first['executor']}`, the bench subscribing to `estimate`.", ""]
+    rows = [
+        ["latency at 230 Hz to the bench's DDS reader, p50 / p90 / p99 / max", *(lat4(v["latency"], "dds_") for _, v in vs)],
+        ["latency at 230 Hz to the bench's callback, p50 / p90 / p99 / max", *(lat4(v["latency"]) for _, v in vs)],
+        ["latency at 1000 Hz, p50 / p99, to the DDS reader; to the callback",
+         *(f"{lat2(step_at(v, 1000), 'dds_')}; {lat2(step_at(v, 1000))}" for _, v in vs)],
+        ["highest input rate sustained without drops", *(rate(v) for _, v in vs)],
+        ["node processing time at 230 Hz, mean / max (diagnostics)",
+         *(f"{ms(v['latency'].get('node_processing_mean_ms'), 3)} / {ms(v['latency'].get('node_processing_max_ms'))} ms"
+           for _, v in vs)],
+        ["load average before / after the run",
+         *(f"{r['load_average_before'][0]:.2f} / {r['load_average_after'][0]:.2f}" for _, _, r in runs)],
+    ]
+    return "\n".join([*out, table(["measure", *(label for label, _ in vs)], rows)]) + "\n"
+
+
 def run_bench(domain_id: int) -> None:
     """The quiet-machine report: ``gait-estimator bench-node --profile --json bench_node.json``
     (DDS kept on this machine: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, its own ROS_DOMAIN_ID)."""
@@ -278,6 +314,8 @@ def main(argv: list[str] | None = None) -> int:
         parts.append(one_core(reports["one_core"]))
     if "modes_700" in reports:
         parts.append(modes_700(reports["modes_700"]))
+    if any(k.startswith("imu1_") for k in reports):
+        parts.append(imu_input(reports))
     (NODE / "tables.md").write_text("\n".join(parts), encoding="utf-8")
     print(f"wrote {(NODE / 'tables.md').relative_to(ROOT)}")
     return 0

@@ -1,5 +1,5 @@
 """estimator_node as a separate process through its installed entry point, and the demo and
-bench-node commands: real DDS on loopback (domain IDs 21..28, 37 and 49, LOCALHOST discovery)."""
+bench-node commands: real DDS on loopback (domain IDs 21..28, 37, 38 and 49, LOCALHOST discovery)."""
 
 from __future__ import annotations
 
@@ -329,3 +329,17 @@ def test_bench_node_with_more_modes(tmp_path: Path) -> None:
     assert bad.returncode == 2 and "--modes" in bad.stderr
     bad = _gait_estimator("bench-node", "--thread-priority", "100")
     assert bad.returncode == 2 and "--thread-priority" in bad.stderr
+
+
+def test_bench_node_with_raw_imu_input(tmp_path: Path) -> None:
+    """--input imu-raw: the node runs input_type imu with configured mounting, four Imu messages
+    (gyro + accelerometer only) per sample after a standing second; every sample is answered."""
+    report = tmp_path / "bench.json"
+    proc = _gait_estimator("bench-node", "--input", "imu-raw", "--samples", "150", "--rates", "300", "--seconds", "0.5",
+                           "--executor", "events", "--outputs", "estimate", "--domain-id", "38", "--json", str(report))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "input imu-raw" in proc.stdout
+    data = json.loads(report.read_text(encoding="utf-8"))
+    assert data["input"] == "imu-raw" and data["node_exit_code"] == 0
+    assert data["latency"]["samples"] == 150 and data["latency"]["answered"] >= 140
+    assert data["throughput"]["steps"][0]["rate_hz"] == 300 and data["throughput"]["steps"][0]["answered"] > 0

@@ -20,6 +20,7 @@ from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
 from .args import choice_list, positive_float, positive_int, prepare_output
+from .bench_profile import PROFILE_LABELS, clock_offset_ns, profile_stages
 from .node_commands import domain_id_arg, percentiles, start_node, wait_node
 
 BENCH_DOMAIN_ID = 78
@@ -51,73 +52,11 @@ def _rates(text: str) -> list[float]:
 
 EXECUTORS = ("events", "single_threaded")
 """Values of estimator_node's ``executor`` parameter (gait_estimator.ros.node.EXECUTORS)."""
+INPUTS = ("joint_state", "imu", "imu-raw")
+"""bench-node --input: JointState angles, or four Imu topics with orientations / gyro + accelerometer only."""
 OUTPUT_SETS = ("estimate", "all")
 """bench-node --outputs: the bench subscribes to ``estimate`` only (like a controller), or to
 ``mode``, ``phase``, ``sse`` and ``estimate`` (the node publishes all four per sample)."""
-
-
-def _stats_ms(values_ms: np.ndarray) -> dict[str, float]:
-    if values_ms.size == 0:
-        return {}
-    p50, p99 = np.percentile(values_ms, [50, 99])
-    return {"mean_ms": float(values_ms.mean()), "p50_ms": float(p50), "p99_ms": float(p99)}
-
-
-def _clock_offset_ns() -> int:
-    """time.time_ns() - time.perf_counter_ns(), from the closest of a few back-to-back readings."""
-    best = None
-    for _ in range(20):
-        a = time.perf_counter_ns()
-        w = time.time_ns()
-        b = time.perf_counter_ns()
-        if best is None or b - a < best[0]:
-            best = (b - a, w - (a + b) // 2)
-    assert best is not None
-    return best[1]
-
-
-def _profile(got: Any, stamps: np.ndarray, sent_wall: np.ndarray, recv_wall: np.ndarray) -> dict[str, Any]:
-    """Where the time of one latency run went, per answered sample (see bench_node)."""
-    from ..ros.node import PROFILE_COLUMNS
-
-    if not got.profile:
-        return {"error": "no ~/profile data from the node"}
-    rows = np.concatenate(got.profile)
-    col = {c: i for i, c in enumerate(PROFILE_COLUMNS)}
-    prof_stamp = rows[:, col["stamp_sec"]].astype(np.int64) * 1_000_000_000 + rows[:, col["stamp_nanosec"]].astype(np.int64)
-    start = rows[:, col["start_sec"]].astype(np.int64) * 1_000_000_000 + rows[:, col["start_nanosec"]].astype(np.int64)
-    by_stamp = {int(st): k for k, st in enumerate(prof_stamp)}
-    index = {int(st): i for i, st in enumerate(stamps)}
-    est_stamp = np.array(got.estimate_stamp_ns, dtype=np.int64)
-    dds = np.array(got.estimate_dds_ns, dtype=np.int64)
-    src = np.array(got.estimate_source_ns, dtype=np.int64)
-    pairs = [(j, index[int(st)], by_stamp[int(st)]) for j, st in enumerate(est_stamp) if int(st) in index and int(st) in by_stamp]
-    if not pairs:
-        return {"error": "no answered sample found in the node's ~/profile"}
-    j, i, k = (np.array(v, dtype=np.int64) for v in zip(*pairs, strict=True))
-    est_ns = rows[k, col["estimator_ns"]]
-    pub_ns = rows[k, col["publish_ns"]]
-    stages = {
-        "dds_in_and_executor": (start[k] - sent_wall[i]) / 1e6,
-        "estimator": est_ns / 1e6,
-        "publish": pub_ns / 1e6,
-        "dds_out": (dds[j] - src[j]) / 1e6,
-        "bench_callback": (recv_wall[j] - dds[j]) / 1e6,
-        "total_to_dds": (dds[j] - sent_wall[i]) / 1e6,
-        "total_to_callback": (recv_wall[j] - sent_wall[i]) / 1e6,
-    }
-    return {"samples": len(pairs), "stages": {name: _stats_ms(v) for name, v in stages.items()}}
-
-
-PROFILE_LABELS = {
-    "dds_in_and_executor": "input publish -> node starts handling it (DDS in, executor wake-up, take)",
-    "estimator": "node: angle extraction, stamp checks, estimator update",
-    "publish": "node: publishing (count queries, filling, publish calls)",
-    "dds_out": "estimate written by the node -> bench's DDS reader (DDS out)",
-    "bench_callback": "bench's DDS reader -> bench's Python callback (bench executor)",
-    "total_to_dds": "total: input publish -> estimate at the bench's DDS reader",
-    "total_to_callback": "total: input publish -> bench's callback (the latency above)",
-}
 
 
 class _Variant:
@@ -128,11 +67,14 @@ class _Variant:
         client: EstimatorClient subscribed to the node's outputs and diagnostics.
         log: Prints one line.
         label: Prefix of the log lines.
+        input_kind: One of INPUTS (IMU: the angles become four Imu messages per sample, their
+            gyro continuing from the previous run's last angles).
     """
 
-    def __init__(self, lib: Any, client: Any, log: Any, label: str) -> None:
-        self.lib, self.client, self.log, self.label = lib, client, log, label
+    def __init__(self, lib: Any, client: Any, log: Any, label: str, input_kind: str = "joint_state") -> None:
+        self.lib, self.client, self.log, self.label, self.input_kind = lib, client, log, label, input_kind
         self.next_stamp = time.time_ns()
+        self.last_deg = np.zeros(4)  # IMU input: the angles of the last sample sent
 
     def node_received(self, at_least: int = 0) -> int:
         """The node's samples_received from a report newer than now; up to 3 s for one that
@@ -147,21 +89,31 @@ class _Variant:
             raise GaitEstimatorError("no diagnostics from estimator_node")
         return int(d["samples_received"])
 
-    def run(self, n: int, rate: float, with_profile: bool = False) -> dict[str, Any]:
-        """Stream ``n`` samples at ``rate`` Hz; latency, drops and the node's processing time."""
+    def run(self, n: int, rate: float, with_profile: bool = False, standing: bool = False) -> dict[str, Any]:
+        """Stream ``n`` samples at ``rate`` Hz (``standing``: all angles 0); latency, drops and
+        the node's processing time."""
         from ..analysis.bench import synthetic_walk
 
         client, lib = self.client, self.lib
-        x = np.radians(synthetic_walk(lib, n, seed=n))
+        deg = np.zeros((n, 4)) if standing else synthetic_walk(lib, n, seed=n)
         period = int(1e9 / lib.sample_rate_hz)  # stamps keep the library's time base
         stamps = self.next_stamp + period * np.arange(1, n + 1, dtype=np.int64)
         self.next_stamp = int(stamps[-1])
+        if self.input_kind == "joint_state":
+            x: Any = np.radians(deg)
+        else:  # from the last angles sent into this run's in 0.25 s: no jump for the gyro
+            from ..ros.imu_publish import imu_samples
+
+            k = min(n, round(0.25 * lib.sample_rate_hz))
+            deg[:k] = self.last_deg + (deg[k - 1] - self.last_deg) * (np.arange(1, k + 1) / k)[:, None]
+            x = imu_samples(deg, stamps, period * 1e-9, self.input_kind == "imu-raw", self.last_deg)
+            self.last_deg = deg[-1].copy()
         before = self.node_received()
         n_diag = len(client.received.diagnostics)
         got = client.received
         got.clear()
         first = client.estimate_count
-        offset = _clock_offset_ns()
+        offset = clock_offset_ns()
         sent = client.stream(x, stamps, rate)
         achieved = (n - 1) / max((sent[-1] - sent[0]) / 1e9, 1e-9) if n > 1 else rate
         last, last_change = client.estimate_count, time.monotonic()
@@ -196,7 +148,7 @@ class _Variant:
             res["node_processing_mean_ms"] = float(np.mean([float(d["processing_time_mean_ms"]) for d in busy]))
             res["node_processing_max_ms"] = float(max(float(d["processing_time_max_ms"]) for d in busy))
         if with_profile:
-            res["profile"] = _profile(got, stamps, sent + offset, recv + offset)
+            res["profile"] = profile_stages(got, stamps, sent + offset, recv + offset)
         return res
 
     def latency(self, samples: int, rate_hz: float, profile: bool, out: dict[str, Any]) -> None:
@@ -273,6 +225,7 @@ def _bench_variant(
     log: Any,
     preset: str = "default",
     thread_priority: int = 0,
+    input_kind: str = "joint_state",
 ) -> dict[str, Any]:
     """One variant of bench_node: a fresh estimator_node process, its latency and throughput."""
     from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
@@ -280,11 +233,16 @@ def _bench_variant(
     from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient
 
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
-    priority = ["-p", f"thread_priority:={thread_priority}"] if thread_priority else []
-    node = start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}", *priority], node_cmd)
+    extra = ["-p", f"thread_priority:={thread_priority}"] if thread_priority else []
+    if input_kind != "joint_state":  # configured mounting; a path without a file: no saved calibration
+        from ..ros.imu_publish import node_imu_arguments
+
+        extra += node_imu_arguments(os.path.join(tempfile.gettempdir(), f"gait_estimator_bench_{os.getpid()}.imu.yaml"))
+    node = start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}", *extra], node_cmd)
     try:
         client = EstimatorClient(
             domain_id,
+            input_type="imu" if input_kind != "joint_state" else "joint_state",
             reliable=True,
             record=False,
             outputs=(*topics, DIAGNOSTICS_TOPIC),
@@ -294,9 +252,12 @@ def _bench_variant(
         node.close()
         raise
     out: dict[str, Any] = {"executor": executor, "outputs": outputs, "node_cmd": node.cmd}
-    bench = _Variant(lib, client, log, f"[executor {executor}, outputs {outputs}]")
+    bench = _Variant(lib, client, log, f"[executor {executor}, outputs {outputs}"
+                     + ("]" if input_kind == "joint_state" else f", input {input_kind}]"), input_kind)
     try:
         wait_node(client, node, 30.0)
+        if input_kind != "joint_state":  # as a wearer would: stand (the fusion settles), then walk
+            bench.run(round(lib.sample_rate_hz), rate_hz, standing=True)
         bench.run(int(lib.lengths.max()) + 50, rate_hz)  # warm-up: fill the window, first-call costs
         bench.latency(latency_samples, rate_hz, profile, out)
         if throughput:
@@ -323,6 +284,7 @@ def bench_node(
     preset: str = "default",
     modes: int | None = None,
     thread_priority: int = 0,
+    input_kind: str = "joint_state",
 ) -> dict[str, Any]:
     """Measure estimator_node (with estimator preset ``preset``) in a child process over DDS on this machine, once per variant
     (``executors`` x ``outputs``, a fresh node process each). With ``modes``, the node runs a
@@ -344,6 +306,11 @@ def bench_node(
        the message info of ``estimate``; see PROFILE_LABELS), and the per-call costs of the
        publishing levers in this process.
 
+    With ``input_kind`` ``imu`` / ``imu-raw`` the node runs ``input_type: imu`` with configured
+    mounting (ros/imu_publish.py) and each sample is four Imu messages with one stamp (with
+    orientations / gyro + accelerometer only) after one second of standing; latency runs from the
+    publication of a sample's last message, rates count samples.
+
     Input: JointState (rad) of synthetic strides of the library's kernels with noise, stamped on
     the library's time base, published reliably; this process subscribes to ``estimate`` (like a
     controller) or to all four outputs, and to ``/diagnostics``. The report's top-level
@@ -359,12 +326,13 @@ def bench_node(
             lib = lib.replicated(modes)
             kernels = str(save_library(lib, Path(tmp) / f"{lib.name}_{modes}.npz"))
         return _bench_node(lib, kernels, latency_samples, rate_hz, rates, rate_seconds, domain_id, node_cmd, log,
-                           executors, outputs, profile, preset, thread_priority)
+                           executors, outputs, profile, preset, thread_priority, input_kind)
 
 
 def _bench_node(
     lib: Any, kernels: str, latency_samples: int, rate_hz: float, rates: Any, rate_seconds: float, domain_id: int,
     node_cmd: str | None, log: Any, executors: Any, outputs: Any, profile: bool, preset: str, thread_priority: int = 0,
+    input_kind: str = "joint_state",
 ) -> dict[str, Any]:
     from ..analysis.bench import machine_info
     from ..ros.node_client import use_local_ros
@@ -380,11 +348,14 @@ def _bench_node(
         "thread_priority": thread_priority,
         "variants": [],
     }
+    if input_kind != "joint_state":
+        report["input"] = input_kind
     for executor in executors:
         for out in outputs:
             v = _bench_variant(
                 lib, kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
                 node_cmd, profile, throughput=out == "estimate", log=log, preset=preset, thread_priority=thread_priority,
+                input_kind=input_kind,
             )
             report["variants"].append(v)
     first = report["variants"][0]
@@ -424,10 +395,11 @@ def cmd_bench_node(args: argparse.Namespace) -> int:
         preset=args.preset,
         modes=args.modes,
         thread_priority=args.thread_priority,
+        input_kind=args.input,
     )
     m = report["machine"]
     print(f"machine: {m['processor']}, {m['cpus']} CPUs ({m['cpus_allowed']} allowed), Python {m['python']}; "
-          f"library {report['library']} ({report['modes']} modes); load average before "
+          f"library {report['library']} ({report['modes']} modes), input {args.input}; load average before "
           f"{report['load_average_before'][0]:.2f}, after {report['load_average_after'][0]:.2f}")
     print(f"summary (latency at {args.rate:g} Hz, p50 / p99 ms, to the bench's callback | to its DDS reader; "
           "highest rate):")
@@ -471,6 +443,9 @@ def add_commands(sub: Any) -> None:
     b.add_argument("--outputs", type=choice_list(OUTPUT_SETS), default=list(OUTPUT_SETS), metavar="LIST",
                    help="what the bench subscribes to: estimate (like a controller) and/or all (mode, phase, sse, "
                    "estimate; latency only); default " + ",".join(OUTPUT_SETS))
+    b.add_argument("--input", choices=INPUTS, default="joint_state",
+                   help="joint_state (default), or four Imu topics (input_type: imu, configured mounting) with "
+                   "orientations (imu) or gyro + accelerometer only (imu-raw); a rate counts four-message samples")
     b.add_argument("--preset", choices=("default", "paper"), default="default",
                    help="the node's estimator preset (default: default)")
     b.add_argument("--modes", type=positive_int, metavar="M",

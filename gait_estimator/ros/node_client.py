@@ -23,13 +23,14 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from ..core.channels import CHANNELS
 from ..core.kernels import KernelLibrary
 from ..core.matcher import MatchTrace
 from ..io.cdr import read_stamp
+from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
 from .node_process import (  # noqa: F401 - re-exported: the node client's users start nodes too
     NODE_MODULE,
@@ -130,7 +131,8 @@ class EstimatorClient:
 
     Args:
         domain_id: ROS domain (a private context is created with it).
-        input_type: ``joint_state`` or ``float64_multi_array``.
+        input_type: ``joint_state`` or ``float64_multi_array``; or ``imu``: four ``sensor_msgs/Imu``
+            topics (the node's default ``imu_topics``), fed serialised messages (``stream``).
         reliable: Publish input reliably (default best effort, like most sensor drivers).
         joint_names: JointState names for the four channels (CHANNELS order).
         namespace: Namespace of the estimator's topics (relative names are used otherwise).
@@ -187,8 +189,12 @@ class EstimatorClient:
             history=HistoryPolicy.KEEP_LAST,
             depth=1000 if reliable else 10,
         )
-        msg_type = JointState if input_type == "joint_state" else Float64MultiArray
-        self.publisher = self.node.create_publisher(msg_type, INPUT_TOPIC, in_qos)
+        if input_type == "imu":
+            self.input_publishers = [self.node.create_publisher(Imu, t, in_qos) for t in DEFAULT_IMU_TOPICS]
+        else:
+            msg_type = JointState if input_type == "joint_state" else Float64MultiArray
+            self.publisher = self.node.create_publisher(msg_type, INPUT_TOPIC, in_qos)
+            self.input_publishers = [self.publisher]
         out_qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=5000)
         subs = {
             ESTIMATE_TOPIC: (JointState, self._on_estimate if record else self._on_estimate_serialized, out_qos),
@@ -292,7 +298,7 @@ class EstimatorClient:
         """
 
         def matched() -> bool:
-            if self.publisher.get_subscription_count() < 1:
+            if any(p.get_subscription_count() < 1 for p in self.input_publishers):
                 return False
             return not outputs or all(s.get_publisher_count() >= 1 for s in self._subs if s.topic_name != DIAGNOSTICS_TOPIC)
 
@@ -333,15 +339,18 @@ class EstimatorClient:
         """Publish samples paced at ``rate_hz`` (None: as fast as possible), spinning in between.
 
         Args:
-            angles: (T, 4) in the node's input units.
-            stamps_ns: (T,) stamps (JointState only; ignored for Float64MultiArray).
+            angles: (T, 4) in the node's input units; for ``imu``, per sample the four sensors'
+                serialised Imu messages (ros/imu_publish.py ``imu_samples``, stamped already).
+            stamps_ns: (T,) stamps (JointState only; ignored for Float64MultiArray and imu).
             rate_hz: Publication rate, Hz.
             on_sample: Called with the index after each publication.
             due_s: (T,) publication times, seconds from the start, instead of a fixed rate.
 
         Returns:
-            perf_counter_ns() of every publication (taken just before the publish call), (T,).
+            perf_counter_ns() of every publication (taken just before the publish call; for
+            ``imu``, just before the sample's last message's), (T,).
         """
+        imu = self.input_publishers if self.input_type == "imu" else None
         n = len(angles)
         sent = np.empty(n, dtype=np.int64)
         period_ns = 0 if not rate_hz else round(1e9 / rate_hz)
@@ -356,9 +365,15 @@ class EstimatorClient:
                 if left <= 0:
                     break
                 spin(timeout_sec=min(left, 2_000_000) / 1e9 if left > 200_000 else 0.0)
-            msg = self.message(angles[i], int(stamps_ns[i]))
-            sent[i] = clock()  # before the call: the message may be on its way before publish() returns
-            self.publisher.publish(msg)
+            if imu is not None:
+                m0, m1, m2, m3 = angles[i]
+                imu[0].publish(m0), imu[1].publish(m1), imu[2].publish(m2)
+                sent[i] = clock()
+                imu[3].publish(m3)
+            else:
+                msg = self.message(angles[i], int(stamps_ns[i]))
+                sent[i] = clock()  # before the call: the message may be on its way before publish() returns
+                self.publisher.publish(msg)
             if on_sample is not None:
                 on_sample(i)
             if not period_ns:
