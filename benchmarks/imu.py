@@ -23,7 +23,8 @@ synthetic checks and the per-sample conversion cost. One command:
   gyro bias.
 * Fusion settings: per segment, chosen leave-one-trial-out from FUSION_GRID (``select_fusion``).
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
-  (best of 3 rounds by median); the message fields as Python floats, as the node reads them.
+  (best of 3 rounds by median), the inputs built as the node builds them (rate from the stamps,
+  per-segment fusion settings); the message fields as Python floats, as the node reads them.
   With rclpy installed also the node's decoding of one serialised Imu message (``read_imu``
   from its CDR bytes) next to rclpy's ``deserialize_message`` and field access, interleaved.
 """
@@ -263,9 +264,10 @@ def synthetic(seeds: int = 6) -> dict:
         cal, _, _ = learn_calibration(s.time_s, ups)
         got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
         worst_q = max(worst_q, float(np.sqrt(np.mean((got - s.angles_deg) ** 2, axis=0)).max()))
-        first = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c]) for c in range(4)])
+        first = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], params=FUSION_BY_CHANNEL[c]) for c in range(4)])
         _, st, _ = learn_calibration(s.time_s, first, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
-        ups = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], st.gyro_bias_dps[c]) for c in range(4)])
+        ups = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], st.gyro_bias_dps[c], FUSION_BY_CHANNEL[c])
+                        for c in range(4)])
         cal, _, _ = learn_calibration(s.time_s, ups, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
         got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
         late = s.time_s >= 10.0
@@ -283,7 +285,7 @@ def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
     a = rng.normal(0, 1, size=(n, 4, 3)) + np.array([0.0, 0.0, 9.8])
     out = {}
     for kind, cov0 in [(k, c) for _ in range(rounds) for k, c in (("orientation", 0.0), ("raw", -1.0))]:
-        inputs = [SensorInput() for _ in range(4)]
+        inputs = [SensorInput(None, "", FUSION_BY_CHANNEL[c], 0.5) for c in range(4)]  # as the node builds them
         pairer = ImuPairer()
         # Python floats, as the node reads them (numpy scalars would make the arithmetic slower)
         rows = [[(tuple(q[k, c].tolist()), tuple(w[k, c].tolist()), tuple(a[k, c].tolist())) for c in range(4)]

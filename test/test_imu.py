@@ -17,6 +17,7 @@ from gait_estimator.analysis.evaluate import read_predictions_csv
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.errors import RecordingError
 from gait_estimator.core.imu import (
+    FUSION_BY_CHANNEL,
     CalibrationError,
     FusionParams,
     ImuCalibration,
@@ -113,12 +114,13 @@ def test_raw_input_within_one_degree_after_ten_seconds(angles):
     for seed in range(3):
         rng = np.random.default_rng(100 + seed)
         s = synthesize(angles, RATE, random_mounts(rng), rng, acc_noise_g=0.02, gyro_noise_dps=0.5, gyro_bias_dps=2.0)
-        first = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c]) for c in range(4)])
+        first = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], params=FUSION_BY_CHANNEL[c]) for c in range(4)])
         _, standing, _ = learn_calibration(s.time_s, first, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
         assert standing is not None
         bias_err = np.linalg.norm(np.array(standing.gyro_bias_dps) - (s.gyro_dps[:, :200].mean(axis=1)), axis=1)
         assert (bias_err < 1e-9).all()
-        ups = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], standing.gyro_bias_dps[c]) for c in range(4)])
+        ups = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], standing.gyro_bias_dps[c], FUSION_BY_CHANNEL[c])
+                        for c in range(4)])
         cal, _, missing = learn_calibration(s.time_s, ups, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
         assert missing == ""
         got = np.stack([cal.mounts[c].angles_deg(ups[c]) for c in range(4)], axis=1)
@@ -172,7 +174,7 @@ def test_shanks_fuse_with_their_own_settings_in_the_node_and_offline():
     """FUSION_BY_CHANNEL: thighs DEFAULT_FUSION, shanks SHANK_FUSION, in read_imu_bag as in the node."""
     import inspect
 
-    from gait_estimator.core.imu import DEFAULT_FUSION, FUSION_BY_CHANNEL, SHANK_FUSION
+    from gait_estimator.core.imu import DEFAULT_FUSION, SHANK_FUSION
 
     assert FUSION_BY_CHANNEL == (DEFAULT_FUSION, DEFAULT_FUSION, SHANK_FUSION, SHANK_FUSION)
     assert SHANK_FUSION.quasi_gain is not None and SHANK_FUSION.gain < DEFAULT_FUSION.gain

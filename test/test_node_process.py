@@ -334,6 +334,7 @@ def test_bench_node_with_more_modes(tmp_path: Path) -> None:
 def test_bench_node_with_raw_imu_input(tmp_path: Path) -> None:
     """--input imu-raw: the node runs input_type imu with configured mounting, four Imu messages
     (gyro + accelerometer only) per sample after a standing second; every sample is answered."""
+    pytest.importorskip("imufusion")
     report = tmp_path / "bench.json"
     proc = _gait_estimator("bench-node", "--input", "imu-raw", "--samples", "150", "--rates", "300", "--seconds", "0.5",
                            "--executor", "events", "--outputs", "estimate", "--domain-id", "38", "--json", str(report))

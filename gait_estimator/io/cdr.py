@@ -1,8 +1,9 @@
-"""A ``sensor_msgs/JointState`` read from its serialised CDR bytes, as a ROS 2 subscriber
-receives them: stamp, names and positions, without building message objects.
+"""``sensor_msgs/JointState`` and ``sensor_msgs/Imu`` read from their serialised CDR bytes, as a
+ROS 2 subscriber receives them (stamp, names and positions; the Imu fields the IMU input uses),
+without building message objects.
 
-The node subscribes to its input serialised: building a JointState object (header, stamp, a
-string per name, the arrays) costs more than the rest of taking a message. Plain CDR (XCDR1,
+The node subscribes to its input serialised: building a message object (header, stamp, strings,
+arrays) costs more than the rest of taking a message. Plain CDR (XCDR1,
 either byte order), the encoding ROS 2 Jazzy's middlewares use for these messages: a 4-byte
 encapsulation header, then the fields, each aligned to its size relative to the end of that
 header. Anything else raises CdrError, and the caller hands the bytes to the middleware's own
@@ -16,7 +17,7 @@ from typing import NamedTuple
 
 
 class CdrError(ValueError):
-    """The bytes are not a plain-CDR JointState (other encoding, truncated, invalid)."""
+    """The bytes are not a plain-CDR message of the type read (other encoding, truncated, invalid)."""
 
 
 class Stamp(NamedTuple):

@@ -133,7 +133,7 @@ class ImuInput:
 
     def _on_imu(self, sensor: int, msg: bytes | Imu) -> None:
         """One message, serialised (as the subscriptions deliver it: read from the CDR bytes,
-        io/cdr.py, about twenty times faster than building the message object) or not."""
+        io/cdr.py, cheaper than building the message object) or not."""
         t0 = time.perf_counter()
         node = self.node
         self.received[sensor] += 1
