@@ -16,7 +16,7 @@ used (the taught library's ``candidate_strides_s``), ``process`` and ``evaluate`
 Reported: accuracy (all and steady rows), phase error, live - offline in points, kernel
 differences, samples lost on the way. Results in benchmarks/results/teach/.
 
-Sets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and its own ROS_DOMAIN_ID (default 74).
+Sets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and its own ROS_DOMAIN_ID (default 77).
 """
 
 from __future__ import annotations
@@ -247,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="half: teach on at most the first half of each run, score the second half (held out); "
                    "rest: teach on the first N strides (all but the last 2 at most), score the rest of the run")
     p.add_argument("--speed", type=float, default=1.0, help="streaming speed x real time (default %(default)s)")
-    p.add_argument("--domain-id", type=int, default=74, help="ROS_DOMAIN_ID (default %(default)s)")
+    p.add_argument("--domain-id", type=int, default=77, help="ROS_DOMAIN_ID (default %(default)s)")
     p.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "teach"))
     p.add_argument("--tables-only", action="store_true", help="only rewrite tables.md from the saved JSON")
     args = p.parse_args(argv)

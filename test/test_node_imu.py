@@ -310,3 +310,15 @@ def test_undecodable_imu_bytes_are_dropped_and_counted(ros_cdr, tmp_path):
     assert client.spin_until(lambda: node.samples_received == 3, 5.0)
     diag = client.latest_diagnostics(3.0)
     assert diag["rejected_malformed"] == "2" and diag["imu_rejected_malformed"] == "2"
+    # A sensor that sends only undecodable bytes is silent: nothing usable arrives from it.
+    start = time.monotonic()
+    while time.monotonic() - start < 1.5:  # > imu_timeout_s (0.5 s)
+        pubs[1].publish(data[:40])
+        client.spin_for(0.05)
+    seen = len(client.received.diagnostics)
+    while len(client.received.diagnostics) == seen:  # the next report, composed while the garbage still arrives
+        assert time.monotonic() - start < 10.0, "no diagnostics"
+        pubs[1].publish(data[:40])
+        client.spin_for(0.05)
+    diag = client.received.diagnostics[-1]
+    assert CHANNELS[1] in diag["imu_silent"], diag["imu_silent"]

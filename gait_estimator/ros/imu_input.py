@@ -53,7 +53,7 @@ NO_FUSION = "no_fusion"
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "imu_topics": (list(DEFAULT_IMU_TOPICS), "sensor_msgs/Imu topics of right_thigh, left_thigh, right_shank, left_shank."),
     "imu_pairing_tolerance_s": (DEFAULT_TOLERANCE_S, "Largest stamp spread (s) of the four messages of one sample."),
-    "imu_timeout_s": (0.5, "A sensor without messages for this long (s) is reported silent in the diagnostics."),
+    "imu_timeout_s": (0.5, "A sensor without decodable messages for this long (s) is reported silent in the diagnostics."),
     "imu_frame_ids": ([""] * N_CHANNELS, "Per sensor, the header.frame_id its messages must carry ('' = any); "
                       "messages with another frame are dropped (wrong_frame)."),
     "imu_lateral_axes": ([""] * N_CHANNELS, "Per segment, the sensor axis pointing to the wearer's right (+x, -y, ...; "
@@ -137,7 +137,6 @@ class ImuInput:
         t0 = time.perf_counter()
         node = self.node
         self.received[sensor] += 1
-        self.last_arrival[sensor] = time.monotonic()
         if isinstance(msg, bytes):
             try:
                 stamp, frame_id, orientation, cov0, gyro, acc = read_imu(msg)
@@ -151,6 +150,7 @@ class ImuInput:
             o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
             stamp, frame_id, cov0 = msg.header.stamp, msg.header.frame_id, msg.orientation_covariance[0]
             orientation, gyro, acc = (o.x, o.y, o.z, o.w), (w.x, w.y, w.z), (a.x, a.y, a.z)
+        self.last_arrival[sensor] = time.monotonic()  # decodable: the sensor is talking
         stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         if stamp_ns == 0:
             stamp_ns = node.get_clock().now().nanoseconds

@@ -317,6 +317,9 @@ class EstimatorClient:
 
     def message(self, angles: np.ndarray, stamp_ns: int) -> JointState | Float64MultiArray:
         """Input message for one sample (angles in the units the node expects)."""
+        if self.input_type == "imu":
+            raise ValueError("input_type 'imu' takes four serialised Imu messages per sample: stream() with "
+                             "ros/imu_publish.py imu_samples")
         if self.input_type == "joint_state":
             msg = self._js
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
