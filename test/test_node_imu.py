@@ -21,7 +21,7 @@ from std_srvs.srv import Trigger
 
 from gait_estimator import load_library
 from gait_estimator.core.channels import CHANNELS
-from gait_estimator.core.imu import STANDARD_GRAVITY
+from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY
 from gait_estimator.core.imu_learn import learn_calibration
 from gait_estimator.io.cdr import read_imu
 from gait_estimator.io.imu_stream import ImuPairer, SensorInput, load_calibration, save_calibration
@@ -203,6 +203,7 @@ def test_configured_axes_need_no_calibration_file(ros, tmp_path):
                        imu_proximal_axes=["-x"] * 4, imu_standing_angles_deg=[5.0, 5.0, -6.0, -6.0])
     cal = node._imu.calibrator.calibration
     assert cal is not None and all(m.source == "configured" for m in cal.mounts)
+    assert [s.params for s in node._imu.inputs] == list(FUSION_BY_CHANNEL)  # thighs, then shanks: their fusion
     assert cal.angles_deg([(-1.0, 0.0, 0.0)] * 4) == (5.0, 5.0, -6.0, -6.0)  # segment vertical: standing angle
     node._imu.reset_calibration()
     assert node._imu.calibrator.add(0.0, [(-1.0, 0.0, 0.0)] * 4, [(0.0,) * 3] * 4, [(0.0, 0.0, 1.0)] * 4) is not None
