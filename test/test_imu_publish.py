@@ -14,9 +14,9 @@ from gait_estimator.analysis.bench import synthetic_walk
 from gait_estimator.analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, sagittal_imu
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, ImuCalibration, SegmentMount
-from gait_estimator.io.cdr import read_imu
+from gait_estimator.io.cdr import read_imu, write_imu
 from gait_estimator.io.imu_stream import SensorInput
-from gait_estimator.ros.imu_publish import imu_samples, node_imu_arguments, serialize_imu
+from gait_estimator.ros.imu_publish import imu_samples, node_imu_arguments
 
 
 def _angles(rate_hz: float) -> np.ndarray:
@@ -82,8 +82,8 @@ def test_serialised_imu_is_what_rclpy_serialises(raw: bool) -> None:
     m.orientation_covariance[0] = -1.0 if raw else 0.0
     m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = 0.5, -1.5, 2.5
     m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z = 1.0, -9.0, 3.0
-    ours = serialize_imu(1_700_000_123 * 10**9 + 456_789, "left_shank", q, m.orientation_covariance[0],
-                         (0.5, -1.5, 2.5), (1.0, -9.0, 3.0))
+    ours = write_imu(1_700_000_123 * 10**9 + 456_789, "left_shank", q, m.orientation_covariance[0],
+                     (0.5, -1.5, 2.5), (1.0, -9.0, 3.0))
     theirs = serialize_message(m)
     # Byte for byte but the alignment padding after frame_id, which rclpy leaves uninitialised.
     end = 4 + 8 + 4 + len("left_shank") + 1  # encapsulation, stamp, length, string and its NUL

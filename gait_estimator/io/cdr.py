@@ -1,6 +1,6 @@
 """``sensor_msgs/JointState`` and ``sensor_msgs/Imu`` read from their serialised CDR bytes, as a
 ROS 2 subscriber receives them (stamp, names and positions; the Imu fields the IMU input uses),
-without building message objects.
+without building message objects; and an Imu written as such bytes (``write_imu``).
 
 The node subscribes to its input serialised: building a message object (header, stamp, strings,
 arrays) costs more than the rest of taking a message. Plain CDR (XCDR1,
@@ -13,6 +13,7 @@ deserialiser.
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from typing import NamedTuple
 
 
@@ -135,3 +136,14 @@ def read_imu(data: bytes) -> ImuFields:
     except (struct.error, UnicodeDecodeError) as exc:
         raise CdrError(f"invalid Imu: {exc}") from None
     return ImuFields(Stamp(sec, nanosec), frame_id, (ox, oy, oz, ow), cov0, (gx, gy, gz), (ax, ay, az))
+
+
+def write_imu(stamp_ns: int, frame_id: str, orientation_xyzw: Sequence[float], orientation_cov0: float,
+              gyro_rps: Sequence[float], acc_mps2: Sequence[float]) -> bytes:
+    """A ``sensor_msgs/Imu`` as plain little-endian CDR bytes (what ``read_imu`` reads), padding
+    zero; covariances zero (unknown) except ``orientation_covariance[0]`` (-1: no orientation, REP 145)."""
+    name = frame_id.encode("utf-8") + b"\0"
+    head = b"\0\1\0\0" + _TIME[1].pack(*divmod(int(stamp_ns), 1_000_000_000)) + _U32[1].pack(len(name)) + name
+    head += bytes(-(len(head) - _BODY) % 8)
+    return head + _IMU_TAIL[1].pack(*orientation_xyzw, orientation_cov0, *gyro_rps, *acc_mps2)
+

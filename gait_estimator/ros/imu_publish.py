@@ -1,37 +1,22 @@
 """Publishing segment angles as four ``sensor_msgs/Imu`` topics (``bench-node --input imu``).
 
-The messages are built as CDR bytes (plain CDR, little-endian, as ROS 2 Jazzy's middlewares
-serialise them; the inverse of io/cdr.py ``read_imu``) and published serialised, so that the
-bench spends a few microseconds per message, not the tens rclpy needs to fill and convert an
-Imu object. The fields come from ``analysis/imu_sagittal.py``.
+The messages are built as CDR bytes (io/cdr.py ``write_imu``, the inverse of ``read_imu``) and
+published serialised, so that the bench spends a few microseconds per message, not the tens rclpy
+needs to fill and convert an Imu object. The fields come from ``analysis/imu_sagittal.py``.
 """
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Sequence
 
 import numpy as np
 
 from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, sagittal_imu
 from ..core.channels import CHANNELS, N_CHANNELS
+from ..io.cdr import write_imu
 
 IMU_INPUTS = ("imu", "imu-raw")
 """``bench-node --input`` values with IMU messages: with orientations, or gyro + accelerometer only."""
-_HEAD = struct.Struct("<4siI")  # encapsulation (plain CDR, little-endian), stamp sec, nanosec
-_BODY = 4
-
-
-def serialize_imu(stamp_ns: int, frame_id: str, orientation_xyzw: Sequence[float], orientation_cov0: float,
-                  gyro_rps: Sequence[float], acc_mps2: Sequence[float]) -> bytes:
-    """A ``sensor_msgs/Imu`` as CDR bytes; covariances zero (unknown) except
-    ``orientation_covariance[0]`` (-1: no orientation, REP 145)."""
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    name = frame_id.encode("utf-8") + b"\0"
-    head = _HEAD.pack(b"\0\1\0\0", sec, nanosec) + struct.pack("<I", len(name)) + name
-    head += bytes(-(len(head) - _BODY) % 8)
-    tail = struct.pack("<5d64x3d72x3d72x", *orientation_xyzw, orientation_cov0, *gyro_rps, *acc_mps2)
-    return head + tail
 
 
 def imu_samples(
@@ -53,7 +38,7 @@ def imu_samples(
     no_orientation = (0.0, 0.0, 0.0, 0.0)
     q, g, a = f.quat_xyzw.tolist(), f.gyro_rps.tolist(), f.acc_mps2.tolist()
     return [
-        tuple(serialize_imu(int(st), CHANNELS[c], no_orientation if raw else q[k][c], cov0, g[k][c], a[k][c])
+        tuple(write_imu(int(st), CHANNELS[c], no_orientation if raw else q[k][c], cov0, g[k][c], a[k][c])
               for c in range(N_CHANNELS))
         for k, st in enumerate(stamps_ns)
     ]
