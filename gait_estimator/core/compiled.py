@@ -188,15 +188,20 @@ def step_rows(
     return best_mode
 
 
-def _serial_and_parallel(fn, name):  # type: ignore[no-untyped-def]
-    """Two compiled copies of ``fn``: serial (prange runs as range) and with the rows spread over
-    numba's threads, a function object of its own name so that the two caches do not collide."""
-    twin = types.FunctionType(fn.__code__, fn.__globals__, name)
+def _compiled_copy(fn, name, parallel=False, **callees):  # type: ignore[no-untyped-def]
+    """A compiled copy of ``fn`` as a function of its own ``name`` (so that its cache does not
+    collide with ``fn``'s), ``parallel``: prange over numba's threads; ``callees``: global names
+    that refer to other functions in the copy (then a snapshot of the module's globals, else the
+    module's own, which later definitions still enter)."""
+    twin = types.FunctionType(fn.__code__, {**fn.__globals__, **callees} if callees else fn.__globals__, name)
     twin.__qualname__ = name
-    return njit(cache=True, nogil=True)(fn), njit(cache=True, nogil=True, parallel=True)(twin)
+    return njit(cache=True, nogil=True, parallel=parallel)(twin)
 
 
-step_rows, step_rows_parallel = _serial_and_parallel(step_rows, "step_rows_parallel")
+step_rows, step_rows_parallel = (  # serial (prange runs as range) and with the rows over threads
+    njit(cache=True, nogil=True)(step_rows),
+    _compiled_copy(step_rows, "step_rows_parallel", parallel=True),
+)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -308,15 +313,8 @@ def run_steps(  # pragma: no cover - compiled
     return stop, False
 
 
-def _calling(fn, name, **callees):  # type: ignore[no-untyped-def]
-    """A compiled copy of ``fn`` named ``name`` whose global names ``callees`` refer to other functions."""
-    twin = types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, name)
-    twin.__qualname__ = name
-    return njit(cache=True, nogil=True)(twin)
-
-
 run_steps, run_steps_parallel = (
     njit(cache=True, nogil=True)(run_steps),
-    _calling(run_steps, "run_steps_parallel", step_rows=step_rows_parallel),
+    _compiled_copy(run_steps, "run_steps_parallel", step_rows=step_rows_parallel),
 )
 
