@@ -36,6 +36,7 @@ from .errors import GaitEstimatorError
 Vec3 = tuple[float, float, float]
 STANDARD_GRAVITY = 9.80665
 """m/s^2 per g (sensor_msgs/Imu linear_acceleration is m/s^2)."""
+_DEG = 180.0 / math.pi
 
 AXES: dict[str, Vec3] = {
     "+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0),
@@ -143,13 +144,6 @@ class SegmentMount:
             raise CalibrationError(f"{what}: {exc}") from None
 
 
-def _angle(row: tuple[float, ...], up: Vec3, atan2: Any = math.atan2, degrees: Any = math.degrees) -> float:
-    """``SegmentMount.angle_deg`` from a row (forward, proximal, standing_deg) of ImuCalibration."""
-    f0, f1, f2, p0, p1, p2, standing = row
-    x, y, z = up
-    return standing + degrees(atan2(f0 * x + f1 * y + f2 * z, p0 * x + p1 * y + p2 * z))
-
-
 @dataclass(frozen=True)
 class ImuCalibration:
     """The four mounts, CHANNELS order (right_thigh, left_thigh, right_shank, left_shank)."""
@@ -164,9 +158,15 @@ class ImuCalibration:
     def angles_deg(self, ups: Any) -> tuple[float, float, float, float]:
         """Four segment angles (deg) from four up vectors (sensor frames), CHANNELS order; the
         same values as each mount's ``angle_deg``."""
-        r0, r1, r2, r3 = self._rows  # type: ignore[attr-defined]
-        u0, u1, u2, u3 = ups
-        return _angle(r0, u0), _angle(r1, u1), _angle(r2, u2), _angle(r3, u3)
+        # Unrolled over the four sensors: this runs for every sample of a live stream.
+        (a0, a1, a2, a3, a4, a5, a6), (b0, b1, b2, b3, b4, b5, b6), (c0, c1, c2, c3, c4, c5, c6), \
+            (d0, d1, d2, d3, d4, d5, d6) = self._rows  # type: ignore[attr-defined]
+        (x0, y0, z0), (x1, y1, z1), (x2, y2, z2), (x3, y3, z3) = ups
+        atan2, deg = math.atan2, _DEG
+        return (a6 + deg * atan2(a0 * x0 + a1 * y0 + a2 * z0, a3 * x0 + a4 * y0 + a5 * z0),
+                b6 + deg * atan2(b0 * x1 + b1 * y1 + b2 * z1, b3 * x1 + b4 * y1 + b5 * z1),
+                c6 + deg * atan2(c0 * x2 + c1 * y2 + c2 * z2, c3 * x2 + c4 * y2 + c5 * z2),
+                d6 + deg * atan2(d0 * x3 + d1 * y3 + d2 * z3, d3 * x3 + d4 * y3 + d5 * z3))
 
     def summary(self) -> str:
         """One line: each segment's lateral and proximal axes and standing angle."""
@@ -320,6 +320,7 @@ class RawFusion:
                        params.still_gain)]
         self._still_needed = max(1, round(params.still_after_s * rate_hz))
         self._period = 1.0 / rate_hz
+        self._period_lo, self._period_hi = self._period - 1e-6, self._period + 1e-6
 
     def set_rate(self, rate_hz: float) -> None:
         """Use ``rate_hz`` (Hz) as the nominal rate from now on (a live stream's measured rate)."""
@@ -327,17 +328,22 @@ class RawFusion:
         self._ahrs.set_settings(self._settings[self._tier])
         self._ahrs.set_sample_period(self._period)
 
-    def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> Vec3:
-        """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up``."""
-        # Python floats throughout (this runs for every message): numpy for a 3-vector costs more
-        # than the arithmetic, and imufusion takes tuples as it takes arrays.
-        b0, b1, b2 = self.gyro_bias_dps
+    def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> list[float]:
+        """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up`` [x, y, z]."""
         g0, g1, g2 = gyro_dps
+        a0, a1, a2 = acc_g
+        return self.update_xyz(g0, g1, g2, a0, a1, a2, dt_s)
+
+    def update_xyz(self, g0: float, g1: float, g2: float, ax: float, ay: float, az: float,
+                   dt_s: float | None = None) -> list[float]:
+        """``update`` with the six components as Python floats (deg/s, g): the per-message path,
+        where numpy for a 3-vector costs more than the arithmetic."""
+        b0, b1, b2 = self.gyro_bias_dps
         gx, gy, gz = g0 - b0, g1 - b1, g2 - b2
-        ax, ay, az = acc_g
         ahrs = self._ahrs
-        if dt_s is not None and not -1e-6 <= dt_s - self._period <= 1e-6 and dt_s > 0:
+        if dt_s is not None and not self._period_lo <= dt_s <= self._period_hi and dt_s > 0:
             self._period = dt_s
+            self._period_lo, self._period_hi = dt_s - 1e-6, dt_s + 1e-6
             ahrs.set_sample_period(dt_s)
         if self._first:  # start from the accelerometer's tilt, not from a level sensor
             self._first = False
@@ -349,14 +355,15 @@ class RawFusion:
             self._still = still = self._still + 1
         else:
             self._still = still = 0
-        acc2 = self._quasi_acc2
-        tier = 2 if still >= self._still_needed else int(r2 < self._quasi_rate2 and -acc2 < m2 < acc2)
+        if still >= self._still_needed:
+            tier = 2
+        else:
+            acc2 = self._quasi_acc2
+            tier = 1 if r2 < self._quasi_rate2 and -acc2 < m2 < acc2 else 0
         if tier != self._tier:
             self._tier = tier
             ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)
-        ahrs.update_no_magnetometer((gx, gy, gz), (ax, ay, az))
-        x, y, z = ahrs.get_gravity().tolist()
-        return x, y, z
+        return ahrs.update_no_magnetometer((gx, gy, gz), (ax, ay, az)).get_gravity().tolist()
 
 
 def fuse_raw(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,

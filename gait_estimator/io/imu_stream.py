@@ -46,6 +46,7 @@ _RAD2DEG = 180.0 / math.pi
 _INF = math.inf
 _G = STANDARD_GRAVITY
 NO_RATES: Vec3 = (math.nan, math.nan, math.nan)
+_NOTHING: tuple = ()
 
 
 class SensorInput:
@@ -78,7 +79,7 @@ class SensorInput:
         self._restart_from: int | None = None  # stamp of a message far before the previous one
 
     def convert(self, stamp_ns: int, orientation: Any, orientation_cov0: float, gyro_rps: Any,
-                acc_mps2: Any, frame_id: str = "") -> tuple[Vec3, Vec3, Vec3]:
+                acc_mps2: Any, frame_id: str = "") -> tuple[Sequence[float], Vec3, Vec3]:
         """Fields of one Imu message (quaternion x, y, z, w; rad/s; m/s^2) -> (up, gyro, acc)."""
         if self.frame_id and frame_id != self.frame_id:
             raise SampleRejected(WRONG_FRAME, f"frame_id {frame_id!r}, expected {self.frame_id!r}")
@@ -123,13 +124,12 @@ class SensorInput:
         fusion = self.fusion
         if fusion is None:
             fusion = self.fusion = RawFusion(self._rate_hz, self.gyro_bias_dps, self.params)
-        gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG)
-        acc = (ax / _G, ay / _G, az / _G)
-        up = fusion.update(gyro, acc, None if last is None else (stamp_ns - last) * 1e-9)
+        gx, gy, gz, ax, ay, az = gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG, ax / _G, ay / _G, az / _G
+        up = fusion.update_xyz(gx, gy, gz, ax, ay, az, None if last is None else (stamp_ns - last) * 1e-9)
         self.last_ns = stamp_ns
         if self._steps is not None and last is not None:
             self._measure_rate(stamp_ns - last)
-        return up, gyro, acc
+        return up, (gx, gy, gz), (ax, ay, az)
 
     def _measure_rate(self, step_ns: int) -> None:
         """One more stamp step while the rate is measured (``rate_hz`` None): the fusion's rate
@@ -188,18 +188,14 @@ class ImuPairer:
         """Unpaired messages, all sensors (the sum of ``dropped``)."""
         self._newest = [-1] * N_CHANNELS
 
-    def push(self, sensor: int, stamp_ns: int, item: Any) -> list[tuple[int, list[Any]]]:
+    def push(self, sensor: int, stamp_ns: int, item: Any) -> Sequence[tuple[int, list[Any]]]:
         """Add one accepted message; returns the samples it completes: (stamp_ns = the latest
         of the four, [item per sensor])."""
-        queues, newest = self.queues, self._newest
-        if stamp_ns < newest[sensor]:  # a restarted sensor: drop what was queued under the old stamps
-            limit = stamp_ns + self.tolerance_ns
-            for i, old in enumerate(queues):
-                kept = [m for m in old if m[0] <= limit]
-                self.dropped[CHANNELS[i]] += len(old) - len(kept)
-                self.unpaired += len(old) - len(kept)
-                queues[i] = deque(kept)
+        newest = self._newest
+        if stamp_ns < newest[sensor]:
+            self._restarted(stamp_ns)
         newest[sensor] = stamp_ns
+        queues = self.queues
         q = queues[sensor]
         q.append((stamp_ns, item))
         if len(q) > self.max_queue:
@@ -208,7 +204,7 @@ class ImuPairer:
             self.unpaired += 1
         q0, q1, q2, q3 = queues
         if not (q0 and q1 and q2 and q3):
-            return []
+            return _NOTHING
         out = []
         tol = self.tolerance_ns
         while q0 and q1 and q2 and q3:
@@ -223,6 +219,15 @@ class ImuPairer:
             self.dropped[CHANNELS[oldest]] += 1
             self.unpaired += 1
         return out
+
+    def _restarted(self, stamp_ns: int) -> None:
+        """A sensor restarted (a stamp before its newest): drop what was queued under the old stamps."""
+        limit = stamp_ns + self.tolerance_ns
+        for i, old in enumerate(self.queues):
+            kept = [m for m in old if m[0] <= limit]
+            self.dropped[CHANNELS[i]] += len(old) - len(kept)
+            self.unpaired += len(old) - len(kept)
+            self.queues[i] = deque(kept)
 
     def clear(self) -> None:
         for q in self.queues:
