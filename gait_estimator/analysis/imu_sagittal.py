@@ -1,5 +1,6 @@
-"""``sensor_msgs/Imu`` fields from segment angles: each sensor turns only about its segment's
-lateral axis (a pure sagittal rotation), ROS-free; the input of ``bench-node --input imu``.
+"""``sensor_msgs/Imu`` fields and serialised messages from segment angles: each sensor turns only
+about its segment's lateral axis (a pure sagittal rotation), ROS-free; the input of
+``bench-node --input imu``.
 
 A sensor's mounting is the node's configured one (docs/imu.md): sensor axes ``lateral`` (the
 wearer's right) and ``proximal``, forward = proximal x lateral. At angle 0 forward, proximal and
@@ -11,6 +12,10 @@ about its lateral axis, so that the world's up in the sensor frame is
 * gyro: rad/s about the lateral axis, the backward difference of the angles (the rate over the
   step that ends at the sample, which the fusion integrates back to the angles);
 * accelerometer: gravity in the sensor frame, m/s^2 (no linear acceleration).
+
+``imu_samples`` serialises them as CDR bytes (io/cdr.py ``write_imu``, the inverse of the node's
+``read_imu``), so that the bench publishes each message in a few microseconds, not the tens rclpy
+needs to fill and convert an Imu object.
 """
 
 from __future__ import annotations
@@ -21,8 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.channels import N_CHANNELS
+from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import STANDARD_GRAVITY, parse_axis
+from ..io.cdr import write_imu
 
 BENCH_LATERAL_AXES = ("+z", "-z", "+z", "-z")
 """Configured lateral axes of the bench's sensors, CHANNELS order: z out of the leg's outer side."""
@@ -31,7 +37,7 @@ BENCH_PROXIMAL_AXES = ("-x", "-x", "-x", "-x")
 
 
 @dataclass
-class ImuFields:
+class SagittalImu:
     """Per sample and sensor (CHANNELS order): orientation (T, 4, 4: x, y, z, w), gyro (T, 4, 3,
     rad/s), accelerometer (T, 4, 3, m/s^2)."""
 
@@ -74,7 +80,7 @@ def sagittal_imu(
     lateral: Sequence[str] = BENCH_LATERAL_AXES,
     proximal: Sequence[str] = BENCH_PROXIMAL_AXES,
     previous_deg: np.ndarray | None = None,
-) -> ImuFields:
+) -> SagittalImu:
     """The four sensors' Imu fields for segment angles ``angles_deg`` (T, 4), degrees, spaced
     ``period_s`` seconds; ``lateral``/``proximal``: configured sensor axes per segment (the
     node's ``imu_lateral_axes``/``imu_proximal_axes``); ``previous_deg`` (4,): the angles one
@@ -97,4 +103,29 @@ def sagittal_imu(
         quat[:, c, 3] = w1 * w2 - v2 @ v1
         gyro[:, c] = rate[:, c, None] * lat[None, :]
         acc[:, c] = STANDARD_GRAVITY * (np.cos(theta[:, c])[:, None] * prox + np.sin(theta[:, c])[:, None] * fwd)
-    return ImuFields(quat, gyro, acc)
+    return SagittalImu(quat, gyro, acc)
+
+
+def imu_samples(
+    angles_deg: np.ndarray,
+    stamps_ns: Sequence[int] | np.ndarray,
+    period_s: float,
+    raw: bool,
+    previous_deg: np.ndarray | None = None,
+    lateral: Sequence[str] = BENCH_LATERAL_AXES,
+    proximal: Sequence[str] = BENCH_PROXIMAL_AXES,
+) -> list[tuple[bytes, ...]]:
+    """Per sample of ``angles_deg`` (T, 4), degrees, stamped ``stamps_ns``: the four sensors'
+    serialised Imu messages (CHANNELS order, frame_id = the channel's name). ``raw``: no
+    orientation (``orientation_covariance[0] = -1``), gyro and accelerometer only; otherwise the
+    orientation with the same gyro and accelerometer (as an orientation filter passes them on).
+    ``period_s``, ``previous_deg``, ``lateral``, ``proximal``: see ``sagittal_imu``."""
+    f = sagittal_imu(angles_deg, period_s, lateral, proximal, previous_deg)
+    cov0 = -1.0 if raw else 0.0
+    no_orientation = (0.0, 0.0, 0.0, 0.0)
+    q, g, a = f.quat_xyzw.tolist(), f.gyro_rps.tolist(), f.acc_mps2.tolist()
+    return [
+        tuple(write_imu(int(st), CHANNELS[c], no_orientation if raw else q[k][c], cov0, g[k][c], a[k][c])
+              for c in range(N_CHANNELS))
+        for k, st in enumerate(stamps_ns)
+    ]

@@ -11,11 +11,13 @@ import os
 import signal
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
@@ -57,6 +59,18 @@ INPUTS = ("joint_state", "imu", "imu-raw")
 OUTPUT_SETS = ("estimate", "all")
 """bench-node --outputs: the bench subscribes to ``estimate`` only (like a controller), or to
 ``mode``, ``phase``, ``sse`` and ``estimate`` (the node publishes all four per sample)."""
+
+
+def node_imu_arguments(calibration_path: str, lateral: Sequence[str] = BENCH_LATERAL_AXES,
+                       proximal: Sequence[str] = BENCH_PROXIMAL_AXES) -> list[str]:
+    """``--ros-args`` of an estimator_node fed by ``imu_samples``: ``input_type: imu`` with the
+    mounting configured (nothing to learn), its calibration file at ``calibration_path`` (read if
+    it exists; pass one that does not, or a saved calibration would take precedence)."""
+    def strings(v: Sequence[str]) -> str:
+        return "[" + ",".join(f"'{a}'" for a in v) + "]"
+
+    return ["-p", "input_type:=imu", "-p", f"imu_lateral_axes:={strings(lateral)}",
+            "-p", f"imu_proximal_axes:={strings(proximal)}", "-p", f"imu_calibration_path:={calibration_path}"]
 
 
 class _Variant:
@@ -102,7 +116,7 @@ class _Variant:
         if self.input_kind == "joint_state":
             x: Any = np.radians(deg)
         else:  # from the last angles sent into this run's in 0.25 s: no jump for the gyro
-            from ..ros.imu_publish import imu_samples
+            from ..analysis.imu_sagittal import imu_samples
 
             k = min(n, round(0.25 * lib.sample_rate_hz))
             deg[:k] = self.last_deg + (deg[k - 1] - self.last_deg) * (np.arange(1, k + 1) / k)[:, None]
@@ -235,8 +249,6 @@ def _bench_variant(
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
     extra = ["-p", f"thread_priority:={thread_priority}"] if thread_priority else []
     if input_kind != "joint_state":  # configured mounting; a path without a file: no saved calibration
-        from ..ros.imu_publish import node_imu_arguments
-
         extra += node_imu_arguments(os.path.join(tempfile.gettempdir(), f"gait_estimator_bench_{os.getpid()}.imu.yaml"))
     node = start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}", *extra], node_cmd)
     try:
@@ -307,7 +319,7 @@ def bench_node(
        publishing levers in this process.
 
     With ``input_kind`` ``imu`` / ``imu-raw`` the node runs ``input_type: imu`` with configured
-    mounting (ros/imu_publish.py) and each sample is four Imu messages with one stamp (with
+    mounting (analysis/imu_sagittal.py) and each sample is four Imu messages with one stamp (with
     orientations / gyro + accelerometer only) after one second of standing; latency runs from the
     publication of a sample's last message, rates count samples.
 

@@ -319,7 +319,7 @@ class EstimatorClient:
         """Input message for one sample (angles in the units the node expects)."""
         if self.input_type == "imu":
             raise ValueError("input_type 'imu' takes four serialised Imu messages per sample: stream() with "
-                             "ros/imu_publish.py imu_samples")
+                             "analysis/imu_sagittal.py imu_samples")
         if self.input_type == "joint_state":
             msg = self._js
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
@@ -343,7 +343,7 @@ class EstimatorClient:
 
         Args:
             angles: (T, 4) in the node's input units; for ``imu``, per sample the four sensors'
-                serialised Imu messages (ros/imu_publish.py ``imu_samples``, stamped already).
+                serialised Imu messages (analysis/imu_sagittal.py ``imu_samples``, stamped already).
             stamps_ns: (T,) stamps (JointState only; ignored for Float64MultiArray and imu).
             rate_hz: Publication rate, Hz.
             on_sample: Called with the index after each publication.

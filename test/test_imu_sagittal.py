@@ -1,4 +1,4 @@
-"""bench-node's IMU messages (analysis/imu_sagittal.py, ros/imu_publish.py): segment angles ->
+"""bench-node's IMU messages (analysis/imu_sagittal.py): segment angles ->
 serialised sensor_msgs/Imu -> the node's own reading and conversion (io/cdr.py read_imu,
 io/imu_stream.py SensorInput, the configured mounting) give the angles back."""
 
@@ -11,12 +11,12 @@ from sensor_msgs.msg import Imu
 
 from gait_estimator import load_library
 from gait_estimator.analysis.bench import synthetic_walk
-from gait_estimator.analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, sagittal_imu
+from gait_estimator.analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, imu_samples, sagittal_imu
+from gait_estimator.cli.bench_node import node_imu_arguments
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, ImuCalibration, SegmentMount
 from gait_estimator.io.cdr import read_imu, write_imu
 from gait_estimator.io.imu_stream import SensorInput
-from gait_estimator.ros.imu_publish import imu_samples, node_imu_arguments
 
 
 def _angles(rate_hz: float) -> np.ndarray:
