@@ -152,7 +152,8 @@ def read_imu_bag(
         d = float(np.median(np.diff(np.array(stamps, dtype=np.int64)))) * 1e-9
         rate = 1.0 / d if d > 0 else rate
     tolerance_s = imu_tolerance_s if imu_tolerance_s is not None else _measured_tolerance(messages)
-    paired, rejected = _front_end(messages, rate, None, tolerance_s, fusion_params)
+    biases = None if cal is None else [m.gyro_bias_dps for m in cal.mounts]  # as the node applies a saved one
+    paired, rejected = _front_end(messages, rate, biases, tolerance_s, fusion_params)
     if undecodable:
         rejected["undecodable"] += undecodable
     if len(paired) < 2:
