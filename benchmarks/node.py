@@ -3,6 +3,7 @@
 
     python benchmarks/node.py          # tables only (part of `make docs`)
     python benchmarks/node.py --run    # first rerun the quiet-machine report (starts a ROS 2 node)
+    python benchmarks/node.py --run-imu  # first rerun the two IMU-input sittings (six bench-node runs)
 
 Reads, in benchmarks/results/node/ (a missing report leaves its column or section out):
 
@@ -261,7 +262,8 @@ def imu_input(reports: dict[str, dict[str, Any]]) -> str:
     vs = [(label, variant(r, r["executor"], r["outputs"])) for label, _, r in runs]
     first = runs[0][2]
     out = ["## IMU input", "",
-           "`gait-estimator bench-node --input INPUT --profile --json benchmarks/results/node/bench_node_imu*.json` "
+           "`python benchmarks/node.py --run-imu`: `gait-estimator bench-node --input INPUT --profile --json "
+           "benchmarks/results/node/bench_node_imu*.json` "
            f"for INPUT {', '.join(f'`{f}`' for _, f, _ in runs[:3])}, one after the other on the development machine "
            f"({first.get('date', '')}, {first['machine']['processor']}, {first['machine']['cpus']} vCPUs; loads in the "
            "last row); sitting 2 in the reverse order. IMU: `input_type: imu` with configured mounting, per sample "
@@ -282,14 +284,23 @@ def imu_input(reports: dict[str, dict[str, Any]]) -> str:
     return "\n".join([*out, table(["measure", *(label for label, _ in vs)], rows)]) + "\n"
 
 
-def run_bench(domain_id: int) -> None:
-    """The quiet-machine report: ``gait-estimator bench-node --profile --json bench_node.json``
-    (DDS kept on this machine: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, its own ROS_DOMAIN_ID)."""
+def run_bench(domain_id: int, report: str = "quiet", extra: tuple[str, ...] = ()) -> None:
+    """``gait-estimator bench-node --profile --json`` into the report ``report`` (REPORTS), with
+    ``extra`` arguments (DDS kept on this machine: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, its own
+    ROS_DOMAIN_ID)."""
     env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_DOMAIN_ID": str(domain_id)}
     NODE.mkdir(parents=True, exist_ok=True)
-    subprocess.run([sys.executable, "-m", "gait_estimator.cli", "bench-node", "--profile", "--json",
-                    str(NODE / REPORTS["quiet"])], cwd=ROOT, env=env, check=True)
-    stamp(NODE / REPORTS["quiet"])
+    subprocess.run([sys.executable, "-m", "gait_estimator.cli", "bench-node", *extra, "--profile", "--json",
+                    str(NODE / REPORTS[report])], cwd=ROOT, env=env, check=True)
+    stamp(NODE / REPORTS[report])
+
+
+def run_imu_sittings(domain_id: int) -> None:
+    """The two IMU-input sittings: ``--input`` joint_state, imu, imu-raw one after the other, then
+    in the reverse order (the machine's load drifts during a sitting)."""
+    for n, order in ((1, list(IMU_RUNS)), (2, list(reversed(IMU_RUNS)))):
+        for kind in order:
+            run_bench(domain_id, f"imu{n}_{kind}", ("--input", kind.replace("imu_raw", "imu-raw")))
 
 
 def stamp(path: Path) -> None:
@@ -302,10 +313,14 @@ def stamp(path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run", action="store_true", help="run the quiet-machine bench-node first (about 1 min), then the tables")
-    ap.add_argument("--domain-id", type=int, default=91, help="ROS_DOMAIN_ID of the --run bench (default %(default)s)")
+    ap.add_argument("--run-imu", action="store_true",
+                    help="run the two IMU-input sittings first (six bench-node runs, about 6 min), then the tables")
+    ap.add_argument("--domain-id", type=int, default=91, help="ROS_DOMAIN_ID of the benches (default %(default)s)")
     args = ap.parse_args(argv)
     if args.run:
         run_bench(args.domain_id)
+    if args.run_imu:
+        run_imu_sittings(args.domain_id)
     reports = {k: json.loads((NODE / f).read_text(encoding="utf-8")) for k, f in REPORTS.items() if (NODE / f).is_file()}
     if "quiet" not in reports:
         sys.exit(f"{NODE / REPORTS['quiet']}: missing; run gait-estimator bench-node --profile --json {NODE / REPORTS['quiet']}")
