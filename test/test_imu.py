@@ -21,6 +21,7 @@ from gait_estimator.core.imu import (
     CalibrationError,
     FusionParams,
     ImuCalibration,
+    RawFusion,
     SegmentMount,
     fuse_raw,
     parse_axis,
@@ -146,6 +147,20 @@ def test_live_raw_input_measures_its_rate_as_bag_reading_does(angles):
     live_err = np.abs(np.array(ups[id(live)]) - np.array(ups[id(known)]))[late].max()
     guess_err = np.abs(np.array(ups[id(guess)]) - np.array(ups[id(known)]))[late].max()
     assert live_err < 1e-6 <= guess_err
+
+
+def test_raw_fusion_integrates_each_step_more_than_a_microsecond_off_its_period():
+    """Drivers stamp with microsecond jitter: a 5.001 ms step at 200 Hz is integrated over 5.001 ms,
+    a step within 1 us of the period in use over that period."""
+    pytest.importorskip("imufusion")
+
+    def up_after(step_s: float) -> list[float]:
+        f = RawFusion(200.0, params=FusionParams(gain=0.0, still_gain=0.0))  # the gyro alone
+        f.update((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+        return f.update((500.0, 0.0, 0.0), (0.0, 0.0, 1.0), step_s)
+
+    assert up_after(0.005001) != up_after(0.005)
+    assert up_after(0.0050009) == up_after(0.005)
 
 
 def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):

@@ -320,7 +320,6 @@ class RawFusion:
                        params.still_gain)]
         self._still_needed = max(1, round(params.still_after_s * rate_hz))
         self._period = 1.0 / rate_hz
-        self._period_lo, self._period_hi = self._period - 1e-6, self._period + 1e-6
 
     def set_rate(self, rate_hz: float) -> None:
         """Use ``rate_hz`` (Hz) as the nominal rate from now on (a live stream's measured rate)."""
@@ -341,9 +340,8 @@ class RawFusion:
         b0, b1, b2 = self.gyro_bias_dps
         gx, gy, gz = g0 - b0, g1 - b1, g2 - b2
         ahrs = self._ahrs
-        if dt_s is not None and not self._period_lo <= dt_s <= self._period_hi and dt_s > 0:
+        if dt_s is not None and not -1e-6 <= dt_s - self._period <= 1e-6 and dt_s > 0:
             self._period = dt_s
-            self._period_lo, self._period_hi = dt_s - 1e-6, dt_s + 1e-6
             ahrs.set_sample_period(dt_s)
         if self._first:  # start from the accelerometer's tilt, not from a level sensor
             self._first = False
