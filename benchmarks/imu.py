@@ -122,15 +122,13 @@ def shank_faults(rec: Recording, trial: str) -> np.ndarray:
 
 
 THIGH_ACC_JUMP_MPS2 = 1.0
-"""A step of the right thigh's accelerometer this large from one sample to the next while standing
-(40-110 times the median step there) starts ``thigh_faults``."""
+"""A step of the right thigh's accelerometer at least this large from one sample to the next while
+standing starts ``thigh_faults`` (data/camargo_ab06/README.md "Known issues")."""
 
 
 def thigh_faults(rec: Recording) -> np.ndarray:
-    """Samples from the right thigh IMU's fault on: in four of the five trials, during the last
-    standing bout, its accelerometer jumps in one sample by 1.7-2.7 m/s^2 with no rotation in the
-    gyro, onto the motion-capture angle, and the data after it look derived from motion capture
-    like the shank's listed patches (data/camargo_ab06/README.md "Known issues")."""
+    """Samples of the right thigh IMU from its first accelerometer step > THIGH_ACC_JUMP_MPS2 while
+    standing to the end of the trial; none without such a step (``thigh_fault_evidence``)."""
     acc = np.stack([rec.extra[f"right_thigh_acc_{k}_mps2"] for k in "xyz"], axis=1)
     step = np.r_[0.0, np.linalg.norm(np.diff(acc, axis=0), axis=1)]
     jumps = np.flatnonzero((step > THIGH_ACC_JUMP_MPS2) & (rec.labels == "stand"))
@@ -140,9 +138,32 @@ def thigh_faults(rec: Recording) -> np.ndarray:
     return bad
 
 
-def imu_faults(rec: Recording, trial: str) -> np.ndarray:
-    """Samples with either right IMU faulty (``thigh_faults`` or ``shank_faults``)."""
-    return thigh_faults(rec) | shank_faults(rec, trial)
+def thigh_fault_evidence(rec: Recording) -> dict | None:
+    """What sets a ``thigh_faults`` start apart, or None: the accelerometer step (m/s^2) and its
+    ratio to the median step while standing; the accelerometer's tilt (atan2(acc_y, -acc_x), the
+    data README's thigh frame) minus mocap over the standing 0.5 s before and after (deg); the
+    median |second difference| of gyro z (deg/s) and the correlation of gyro y and z with the
+    mocap thigh rate, before and after the start."""
+    bad = thigh_faults(rec)
+    if not bad.any():
+        return None
+    ex, t, i = rec.extra, rec.time_s, int(np.argmax(bad))
+    acc = np.stack([ex[f"right_thigh_acc_{k}_mps2"] for k in "xyz"], axis=1)
+    gyro = {k: ex[f"right_thigh_gyro_{k}_dps"] for k in "yz"}
+    step = np.r_[0.0, np.linalg.norm(np.diff(acc, axis=0), axis=1)]
+    stand = rec.labels == "stand"
+    tilt = np.degrees(np.arctan2(acc[:, 1], -acc[:, 0])) - rec.angles_deg[:, 0]
+    near = {"before": stand & (t >= t[i] - 0.5) & (t < t[i]), "after": stand & (t > t[i]) & (t <= t[i] + 0.5)}
+    rate = np.gradient(rec.angles_deg[:, 0], t)
+    parts = {"before": slice(0, i), "after": slice(i, None)}
+    return {
+        "start_s": float(t[i]), "step_mps2": float(step[i]), "step_ratio": float(step[i] / np.median(step[stand])),
+        "walking_after_s": float((~stand[i:]).sum() * np.median(np.diff(t))),
+        **{f"tilt_minus_mocap_{k}_deg": float(tilt[m].mean()) for k, m in near.items()},
+        **{f"gyro_z_second_difference_{k}_dps": float(np.median(np.abs(np.diff(gyro["z"][sl], 2))))
+           for k, sl in parts.items()},
+        **{f"r_gyro_{ax}_{k}": float(np.corrcoef(gyro[ax][sl], rate[sl])[0, 1]) for ax in "yz" for k, sl in parts.items()},
+    }
 
 
 def trial_imu(path: Path, tmp: Path) -> dict:
@@ -157,7 +178,7 @@ def trial_imu(path: Path, tmp: Path) -> dict:
         acc[c] = np.stack([ex[f"right_{seg}_acc_{k}_mps2"] for k in "xyz"], axis=1)
     left = {c: virtual_quaternions(mocap[:, c]) for c in (1, 3)}
     configured = {"imu_lateral_axes": ["", "+z", "", "+z"], "imu_proximal_axes": ["", "+y", "", "+y"]}
-    out: dict = {"trial": path.stem, "samples": len(t)}
+    out: dict = {"trial": path.stem, "samples": len(t), "thigh_fault": thigh_fault_evidence(rec)}
     angles = {}
     for kind in ("orientation", "raw"):
         if kind == "orientation":
@@ -241,11 +262,12 @@ def halves(rec: Recording, angles: np.ndarray, unscored: np.ndarray | None = Non
 
 def estimator_runs(trials: list[dict], skip_faults: bool = False) -> dict:
     """Accuracy and phase error, kernels from first halves, tested on second halves; with
-    ``skip_faults``, the samples of the data set's IMU faults (``imu_faults``) are neither
-    trained on nor scored (for both inputs)."""
+    ``skip_faults``, the samples of the data set's shank IMU faults are neither trained on nor
+    scored (for both inputs). The thigh's (``thigh_faults``) are kept: their IMU angles are the
+    mocap angles."""
     out = {}
     sets = {"mocap": lambda tr: tr["rec"].angles_deg, "imu_raw": lambda tr: tr["angles"]["raw"]}
-    faults = [imu_faults(tr["rec"], tr["stats"]["trial"]) if skip_faults else None for tr in trials]
+    faults = [shank_faults(tr["rec"], tr["stats"]["trial"]) if skip_faults else None for tr in trials]
     parts = {name: [halves(tr["rec"], get(tr), f) for tr, f in zip(trials, faults, strict=True)]
              for name, get in sets.items()}
     for train_on, test_on in (("mocap", "mocap"), ("imu_raw", "imu_raw"), ("mocap", "imu_raw")):
@@ -411,7 +433,8 @@ def write_tables(out: Path) -> str:
     """tables.md from imu.json: per-trial figures, then the sections docs/imu.md copies
     (``imu#Angles``, ``imu#Estimator``, ``imu#Cost``); returns it."""
     r = json.loads((out / "imu.json").read_text(encoding="utf-8"))
-    text = "\n".join(["### Per trial", "", per_trial(r), "### Angles", "", angles_table(r), "",
+    text = "\n".join(["### Per trial", "", per_trial(r), "### Thigh IMU faults", "", thigh_fault_table(r), "",
+                      "### Angles", "", angles_table(r), "",
                       "### Fusion settings, leave-one-trial-out", "", selection_table(r), "",
                       "### Estimator", "", estimator_table(r), "", "### Cost", "", cost_table(r)])
     (out / "tables.md").write_text(text + "\n", encoding="utf-8")
@@ -427,6 +450,24 @@ def angles_table(r: dict) -> str:
         m = r[f"mean_rms_{kind}"]
         rows.append(f"| {name} | {m['thigh']:.1f}°, {m['shank']:.1f}° | {m['thigh_clean']:.1f}°, {m['shank_clean']:.1f}° | "
                     f"{m['thigh_after']:.1f}°, {m['shank_after']:.1f}° |")
+    return "\n".join(rows)
+
+
+def thigh_fault_table(r: dict) -> str:
+    """``thigh_fault_evidence`` per trial."""
+    rows = ["| trial | start s | accelerometer step m/s² (× median standing) | walking after, s | tilt − mocap "
+            "before / after, deg | median \\|Δ² gyro z\\| before / after, deg/s | r(gyro y, mocap rate) before / after "
+            "| r(gyro z, ·) before / after |", "|---|---|---|---|---|---|---|---|"]
+    for tr in r["trials"]:
+        e = tr.get("thigh_fault")
+        if e is None:
+            rows.append(f"| {tr['trial']} | none | | | | | | |")
+            continue
+        rows.append(f"| {tr['trial']} | {e['start_s']:.3f} | {e['step_mps2']:.2f} ({e['step_ratio']:.0f}×) | "
+                    f"{e['walking_after_s']:.1f} | {e['tilt_minus_mocap_before_deg']:+.1f} / "
+                    f"{e['tilt_minus_mocap_after_deg']:+.1f} | {e['gyro_z_second_difference_before_dps']:.2f} / "
+                    f"{e['gyro_z_second_difference_after_dps']:.2f} | {e['r_gyro_y_before']:+.2f} / "
+                    f"{e['r_gyro_y_after']:+.2f} | {e['r_gyro_z_before']:+.2f} / {e['r_gyro_z_after']:+.2f} |")
     return "\n".join(rows)
 
 
@@ -447,7 +488,7 @@ def estimator_table(r: dict) -> str:
     """Accuracy and mean phase error (% of a stride) per kernel source and input."""
     every, sound = r["estimator"], r["estimator_without_faults"]
     n_all, n_sound = next(iter(every.values()))["samples"], next(iter(sound.values()))["samples"]
-    rows = [f"| kernels from → fed with | all samples ({n_all}): accuracy, phase error | without the IMU "
+    rows = [f"| kernels from → fed with | all samples ({n_all}): accuracy, phase error | without the shank IMU "
             f"faults ({n_sound}) |", "|---|---|---|"]
     names = {"mocap": "mocap", "imu_raw": "IMU (raw)"}
     for key in every:
@@ -482,7 +523,7 @@ def per_trial(r: dict) -> str:
                      f"**{m['shank_clean']:.1f}** | "
                      f"**{m['thigh_after']:.1f}**, **{m['shank_after']:.1f}** |")
     lines += ["", "| kernels from -> tested with | accuracy | phase error (mean, % of stride) | samples |", "|---|---|---|---|"]
-    for key, note in (("estimator", ""), ("estimator_without_faults", ", IMU faults not used")):
+    for key, note in (("estimator", ""), ("estimator_without_faults", ", shank IMU faults not used")):
         for k, v in r[key].items():
             lines.append(f"| {k}{note} | {100 * v['accuracy']:.1f} % | {100 * v['phase_error_mean']:.2f} | {v['samples']} |")
     s = r["synthetic"]

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES
+from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, imu_samples
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
@@ -116,8 +116,6 @@ class _Variant:
         if self.input_kind == "joint_state":
             x: Any = np.radians(deg)
         else:  # from the last angles sent into this run's in 0.25 s: no jump for the gyro
-            from ..analysis.imu_sagittal import imu_samples
-
             k = min(n, round(0.25 * lib.sample_rate_hz))
             deg[:k] = self.last_deg + (deg[k - 1] - self.last_deg) * (np.arange(1, k + 1) / k)[:, None]
             x = imu_samples(deg, stamps, period * 1e-9, self.input_kind == "imu-raw", self.last_deg)
