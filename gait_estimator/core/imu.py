@@ -301,6 +301,7 @@ class RawFusion:
         quasi = params.quasi_gain is not None and params.quasi_gain != params.gain
         self._quasi_rate2 = params.quasi_rate_dps * params.quasi_rate_dps if quasi else -1.0
         self._quasi_acc2 = 2.0 * params.quasi_acc_g
+        self._calm_rate2 = max(self._still_rate2, self._quasi_rate2)
         self._still = 0
         self._tier = 0  # settings in use: 0 moving, 1 turning slowly, 2 still
         self.gyro_bias_dps = gyro_bias_dps
@@ -347,17 +348,20 @@ class RawFusion:
             self._first = False
             ahrs.set_quaternion(_tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64)))
             ahrs.skip_startup()
-        r2, m2 = gx * gx + gy * gy + gz * gz, ax * ax + ay * ay + az * az - 1.0
-        acc2 = self._still_acc2
-        if r2 < self._still_rate2 and -acc2 < m2 < acc2:
-            self._still = still = self._still + 1
+        r2 = gx * gx + gy * gy + gz * gz
+        if r2 >= self._calm_rate2:  # turning faster than both tiers allow (most of a stride)
+            self._still = tier = 0
         else:
-            self._still = still = 0
-        if still >= self._still_needed:
-            tier = 2
-        else:
-            acc2 = self._quasi_acc2
-            tier = 1 if r2 < self._quasi_rate2 and -acc2 < m2 < acc2 else 0
+            m2, acc2 = ax * ax + ay * ay + az * az - 1.0, self._still_acc2
+            if r2 < self._still_rate2 and -acc2 < m2 < acc2:
+                self._still = still = self._still + 1
+            else:
+                self._still = still = 0
+            if still >= self._still_needed:
+                tier = 2
+            else:
+                acc2 = self._quasi_acc2
+                tier = 1 if r2 < self._quasi_rate2 and -acc2 < m2 < acc2 else 0
         if tier != self._tier:
             self._tier = tier
             ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)

@@ -277,7 +277,7 @@ class ImuCalibrator:
         self.status = "waiting for samples"
         self._clear()
 
-    def add(self, t: float, ups: list[Vec3], gyro: list[Vec3], acc: list[Vec3]) -> ImuCalibration | None:
+    def add(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> ImuCalibration | None:
         """One paired sample (t in s); returns the calibration when it has just been learnt."""
         if self._n and t <= self._t[self._n - 1]:  # a restarted stream: what was kept has the old stamps
             self._standing = None

@@ -199,7 +199,8 @@ class ImuInput:
         node = self.node
         node._received += 1
         node._period_received += 1
-        ups = [i[0] for i in items]
+        i0, i1, i2, i3 = items  # SensorInput.convert's (up, gyro, acc) per sensor
+        ups = (i0[0], i1[0], i2[0], i3[0])
         cal = self.calibrator.calibration
         if cal is None:
             learnt = self.calibrator.add(stamp_ns * 1e-9, ups, [i[1] for i in items], [i[2] for i in items])
