@@ -349,7 +349,7 @@ class RawFusion:
             ahrs.set_quaternion(_tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64)))
             ahrs.skip_startup()
         r2 = gx * gx + gy * gy + gz * gz
-        if r2 >= self._calm_rate2:  # turning faster than both tiers allow (most of a stride)
+        if r2 >= self._calm_rate2:  # faster than both tiers allow (most of a stride); _still_needed >= 1
             self._still = tier = 0
         else:
             m2, acc2 = ax * ax + ay * ay + az * az - 1.0, self._still_acc2
