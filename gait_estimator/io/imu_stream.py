@@ -200,8 +200,7 @@ class ImuPairer:
         q.append((stamp_ns, item))
         if len(q) > self.max_queue:
             q.popleft()
-            self.dropped[CHANNELS[sensor]] += 1
-            self.unpaired += 1
+            self._drop(sensor)
         q0, q1, q2, q3 = queues
         if not (q0 and q1 and q2 and q3):
             return _NOTHING
@@ -216,17 +215,20 @@ class ImuPairer:
                 continue
             oldest = (s0, s1, s2, s3).index(lo)
             queues[oldest].popleft()
-            self.dropped[CHANNELS[oldest]] += 1
-            self.unpaired += 1
+            self._drop(oldest)
         return out
+
+    def _drop(self, sensor: int, n: int = 1) -> None:
+        """Count ``n`` unpaired messages of ``sensor``: per sensor and in the running total."""
+        self.dropped[CHANNELS[sensor]] += n
+        self.unpaired += n
 
     def _restarted(self, stamp_ns: int) -> None:
         """A sensor restarted (a stamp before its newest): drop what was queued under the old stamps."""
         limit = stamp_ns + self.tolerance_ns
         for i, old in enumerate(self.queues):
             kept = [m for m in old if m[0] <= limit]
-            self.dropped[CHANNELS[i]] += len(old) - len(kept)
-            self.unpaired += len(old) - len(kept)
+            self._drop(i, len(old) - len(kept))
             self.queues[i] = deque(kept)
 
     def clear(self) -> None:
