@@ -126,11 +126,17 @@ THIGH_ACC_JUMP_MPS2 = 1.0
 standing starts ``thigh_faults`` (data/camargo_ab06/README.md "Known issues")."""
 
 
+def _thigh_acc_steps(rec: Recording) -> tuple[np.ndarray, np.ndarray]:
+    """The right thigh's accelerometer (T, 3), m/s^2, and the size of each sample's step from the
+    previous one (T,; 0 for the first)."""
+    acc = np.stack([rec.extra[f"right_thigh_acc_{k}_mps2"] for k in "xyz"], axis=1)
+    return acc, np.r_[0.0, np.linalg.norm(np.diff(acc, axis=0), axis=1)]
+
+
 def thigh_faults(rec: Recording) -> np.ndarray:
     """Samples of the right thigh IMU from its first accelerometer step > THIGH_ACC_JUMP_MPS2 while
     standing to the end of the trial; none without such a step (``thigh_fault_evidence``)."""
-    acc = np.stack([rec.extra[f"right_thigh_acc_{k}_mps2"] for k in "xyz"], axis=1)
-    step = np.r_[0.0, np.linalg.norm(np.diff(acc, axis=0), axis=1)]
+    _, step = _thigh_acc_steps(rec)
     jumps = np.flatnonzero((step > THIGH_ACC_JUMP_MPS2) & (rec.labels == "stand"))
     bad = np.zeros(len(rec), dtype=bool)
     if jumps.size:
@@ -148,9 +154,8 @@ def thigh_fault_evidence(rec: Recording) -> dict | None:
     if not bad.any():
         return None
     ex, t, i = rec.extra, rec.time_s, int(np.argmax(bad))
-    acc = np.stack([ex[f"right_thigh_acc_{k}_mps2"] for k in "xyz"], axis=1)
+    acc, step = _thigh_acc_steps(rec)
     gyro = {k: ex[f"right_thigh_gyro_{k}_dps"] for k in "yz"}
-    step = np.r_[0.0, np.linalg.norm(np.diff(acc, axis=0), axis=1)]
     stand = rec.labels == "stand"
     tilt = np.degrees(np.arctan2(acc[:, 1], -acc[:, 0])) - rec.angles_deg[:, 0]
     near = {"before": stand & (t >= t[i] - 0.5) & (t < t[i]), "after": stand & (t > t[i]) & (t <= t[i] + 0.5)}
@@ -167,7 +172,8 @@ def thigh_fault_evidence(rec: Recording) -> dict | None:
 
 
 def trial_imu(path: Path, tmp: Path) -> dict:
-    """Per trial: angles from the orientation and the raw bags, tared; RMS vs mocap."""
+    """Per trial: angles from the orientation and the raw bags, tared; RMS vs mocap; the samples of
+    the data set's IMU faults per right segment (``faults``)."""
     rec = read_project_csv(path)
     t, ex, mocap = rec.time_s, rec.extra, rec.angles_deg
     stamps = BASE_NS + np.round(t * 1e9).astype(np.int64)
@@ -179,6 +185,7 @@ def trial_imu(path: Path, tmp: Path) -> dict:
     left = {c: virtual_quaternions(mocap[:, c]) for c in (1, 3)}
     configured = {"imu_lateral_axes": ["", "+z", "", "+z"], "imu_proximal_axes": ["", "+y", "", "+y"]}
     out: dict = {"trial": path.stem, "samples": len(t), "thigh_fault": thigh_fault_evidence(rec)}
+    faults = {RIGHT["thigh"]: thigh_faults(rec), RIGHT["shank"]: shank_faults(rec, path.stem)}
     angles = {}
     for kind in ("orientation", "raw"):
         if kind == "orientation":
@@ -194,7 +201,7 @@ def trial_imu(path: Path, tmp: Path) -> dict:
             a[:, c] -= (a[stand, c] - mocap[stand, c]).mean()  # the standing tare
         walk = rec.labels != "stand"
         out[kind] = {seg: float(np.sqrt(np.mean((a[walk, c] - mocap[walk, c]) ** 2))) for seg, c in RIGHT.items()}
-        clean = {0: walk & ~thigh_faults(rec), 2: walk & ~shank_faults(rec, path.stem)}
+        clean = {c: walk & ~bad for c, bad in faults.items()}
         after = t > t[stand][-1]  # what the node puts out: nothing before its standing pose
         for seg, c in RIGHT.items():
             out[kind][f"{seg}_clean"] = float(np.sqrt(np.mean((a[clean[c], c] - mocap[clean[c], c]) ** 2)))
@@ -207,7 +214,8 @@ def trial_imu(path: Path, tmp: Path) -> dict:
         angles[kind] = a
         if kind == "raw":
             mounts = {c: got.calibration.mounts[c] for c in RIGHT.values()}
-    return {"stats": out, "angles": angles, "rec": rec, "gyro": gyro, "acc_g": acc / STANDARD_GRAVITY, "mounts": mounts}
+    return {"stats": out, "angles": angles, "rec": rec, "gyro": gyro, "acc_g": acc / STANDARD_GRAVITY, "mounts": mounts,
+            "faults": faults}
 
 
 FUSION_GRID = [FusionParams(gain=g) for g in (0.2, 0.3, 0.5, 1.0)] + [
@@ -223,7 +231,7 @@ def _fusion_rms(tr: dict, c: int, params: FusionParams) -> float:
     a = m.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], m.gyro_bias_dps, params))
     stand, mocap = first_stand(rec), rec.angles_deg[:, c]
     a -= (a[stand] - mocap[stand]).mean()
-    sel = (rec.labels != "stand") & ~(shank_faults(rec, tr["stats"]["trial"]) if c == 2 else thigh_faults(rec))
+    sel = (rec.labels != "stand") & ~tr["faults"][c]
     return float(np.sqrt(np.mean((a[sel] - mocap[sel]) ** 2)))
 
 
@@ -268,7 +276,7 @@ def estimator_runs(trials: list[dict], skip_faults: bool = False) -> dict:
     for reasons unrelated to the IMU (the phase error, over correct rows, is the same either way)."""
     out = {}
     sets = {"mocap": lambda tr: tr["rec"].angles_deg, "imu_raw": lambda tr: tr["angles"]["raw"]}
-    faults = [shank_faults(tr["rec"], tr["stats"]["trial"]) if skip_faults else None for tr in trials]
+    faults = [tr["faults"][RIGHT["shank"]] if skip_faults else None for tr in trials]
     parts = {name: [halves(tr["rec"], get(tr), f) for tr, f in zip(trials, faults, strict=True)]
              for name, get in sets.items()}
     for train_on, test_on in (("mocap", "mocap"), ("imu_raw", "imu_raw"), ("mocap", "imu_raw")):
