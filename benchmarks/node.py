@@ -42,7 +42,12 @@ REPORTS = {"quiet": "bench_node.json", "busy": "bench_node_busy.json", "busy_rt"
            "one_core": "bench_node_one_core.json", "modes_700": "bench_node_700.json",
            **{f"imu{n}_{k}": f"bench_node_imu{n}_{k}.json" for n in (1, 2) for k in ("joint_state", "imu", "imu_raw")}}
 IMU_RUNS = {"joint_state": "JointState", "imu": "Imu ×4, orientations", "imu_raw": "Imu ×4, gyro + accelerometer"}
-"""IMU input runs (``--input``; file names with ``_``) and their column labels."""
+"""IMU input runs (file names; ``input_flag`` gives their ``--input``) and their column labels."""
+
+
+def input_flag(kind: str) -> str:
+    """bench-node's ``--input`` value of an IMU_RUNS key."""
+    return kind.replace("imu_raw", "imu-raw")
 PERIODS_MS = {230: 1000 / 230, 1000: 1.0}
 STAGES = {
     "dds_in_and_executor": "input published → node starts handling it (DDS in, executor wake-up, take)",
@@ -104,6 +109,21 @@ def machine_line(r: dict[str, Any]) -> str:
             f"load average {r['load_average_before'][0]:.2f} before the run, {r['load_average_after'][0]:.2f} after")
 
 
+def latency_rows(vs: list[dict[str, Any]]) -> list[list[str]]:
+    """The rows every side-by-side node table shows, one column per variant in ``vs``: latency at
+    230 Hz (to the DDS reader, to the callback) and 1000 Hz, the highest rate, processing time."""
+    return [
+        ["latency at 230 Hz to the bench's DDS reader, p50 / p90 / p99 / max", *(lat4(v["latency"], "dds_") for v in vs)],
+        ["latency at 230 Hz to the bench's callback, p50 / p90 / p99 / max", *(lat4(v["latency"]) for v in vs)],
+        ["latency at 1000 Hz, p50 / p99, to the DDS reader; to the callback",
+         *(f"{lat2(step_at(v, 1000), 'dds_')}; {lat2(step_at(v, 1000))}" for v in vs)],
+        ["highest input rate sustained without drops", *(rate(v) for v in vs)],
+        ["node processing time at 230 Hz, mean / max (diagnostics)",
+         *(f"{ms(v['latency'].get('node_processing_mean_ms'), 3)} / {ms(v['latency'].get('node_processing_max_ms'))} ms"
+           for v in vs)],
+    ]
+
+
 def two_cores(reports: dict[str, dict[str, Any]]) -> str:
     quiet = reports["quiet"]
     busy = reports.get("busy")
@@ -137,17 +157,7 @@ def two_cores(reports: dict[str, dict[str, Any]]) -> str:
         f"### Default node (executor `{default[0]}`), the bench subscribing to `estimate` only",
         "",
     ]
-    rows = []
-    vs = [(name, variant(r, *default)) for name, r in states]
-    rows.append(["latency at 230 Hz to the bench's DDS reader, p50 / p90 / p99 / max",
-                 *(lat4(v["latency"], "dds_") for _, v in vs)])
-    rows.append(["latency at 230 Hz to the bench's callback, p50 / p90 / p99 / max", *(lat4(v["latency"]) for _, v in vs)])
-    rows.append(["latency at 1000 Hz, p50 / p99, to the DDS reader; to the callback",
-                 *(f"{lat2(step_at(v, 1000), 'dds_')}; {lat2(step_at(v, 1000))}" for _, v in vs)])
-    rows.append(["highest input rate sustained without drops", *(rate(v) for _, v in vs)])
-    rows.append(["node processing time at 230 Hz, mean / max (diagnostics)",
-                 *(f"{ms(v['latency'].get('node_processing_mean_ms'), 3)} / {ms(v['latency'].get('node_processing_max_ms'))} ms"
-                   for _, v in vs)])
+    rows = latency_rows([variant(r, *default) for _, r in states])
     out += [table(["measure", *(name for name, _ in states)], rows), ""]
 
     out += ["### Executors and outputs side by side", ""]
@@ -257,7 +267,7 @@ def modes_700(r: dict[str, Any]) -> str:
 
 def imu_input(reports: dict[str, dict[str, Any]]) -> str:
     """The node fed four Imu topics (configured mounting) vs JointState, one sitting."""
-    runs = [(f"{label}, sitting {n}", {"imu_raw": "imu-raw"}.get(k, k), reports[f"imu{n}_{k}"])
+    runs = [(f"{label}, sitting {n}", input_flag(k), reports[f"imu{n}_{k}"])
             for n in (1, 2) for k, label in IMU_RUNS.items() if f"imu{n}_{k}" in reports]
     vs = [(label, variant(r, r["executor"], r["outputs"])) for label, _, r in runs]
     first = runs[0][2]
@@ -270,14 +280,7 @@ def imu_input(reports: dict[str, dict[str, Any]]) -> str:
            "four Imu messages with one stamp; latency from the publication of the last of them; a rate counts samples. Executor "
            f"`{first['executor']}`, the bench subscribing to `estimate`.", ""]
     rows = [
-        ["latency at 230 Hz to the bench's DDS reader, p50 / p90 / p99 / max", *(lat4(v["latency"], "dds_") for _, v in vs)],
-        ["latency at 230 Hz to the bench's callback, p50 / p90 / p99 / max", *(lat4(v["latency"]) for _, v in vs)],
-        ["latency at 1000 Hz, p50 / p99, to the DDS reader; to the callback",
-         *(f"{lat2(step_at(v, 1000), 'dds_')}; {lat2(step_at(v, 1000))}" for _, v in vs)],
-        ["highest input rate sustained without drops", *(rate(v) for _, v in vs)],
-        ["node processing time at 230 Hz, mean / max (diagnostics)",
-         *(f"{ms(v['latency'].get('node_processing_mean_ms'), 3)} / {ms(v['latency'].get('node_processing_max_ms'))} ms"
-           for _, v in vs)],
+        *latency_rows([v for _, v in vs]),
         ["load average before / after the run",
          *(f"{r['load_average_before'][0]:.2f} / {r['load_average_after'][0]:.2f}" for _, _, r in runs)],
     ]
@@ -300,7 +303,7 @@ def run_imu_sittings(domain_id: int) -> None:
     in the reverse order (the machine's load drifts during a sitting)."""
     for n, order in ((1, list(IMU_RUNS)), (2, list(reversed(IMU_RUNS)))):
         for kind in order:
-            run_bench(domain_id, f"imu{n}_{kind}", ("--input", kind.replace("imu_raw", "imu-raw")))
+            run_bench(domain_id, f"imu{n}_{kind}", ("--input", input_flag(kind)))
 
 
 def stamp(path: Path) -> None:
