@@ -96,7 +96,11 @@ def node_angles(msgs: list[list[Imu]], cal) -> tuple[np.ndarray, np.ndarray]:
 
 
 def publishers(client):
-    return [client.node.create_publisher(Imu, t, 1000) for t in TOPICS]
+    """The four Imu publishers, once the node's subscriptions have matched them."""
+    pubs = [client.node.create_publisher(Imu, t, 1000) for t in TOPICS]
+    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
+    client.spin_for(1.0)  # the node's best-effort subscriptions and our output subscriptions match too
+    return pubs
 
 
 def learnt_calibration(s, path: Path) -> Path:
@@ -124,8 +128,6 @@ def test_imu_input_with_a_saved_calibration_equals_offline_processing(ros, tmp_p
     node = h.estimator(input_type="imu", imu_calibration_path=str(path))
     client = h.client(node)
     pubs = publishers(client)
-    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
-    client.spin_for(1.0)  # the node's best-effort subscriptions and our output subscriptions match too
     msgs = make_messages(s, len(s.time_s))
     stream(client, pubs, msgs, rate_hz=RATE / 2)  # time comes from the stamps; half speed spares a loaded CI
     stamps, angles = node_angles(msgs, load_calibration(path))  # as saved (rounded)
@@ -158,8 +160,6 @@ def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_
     node = h.estimator(input_type="imu", imu_calibration_path=str(path))
     client = h.client(node)
     pubs = publishers(client)
-    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
-    client.spin_for(1.0)
     msgs = make_messages(s, len(s.time_s), raw=True)
     stream(client, pubs, msgs, rate_hz=RATE / 2)
     wait_all_answered(client, len(rec))
@@ -182,8 +182,6 @@ def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_inp
     node = h.estimator(input_type="imu", imu_calibration_path=str(path), imu_frame_ids=list(CHANNELS))
     client = h.client(node)
     pubs = publishers(client)
-    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
-    client.spin_for(1.0)  # the node's best-effort subscriptions and our output subscriptions match too
     msgs = make_messages(s, len(s.time_s), raw=True)
     # bad messages on top: NaN and zero quaternions, an out-of-order stamp, and a silent right shank
     bad = imu_msg(BASE_NS + 10_000_000, [math.nan, 0, 0, 1], s.gyro_dps[0, 0], s.acc_g[0, 0], "right_thigh")
@@ -255,8 +253,6 @@ def test_imu_input_without_a_library_learns_the_calibration_and_waits_for_teachi
     node = h.estimator(input_type="imu", kernels="")
     client = h.client(node)
     pubs = publishers(client)
-    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
-    client.spin_for(1.0)
     stream(client, pubs, make_messages(s, len(s.time_s)))
     client.spin_for(0.5)
     path = tmp_path / ".ros" / "gait_estimator" / "taught.imu.yaml"
@@ -299,8 +295,6 @@ def test_raw_input_without_imufusion_is_dropped_counted_and_named(ros, tmp_path,
     node = h.estimator(input_type="imu", imu_calibration_path=str(tmp_path / "none.imu.yaml"))
     client = h.client(node)
     pubs = publishers(client)
-    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
-    client.spin_for(1.0)
     stream(client, pubs, make_messages(s, 200, raw=True))  # a callback raising would raise here
     client.spin_for(0.5)
     diag = client.latest_diagnostics(3.0)
@@ -334,8 +328,6 @@ def test_undecodable_imu_bytes_are_dropped_and_counted(ros_cdr, tmp_path):
                        imu_calibration_path=str(tmp_path / "never.imu.yaml"))
     client = h.client(node)
     pubs = publishers(client)
-    assert client.spin_until(lambda: all(p.get_subscription_count() for p in pubs), 10.0)
-    client.spin_for(1.0)
     good = imu_msg(BASE_NS, [0.0, 0.0, 0.0, 1.0], np.zeros(3), np.array([0.0, 0.0, 1.0]))
     data = serialize_message(good)
     for raw in (b"\x00\x01\x00\x00" + b"\xff" * 40, data[:40]):  # absurd frame_id length, cut short
