@@ -22,6 +22,11 @@ synthetic checks and the per-sample conversion cost. One command:
 * Synthetic (test/imu_synth.py): random mountings, exact quaternions; raw input with noise and
   gyro bias.
 * Fusion settings: per segment, chosen leave-one-trial-out from FUSION_GRID (``select_fusion``).
+* Calibration check (``calibration_checks``): the node's check of a saved calibration on the
+  first walking (``check_stream``), for the raw-input calibration learnt on each trial
+  checked on every trial (the same sensors, no false alarm wanted), and on each trial with its
+  right thigh or shank sensor turned about the segment's long axis by TURNS_DEG (the recorded
+  gyro and accelerometer rotated into the turned sensor's frame).
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
   (best of 3 rounds by median), the inputs built as the node builds them (rate from the stamps,
   per-segment fusion settings); the message fields as Python floats, as the node reads them.
@@ -59,7 +64,7 @@ from gait_estimator.core.imu import (  # noqa: E402
     fuse_raw,
 )
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag  # noqa: E402
-from gait_estimator.io.imu_stream import ImuPairer, SensorInput  # noqa: E402
+from gait_estimator.io.imu_stream import ImuPairer, SensorInput, check_stream  # noqa: E402
 from gait_estimator.io.process import predict  # noqa: E402
 from gait_estimator.io.recording import Recording, read_project_csv  # noqa: E402
 
@@ -302,6 +307,52 @@ def estimator_runs(trials: list[dict], skip_faults: bool = False) -> dict:
     return out
 
 
+TURNS_DEG = (20.0, 45.0, 90.0, 180.0)
+"""Sensor turns about the segment's long axis tried by ``calibration_checks`` (around the check's
+limit, ``ImuLearnParams.max_axis_change_deg``)."""
+
+
+def _checked(tr: dict, cal: ImuCalibration, turn: tuple[int, float] | None = None) -> dict:
+    """The node's first check of ``cal`` on one trial (raw input fused with the calibration's gyro
+    biases, as the node applies a saved file's), optionally with sensor c turned by deg."""
+    from scipy.spatial.transform import Rotation
+
+    from gait_estimator.core.imu import ups_from_quaternions
+
+    rec = tr["rec"]
+    t = rec.time_s
+    gyro, acc = tr["gyro"].copy(), tr["acc_g"].copy()
+    if turn is not None:
+        c, deg = turn
+        rot = Rotation.from_rotvec(np.radians(deg) * np.asarray(cal.mounts[c].proximal)).as_matrix()
+        gyro[c], acc[c] = gyro[c] @ rot, acc[c] @ rot  # each row v -> rot.T v: the turned sensor's frame
+    ups = np.empty((4, len(t), 3))
+    for c in RIGHT.values():
+        ups[c] = fuse_raw(t, gyro[c], acc[c], cal.mounts[c].gyro_bias_dps, FUSION_BY_CHANNEL[c])
+    for c in (1, 3):  # the virtual left sensors: orientations without rates
+        ups[c] = ups_from_quaternions(virtual_quaternions(rec.angles_deg[:, c]))
+        gyro[c] = np.nan
+    found, k, _ = check_stream(t, ups.transpose(1, 0, 2), gyro.transpose(1, 0, 2), acc.transpose(1, 0, 2), cal)
+    if found is None:
+        return {"fits": None}
+    walking = (rec.labels != "stand")[:k + 1]
+    return {"fits": found.fits, "axis_change_deg": max(found.axis_change_deg[c] for c in RIGHT.values()),
+            "knee_extension_deg": found.knee_extension_deg[0], "at_s": float(t[k]),
+            "walking_s": float(np.diff(t[:k + 1])[walking[1:]].sum())}
+
+
+def calibration_checks(trials: list[dict]) -> dict:
+    """The node's check of a saved calibration on camargo (module docstring): each trial's
+    raw-input calibration checked on every trial, and each trial's own with a turned sensor."""
+    left = SegmentMount.from_axes("+z", "+y")
+    cals = {tr["stats"]["trial"]: ImuCalibration((tr["mounts"][0], left, tr["mounts"][2], left)) for tr in trials}
+    same = [{"from": a, "on": tr["stats"]["trial"], **_checked(tr, cal)} for a, cal in cals.items() for tr in trials]
+    turned = [{"trial": tr["stats"]["trial"], "segment": seg, "turn_deg": deg,
+               **_checked(tr, cals[tr["stats"]["trial"]], (c, deg))}
+              for tr in trials for seg, c in RIGHT.items() for deg in TURNS_DEG]
+    return {"same_sensors": same, "turned": turned}
+
+
 def synthetic(seeds: int = 6) -> dict:
     from imu_synth import gait_angles, random_mounts, synthesize
 
@@ -425,6 +476,7 @@ def main(argv: list[str] | None = None) -> int:
         "estimator": estimator_runs(trials),
         "estimator_without_faults": estimator_runs(trials, skip_faults=True),
         "fusion_selection": select_fusion(trials),
+        "calibration_check": calibration_checks(trials),
         "synthetic": synthetic(),
         "cost": conversion_cost(),
         "decode": decode_cost(),
@@ -446,6 +498,7 @@ def write_tables(out: Path) -> str:
     text = "\n".join(["### Per trial", "", per_trial(r), "### Thigh IMU faults", "", thigh_fault_table(r), "",
                       "### Angles", "", angles_table(r), "",
                       "### Fusion settings, leave-one-trial-out", "", selection_table(r), "",
+                      "### Calibration check", "", check_table(r), "",
                       "### Estimator", "", estimator_table(r), "", "### Cost", "", cost_table(r)])
     (out / "tables.md").write_text(text + "\n", encoding="utf-8")
     return text
@@ -491,6 +544,35 @@ def selection_table(r: dict) -> str:
                          for k, h in v["held_out"].items())
         rows.append(f"| {seg} | {held} | {v['held_out_mean_deg']:.1f}° | {v['in_sample']}, "
                     f"{v['in_sample_mean_deg']:.1f}° | {v['shipped']} |")
+    return "\n".join(rows)
+
+
+def check_table(r: dict) -> str:
+    """``calibration_checks``: verdicts, largest lateral-axis change and knee extension (right
+    leg), and the walking (samples the data set labels as walking) before the verdict."""
+    chk = r["calibration_check"]
+    rows = ["| saved calibration checked on | checks | fits / does not fit / no verdict | lateral axis change, "
+            "deg (largest) | knee past straight, deg (largest) | walking before the verdict (labelled), s |",
+            "|---|---|---|---|---|---|"]
+
+    def row(name: str, runs: list[dict]) -> str:
+        done = [x for x in runs if x["fits"] is not None]
+        if not done:
+            return f"| {name} | {len(runs)} | 0 / 0 / {len(runs)} | | | |"
+        fits = sum(bool(x["fits"]) for x in done)
+        change = ", ".join(f"{x['axis_change_deg']:.0f}" for x in done)
+        return (f"| {name} | {len(runs)} | {fits} / {len(done) - fits} / {len(runs) - len(done)} | "
+                f"{max(x['axis_change_deg'] for x in done):.0f} ({change}) | "
+                f"{max(x['knee_extension_deg'] for x in done):.0f} | "
+                f"{min(x['walking_s'] for x in done):.1f}–{max(x['walking_s'] for x in done):.1f} |")
+
+    same = chk["same_sensors"]
+    rows.append(row("its own trial", [x for x in same if x["from"] == x["on"]]))
+    rows.append(row("the other four trials (same sensors)", [x for x in same if x["from"] != x["on"]]))
+    for seg in RIGHT:
+        for deg in TURNS_DEG:
+            runs = [x for x in chk["turned"] if x["segment"] == seg and x["turn_deg"] == deg]
+            rows.append(row(f"its trial, right {seg} sensor turned {deg:.0f}°", runs))
     return "\n".join(rows)
 
 

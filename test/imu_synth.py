@@ -9,10 +9,14 @@ body rates (deg/s), with noise and gyro bias added as asked.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from gait_estimator.core.imu import ImuCalibration
 
 S0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """Columns: segment forward, proximal, right in the world (x walking direction, z up) at theta 0."""
@@ -75,3 +79,12 @@ def synthesize(angles_deg: np.ndarray, rate_hz: float, mounts: list[Rotation], r
         bias *= gyro_bias_dps / max(np.linalg.norm(bias), 1e-12)
         gyro[c] = np.degrees(w) + bias + rng.normal(0, gyro_noise_dps, (T, 3))
     return SyntheticImu(t, np.asarray(angles_deg, dtype=np.float64), quat, gyro, acc, mounts)
+
+
+def turned(cal: ImuCalibration, channel: int, deg: float) -> ImuCalibration:
+    """``cal`` as it fits a sensor turned by ``-deg`` about its segment's long axis."""
+    m = cal.mounts[channel]
+    lateral = Rotation.from_rotvec(math.radians(deg) * np.array(m.proximal)).apply(m.lateral)
+    mounts = list(cal.mounts)
+    mounts[channel] = dataclasses.replace(m, lateral=tuple(lateral))
+    return ImuCalibration(tuple(mounts))

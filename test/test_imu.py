@@ -4,13 +4,14 @@ synthetic IMU streams made from known segment angles (test/imu_synth.py)."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import subprocess
 import sys
 
 import numpy as np
 import pytest
-from imu_synth import gait_angles, random_mounts, synthesize
+from imu_synth import gait_angles, random_mounts, synthesize, turned
 from scipy.spatial.transform import Rotation
 
 from gait_estimator.analysis.evaluate import read_predictions_csv
@@ -28,7 +29,7 @@ from gait_estimator.core.imu import (
     up_from_quaternion,
     ups_from_quaternions,
 )
-from gait_estimator.core.imu_learn import ImuLearnParams, check_configured, learn_calibration
+from gait_estimator.core.imu_learn import ImuLearnParams, check_calibration, check_configured, learn_calibration
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
@@ -237,6 +238,77 @@ def test_live_calibrator_learns_from_the_stream(angles):
     assert relearnt is not None and relearnt == learnt_at
 
 
+def test_a_calibration_made_earlier_is_checked_on_the_walking(angles):
+    rng = np.random.default_rng(9)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    cal, _, _ = learn_calibration(s.time_s, ups)
+    window = (s.time_s >= 6.0) & (s.time_s < 14.0)  # walking only: no standing pose needed
+    t, u, g = s.time_s[window], ups[:, window], s.gyro_dps[:, window]
+    found, missing = check_calibration(t, u, cal, g)
+    assert missing == "" and found.fits, found
+    assert max(found.axis_change_deg) < 3.0 and max(found.knee_extension_deg) < 10.0
+    assert found.summary().startswith("lateral axes within")
+    for channel, deg in ((2, 45.0), (1, 90.0), (0, 180.0)):  # a sensor turned about the segment, a wrong sign
+        found, _ = check_calibration(t, u, turned(cal, channel, deg), g)
+        assert not found.fits and found.problems[0].startswith(CHANNELS[channel] + ": lateral axis")
+        assert abs(found.axis_change_deg[channel] - deg) < 3.0
+    # a sensor tilted in the sagittal plane: no other axis, but a right shank 45 deg ahead overextends the knee
+    mounts = list(cal.mounts)
+    mounts[2] = dataclasses.replace(mounts[2], standing_deg=45.0)
+    found, _ = check_calibration(t, u, ImuCalibration(tuple(mounts)), g)
+    assert found.problems == (f"right knee {found.knee_extension_deg[0]:.0f} deg past straight",)
+    # without rates (orientation-only drivers, some filling them with zeros) the axis comes from the
+    # up directions' rotation
+    for no_rates in (None, np.zeros_like(g)):
+        found, _ = check_calibration(t, u, turned(cal, 3, 90.0), no_rates)
+        assert not found.fits and abs(found.axis_change_deg[3] - 90.0) < 5.0
+    # nothing to check on yet: too short, or standing only
+    found, missing = check_calibration(s.time_s[:300], ups[:, :300], cal, s.gyro_dps[:, :300])
+    assert found is None and missing == "walk 4 s"
+    still = synthesize(np.zeros((1600, 4)), RATE, s.mounts, rng)
+    found, missing = check_calibration(still.time_s, _ups(still), cal, still.gyro_dps)
+    assert found is None and missing.endswith("walk a few more strides")
+
+
+def test_live_calibrator_checks_a_calibration_on_the_first_walking(angles):
+    rng = np.random.default_rng(10)
+    s = synthesize(angles, RATE, random_mounts(rng), rng)
+    ups = _ups(s)
+    cal, _, _ = learn_calibration(s.time_s, ups)
+    nan3 = (math.nan,) * 3
+    for given, fits in ((cal, True), (turned(cal, 2, 60.0), False)):
+        calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, given, check=True)
+        assert calib.checking and calib.status.startswith("calibrated, to be checked")
+        found = None
+        for k in range(len(s.time_s)):
+            found = calib.check(float(s.time_s[k]), [tuple(ups[c, k]) for c in range(4)],
+                                [tuple(s.gyro_dps[c, k]) for c in range(4)], [nan3] * 4)
+            if found is not None:
+                break
+        assert found is not None and found.fits == fits
+        assert 8.0 <= s.time_s[k] < 8.6, "checked on the first window of stream with walking"
+        assert not calib.checking and calib.calibration is given and calib.status.endswith(": " + found.summary())
+    assert not ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, cal).checking  # asked for only
+    # stamps going back (a restarted stream) while checking: the window starts again on the new stamps
+    calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, cal, check=True)
+    rows = [([tuple(ups[c, k]) for c in range(4)], [tuple(s.gyro_dps[c, k]) for c in range(4)], [nan3] * 4)
+            for k in range(len(s.time_s))]
+    assert all(calib.check(50.0 + float(s.time_s[k]), *rows[k]) is None for k in range(1400))
+    at = next(float(s.time_s[k]) for k in range(len(s.time_s)) if calib.check(float(s.time_s[k]), *rows[k]))
+    assert 8.0 <= at < 8.6
+    # a standing pose asked for before the check: the unchecked axes are not kept, strides are needed
+    calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, turned(cal, 2, 60.0), check=True)
+    calib.request_standing()
+    assert not calib.checking and calib.calibration is None
+    assert all(calib.add(100.0 + float(s.time_s[k]), *rows[k]) is None for k in range(800)), "strides needed"
+    again = next(c for k in range(800, len(s.time_s)) if (c := calib.add(100.0 + float(s.time_s[k]), *rows[k])))
+    assert np.dot(again.mounts[2].lateral, cal.mounts[2].lateral) > math.cos(math.radians(3.0))
+    # configured axes are checked whenever they are put in use, also after a reset
+    configured = ImuCalibrator([m.lateral for m in cal.mounts], [m.proximal for m in cal.mounts], [0.0] * 4)
+    assert configured.add(0.0, *rows[0]) is not None and configured.checking
+
+
 def test_calibration_file_round_trip_and_bad_files(tmp_path):
     cal = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x", standing_deg=3.0) for _ in CHANNELS))
     p = save_calibration(cal, tmp_path / "sub" / "lib.imu.yaml")
@@ -424,6 +496,21 @@ def test_raw_imu_bag_with_a_saved_calibration_reads_as_the_node_converts(synthet
             live += [cal.angles_deg([i[0] for i in items]) for _, items in pairer.push(c, ns, item)]
     assert len(live) == len(offline)
     assert np.abs(np.array(live) - offline.angles_deg).max() < 1e-6
+
+
+def test_a_given_calibration_that_does_not_fit_the_bag_is_an_error(synthetic_bags, tmp_path):
+    _, d = synthetic_bags
+    cal = read_imu_bag(d / "orientation").calibration
+    fits = read_imu_bag(d / "orientation", imu_calibration=cal)
+    assert any("checked on the walking: lateral axes within" in n for n in fits.notes)
+    fit = r"does not fit this recording \(right_shank: lateral axis (8[7-9]|9[0-3]) deg from the swing axis\)"
+    with pytest.raises(RecordingError, match=fit):
+        read_imu_bag(d / "orientation", imu_calibration=turned(cal, 2, 90.0))
+    path = save_calibration(turned(cal, 2, 90.0), tmp_path / "other_day.imu.yaml")
+    r = subprocess.run([sys.executable, "-m", "gait_estimator.cli", "convert", str(d / "raw.db3dir"), "--out",
+                        str(tmp_path / "x.csv"), "--imu-calibration", str(path)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "does not fit this recording" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x.csv").exists()
 
 
 def test_convert_imu_bag_to_csv_and_process_it(synthetic_bags, tmp_path):

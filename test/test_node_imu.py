@@ -1,22 +1,25 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-68, 85):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-69, 85, 86):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
-IMUs: of the same messages read from a bag);
-learning the calibration live (also without a library), saving it (also beside a saved
-library) and forgetting it; bad messages, a silent sensor, raw input without imufusion; the
-node's reading of serialised Imu messages (io/cdr.py) against rclpy's, and undecodable bytes."""
+IMUs: of the same messages read from a bag); learning the calibration live (also without a
+library), saving it (also beside a saved library) and forgetting it; checking a saved calibration
+or configured axes on the walking; bad messages, a silent sensor, raw input without imufusion;
+the node's reading of serialised Imu messages (io/cdr.py) against rclpy's, and undecodable bytes."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import re
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from imu_synth import gait_angles, random_mounts, synthesize
+from imu_synth import gait_angles, random_mounts, synthesize, turned
 from rclpy.serialization import serialize_message
 from ros_helpers import answered_indices, assert_same_trace, in_process_factory, offline, wait_all_answered
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
@@ -38,7 +41,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, range(60, 70))
+    yield from in_process_factory(monkeypatch, [*range(60, 70), 86])
 
 
 @pytest.fixture
@@ -137,9 +140,59 @@ def test_imu_input_with_a_saved_calibration_equals_offline_processing(ros, tmp_p
     assert idx.size >= 0.9 * len(stamps), f"only {idx.size}/{len(stamps)} samples answered"
     assert_same_trace(client.received.trace(lib.mode_names), offline(angles[idx], lib, stamps[idx]))
     diag = client.latest_diagnostics(3.0)
-    assert diag["imu_calibration_status"] == "calibrated" and diag["imu_calibration_path"] == str(path)
+    assert diag["imu_calibration_status"] == "calibrated, to be checked on the walking"  # 8 s of stream in all
+    assert diag["imu_calibration_path"] == str(path)
     assert diag["input_type"] == "imu"
     assert all(c in diag["imu_silent"] for c in CHANNELS), "the stream ended: every sensor is silent"
+
+
+def test_a_saved_calibration_that_does_not_fit_the_sensors_is_learnt_again(ros, tmp_path):
+    """Yesterday's file, but the right shank's sensor was put on turned by 90 deg: the first walking
+    shows it, the node stops feeding the estimator, learns the calibration again from the next
+    standing pose and strides and saves it over the old file."""
+    rng = np.random.default_rng(12)
+    s = synthesize(gait_angles(RATE, walk_s=8.0), RATE, random_mounts(rng), rng)
+    right = load_calibration(learnt_calibration(s, tmp_path / "right.imu.yaml"))
+    path = save_calibration(turned(right, 2, 90.0), tmp_path / "user.imu.yaml")
+    h = ros(69)
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path))
+    client = h.client(node)
+    pubs = publishers(client)
+    assert node._imu.calibrator.checking
+    est, forgotten = node._estimator, []
+    reset_calibration = est.reset_calibration
+    est.reset_calibration = lambda: (forgotten.append(True), reset_calibration())[1]
+    again_s = 12.0  # the stream again from here (stamps in s): stand, walk
+    msgs = make_messages(s, len(s.time_s)) + make_messages(dataclasses.replace(s, time_s=s.time_s + again_s), len(s.time_s))
+    stream(client, pubs, msgs, rate_hz=RATE / 2)
+    client.spin_for(0.5)
+    got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
+    assert (got < 7.5).any(), "estimates with the saved calibration until the check (8 s of stream)"
+    assert not ((got > 8.6) & (got < again_s + 5.0)).any(), "none from the check until learnt again"
+    assert (got > again_s + 7.0).any(), "estimates again once learnt"
+    diag = client.latest_diagnostics(3.0)
+    assert diag["imu_calibration_status"] == "calibrated" and "[learnt]" in diag["imu_calibration"]
+    relearnt = load_calibration(path)
+    assert np.dot(relearnt.mounts[2].lateral, right.mounts[2].lateral) > math.cos(math.radians(3.0))
+    assert forgotten, "the offsets the estimator learnt from the wrong angles are forgotten"
+
+
+def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path):
+    rng = np.random.default_rng(13)
+    mount = Rotation.from_matrix(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))  # z right, x down
+    s = synthesize(gait_angles(RATE, walk_s=8.0), RATE, [mount] * 4, rng)
+    h = ros(86)
+    node = h.estimator(input_type="imu", imu_calibration_path=str(tmp_path / "never.imu.yaml"),
+                       imu_lateral_axes=["+z", "+z", "-z", "+z"], imu_proximal_axes=["-x"] * 4)
+    client = h.client(node)
+    stream(client, publishers(client), make_messages(s, len(s.time_s)), rate_hz=RATE / 2)
+    client.spin_for(0.5)
+    diag = client.latest_diagnostics(3.0)
+    assert re.match(r"calibrated, does not fit the walking: right_shank: lateral axis 1(7[5-9]|80) deg from the swing axis",
+                    diag["imu_calibration_status"]), diag["imu_calibration_status"]
+    assert "do not fit the walking" in client.received.diagnostics_message[-1]
+    got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
+    assert got.max() > 9.5, "configured axes stay in use (the user's statement), reported"
 
 
 def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_path):

@@ -11,6 +11,12 @@
   by tens of degrees. The choice with the smallest 98th percentile of the knee angle wins and must
   beat the next by ``ImuLearnParams.min_sign_margin_deg``.
 
+A calibration made earlier (a saved file, configured axes) is **checked** against a stretch of
+walking (``check_calibration``): its lateral axes against the ones learnt there with its proximal
+axes, and its knee angles against the knee rule. A sensor turned about its segment or a wrong sign
+shows in the first; an angle offset (a sensor tilted within the sagittal plane) only when it
+bends the knee past straight.
+
 Every function takes whole arrays (a file, or the live node's buffer); ``learn_calibration``
 returns the calibration or what is still missing.
 """
@@ -49,8 +55,14 @@ class ImuLearnParams:
             axis when there is no gyro.
         short_still_s: Still stretch (s) taken as the standing pose of a file without one of
             ``STILL_S`` (offline only: the whole file is known).
-        learn_every_s: How often (s of stream) the live calibrator tries to learn again.
+        learn_every_s: How often (s of stream) the live calibrator tries to learn, or to check.
         max_buffer_s: Longest stream (s) the live calibrator keeps while no standing pose is found.
+        check_window_s: Stretch of stream (s) a calibration is checked on (the swing and sign
+            thresholds above decide whether it holds enough walking).
+        max_axis_change_deg: Largest angle (deg) between a checked calibration's lateral axis
+            and the one learnt on the stretch.
+        max_knee_extension_deg: Largest knee extension past straight (deg, 98th percentile over
+            the stretch) a checked calibration may give.
     """
 
     still_max_tilt_deg: float = 3.0
@@ -63,6 +75,9 @@ class ImuLearnParams:
     short_still_s: float = 0.5
     learn_every_s: float = 0.5
     max_buffer_s: float = 120.0
+    check_window_s: float = 8.0
+    max_axis_change_deg: float = 30.0
+    max_knee_extension_deg: float = 30.0
 
 
 DEFAULT_LEARN = ImuLearnParams()
@@ -163,13 +178,13 @@ def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3, gyro_dps: np
                params: ImuLearnParams = DEFAULT_LEARN) -> tuple[Vec3 | None, str]:
     """Sagittal axis (sign undecided) of one sensor while walking: the principal axis of its
     rotation perpendicular to ``proximal`` (which removes turning about the vertical), from the
-    gyro (T, 3) when there is one, else from the rotation of its up directions (T, 3); or None
-    and why not."""
+    gyro (T, 3) when there is one (finite, not all zero: some orientation drivers fill the rates
+    with zeros), else from the rotation of its up directions (T, 3); or None and why not."""
     t = np.asarray(time_s, dtype=np.float64)
     if len(t) < 10:
         return None, "too few samples"
     p = np.asarray(proximal)
-    if gyro_dps is not None and np.isfinite(gyro_dps).all():
+    if gyro_dps is not None and np.isfinite(gyro_dps).all() and np.any(gyro_dps):
         d = np.asarray(gyro_dps, dtype=np.float64)
     else:
         lag = max(1, round(params.rotation_lag_s / float(np.median(np.diff(t)))))
@@ -274,6 +289,60 @@ def learn_calibration(
             return None, standing, why
         mounts.update(chosen)
     return ImuCalibration(tuple(mounts[i] for i in range(N_CHANNELS))), standing, ""  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class CalibrationCheck:
+    """What ``check_calibration`` found on a stretch of walking.
+
+    Attributes:
+        axis_change_deg: Per segment (CHANNELS order), the angle (deg) between the calibration's
+            lateral axis and the one learnt on the stretch (180 = opposite sign).
+        knee_extension_deg: Per leg (right, left), the knee's 98th percentile (deg, + = extended
+            past straight) with the calibration.
+        problems: What does not fit, one phrase each; empty when the calibration fits.
+    """
+
+    axis_change_deg: tuple[float, ...]
+    knee_extension_deg: tuple[float, float]
+    problems: tuple[str, ...]
+
+    @property
+    def fits(self) -> bool:
+        return not self.problems
+
+    def summary(self) -> str:
+        """One line: the problems, or how close the calibration fits."""
+        if self.problems:
+            return "; ".join(self.problems)
+        return (f"lateral axes within {max(self.axis_change_deg):.0f} deg of the swing, knee at most "
+                f"{max(self.knee_extension_deg):.0f} deg past straight")
+
+
+def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, gyro_dps: np.ndarray | None = None,
+                      params: ImuLearnParams = DEFAULT_LEARN) -> tuple[CalibrationCheck | None, str]:
+    """Check ``cal`` on a stretch of stream (module docstring): (the check, '') or (None, what
+    is missing: a stretch shorter than ``WALK_S``, or too little swing for the learner's
+    thresholds). Arrays as ``learn_calibration``'s."""
+    t = np.asarray(time_s, dtype=np.float64)
+    ups = np.asarray(ups, dtype=np.float64)
+    mounts = cal.mounts
+    fresh, _, missing = learn_calibration(
+        t, ups, proximal=[m.proximal for m in mounts], standing_deg=[m.standing_deg for m in mounts],
+        gyro_dps=gyro_dps, params=params)
+    if fresh is None:
+        return None, missing
+    change = tuple(float(np.degrees(np.arccos(np.clip(np.dot(f.lateral, m.lateral), -1.0, 1.0))))
+                   for f, m in zip(fresh.mounts, mounts, strict=True))
+    knee = []
+    for thigh, shank in LEGS:
+        k = mounts[shank].angles_deg(ups[shank]) - mounts[thigh].angles_deg(ups[thigh])
+        knee.append(float(np.percentile(k[np.isfinite(k)], 98)))
+    problems = [f"{CHANNELS[i]}: lateral axis {d:.0f} deg from the swing axis" for i, d in enumerate(change)
+                if round(d) > params.max_axis_change_deg]  # rounded as printed
+    problems += [f"{leg} knee {k:.0f} deg past straight" for leg, k in zip(("right", "left"), knee, strict=True)
+                 if round(k) > params.max_knee_extension_deg]
+    return CalibrationCheck(change, (knee[0], knee[1]), tuple(problems)), ""
 
 
 def check_configured(lateral: Sequence[str], proximal: Sequence[str]) -> tuple[list[Vec3 | None], list[Vec3 | None]]:

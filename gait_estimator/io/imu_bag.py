@@ -29,7 +29,7 @@ from ..core.errors import RecordingError
 from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, FusionParams, ImuCalibration
 from ..core.imu_learn import DEFAULT_LEARN, STILL_S, ImuLearnParams, check_configured, learn_calibration
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
-from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
+from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, check_stream, load_calibration
 from .stream import SampleRejected
 
 IMU = "sensor_msgs/msg/Imu"
@@ -168,8 +168,10 @@ def read_imu_bag(
             if undecodable:
                 rejected["undecodable"] += undecodable
             cal, note = _learn(p, paired, lateral, proximal, standing_deg, learn_params)
+        if all(m.source == "configured" for m in cal.mounts):
+            note += _check_note(p, paired, cal, learn_params, given=False)
     else:
-        note = "IMU calibration given: " + cal.summary()
+        note = "IMU calibration given: " + cal.summary() + _check_note(p, paired, cal, learn_params, given=True)
     assert cal is not None
     stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
     angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)
@@ -256,6 +258,22 @@ def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: l
                              "(or give --imu-calibration FILE)")
     where = f" from the standing pose at {time_s[standing.start]:.1f}-{time_s[standing.stop - 1]:.1f} s" if standing else ""
     return cal, "IMU calibration learnt" + where + ": " + cal.summary()
+
+
+def _check_note(p: Path, paired: list, cal: ImuCalibration, params: ImuLearnParams, given: bool) -> str:
+    """The node's check of a calibration made earlier, on the recording's first walking: the
+    note's ending; RecordingError for a given calibration that does not fit (configured axes that
+    do not fit are kept, as in the node, with a warning in the note)."""
+    found, _, missing = check_stream([s[0] * 1e-9 for s in paired], [s[2] for s in paired], [s[3] for s in paired],
+                                     [s[4] for s in paired], cal, params)
+    if found is None:
+        return f"; not checked ({missing})"
+    if found.fits:
+        return "; checked on the walking: " + found.summary()
+    if given:
+        raise RecordingError(f"{p}: the IMU calibration given does not fit this recording ({found.summary()}); "
+                             "without --imu-calibration one is learnt from it")
+    return "; WARNING: the configured axes do not fit the walking (the angles are wrong): " + found.summary()
 
 
 def imu_msg(ts: Any, stamp_ns: int, frame_id: str, quat_xyzw: Any | None, gyro_rps: Any, acc_mps2: Any) -> Any:

@@ -8,7 +8,9 @@
   is dropped (``unpaired``), so a silent sensor stops the samples instead of repeating its last
   value. ``auto_tolerance_s``: the tolerance of unsynchronised sensors, from their stamps.
 * ``ImuCalibrator``: while no calibration is complete, keeps the paired samples and learns the
-  mounts from them (``core/imu_learn.py``); the standing pose can be asked for again.
+  mounts from them (``core/imu_learn.py``); the standing pose can be asked for again. A
+  calibration made earlier (a file, configured axes) is checked on the first walking while in
+  use (``check``; ``check_stream`` over a whole recording).
 * ``save_calibration`` / ``load_calibration``: the calibration as YAML (atomic write).
 """
 
@@ -25,7 +27,15 @@ import yaml
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import DEFAULT_FUSION, STANDARD_GRAVITY, CalibrationError, FusionParams, ImuCalibration, RawFusion, Vec3
-from ..core.imu_learn import DEFAULT_LEARN, ImuLearnParams, Standing, find_standing, learn_calibration
+from ..core.imu_learn import (
+    DEFAULT_LEARN,
+    CalibrationCheck,
+    ImuLearnParams,
+    Standing,
+    check_calibration,
+    find_standing,
+    learn_calibration,
+)
 from .atomic import atomic_write_text
 from .stream import NON_FINITE, NON_INCREASING_STAMP, STREAM_RESTART_S, SampleRejected
 
@@ -47,6 +57,7 @@ _INF = math.inf
 _G = STANDARD_GRAVITY
 NO_RATES: Vec3 = (math.nan, math.nan, math.nan)
 _NOTHING: tuple = ()
+TO_BE_CHECKED = "calibrated, to be checked on the walking"
 
 
 class SensorInput:
@@ -237,21 +248,29 @@ class ImuPairer:
 
 
 class ImuCalibrator:
-    """Learns the mounts from paired samples while no calibration is complete.
+    """Learns the mounts from paired samples while no calibration is complete; checks one made
+    earlier on the first walking.
 
     Args:
         lateral, proximal: Configured sensor axes per segment (None = learn).
         standing_deg: Angle each segment is taken to have while standing (deg).
         calibration: A complete calibration to start with (saved or configured), or None.
         params: Learning thresholds and how often to try.
+        check: Check ``calibration`` on the first walking (``check``; ``checking`` until then).
+            A calibration built from configured axes alone is always checked.
     """
 
     def __init__(self, lateral: list[Vec3 | None], proximal: list[Vec3 | None], standing_deg: list[float],
-                 calibration: ImuCalibration | None = None, params: ImuLearnParams = DEFAULT_LEARN) -> None:
+                 calibration: ImuCalibration | None = None, params: ImuLearnParams = DEFAULT_LEARN,
+                 check: bool = False) -> None:
         self.params = params
         self.lateral, self.proximal, self.standing_deg = list(lateral), list(proximal), list(standing_deg)
         self.calibration = calibration
+        self.checking = check and calibration is not None
+        """``calibration`` is in use but not checked yet: pass every sample to ``check``."""
         self.status = "calibrated" if calibration is not None else "waiting for samples"
+        if self.checking:
+            self.status = TO_BE_CHECKED
         self._keep_lateral: list[Vec3 | None] | None = None
         self._standing: Standing | None = None
         self._clear()
@@ -263,9 +282,11 @@ class ImuCalibrator:
         self._next_try = -math.inf
 
     def request_standing(self) -> None:
-        """Take a new standing pose from the next still stretch (keeping learnt lateral axes)."""
-        if self.calibration is not None:
+        """Take a new standing pose from the next still stretch, keeping learnt lateral axes; a
+        calibration still to be checked is learnt again in full (its axes are not trusted yet)."""
+        if self.calibration is not None and not self.checking:
             self._keep_lateral = [m.lateral for m in self.calibration.mounts]
+        self.checking = False
         self.calibration = None
         self._standing = None
         self.status = "stand still"
@@ -274,13 +295,14 @@ class ImuCalibrator:
     def reset(self) -> None:
         """Forget everything learnt: back to the configured axes."""
         self.calibration = None
+        self.checking = False
         self._keep_lateral = None
         self._standing = None
         self.status = "waiting for samples"
         self._clear()
 
-    def add(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> ImuCalibration | None:
-        """One paired sample (t in s); returns the calibration when it has just been learnt."""
+    def _keep(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> int:
+        """Append one sample to the buffer; its new length."""
         if self._n and t <= self._t[self._n - 1]:  # a restarted stream: what was kept has the old stamps
             self._standing = None
             self._clear()
@@ -297,14 +319,46 @@ class ImuCalibrator:
         self._t[n] = t
         row = self._rows[n]
         row[:, 0:3], row[:, 3:6], row[:, 6:9] = ups, gyro, acc
-        self._n = n = n + 1
+        self._n = n + 1
+        return n + 1
+
+    def check(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3],
+              acc: Sequence[Vec3]) -> CalibrationCheck | None:
+        """While ``checking``: one paired sample (t in s); returns the check of ``calibration``
+        on the last ``check_window_s`` of stream once it has enough walking (then ``checking``
+        ends; the caller decides what a calibration that does not fit means)."""
+        assert self.calibration is not None
+        n = self._keep(t, ups, gyro, acc)
+        if t < self._next_try:
+            return None
+        params = self.params
+        if t - self._t[0] < params.check_window_s:  # a whole window of stream first
+            return None
+        self._next_try = t + params.learn_every_s
+        first = int(np.searchsorted(self._t[:n], t - params.check_window_s, side="right"))
+        if first > n // 2:  # keep the buffer to about the window
+            self._t[:n - first], self._rows[:n - first] = self._t[first:n], self._rows[first:n]
+            n = self._n = n - first
+            first = 0
+        ups, gyro_a, _ = self._columns(first, n)
+        found, missing = check_calibration(self._t[first:n], ups, self.calibration,
+                                           gyro_a if np.isfinite(gyro_a).any() else None, params)
+        if found is None:
+            self.status = f"{TO_BE_CHECKED}: {missing}"
+            return None
+        self.checking = False
+        self.status = ("calibrated, checked: " if found.fits else "calibrated, does not fit the walking: ") + found.summary()
+        self._clear()
+        return found
+
+    def add(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> ImuCalibration | None:
+        """One paired sample (t in s); returns the calibration when it has just been learnt."""
+        n = self._keep(t, ups, gyro, acc)
         if t < self._next_try:
             return None
         self._next_try = t + self.params.learn_every_s
         time_s = self._t[:n]
-        ups_a = self._rows[:n, :, 0:3].transpose(1, 0, 2)
-        gyro_a = self._rows[:n, :, 3:6].transpose(1, 0, 2)
-        acc_a = self._rows[:n, :, 6:9].transpose(1, 0, 2)
+        ups_a, gyro_a, acc_a = self._columns(0, n)
         have_rates = bool(np.isfinite(gyro_a).any())
         have_acc = bool(np.isfinite(acc_a).any())
         lateral = self.lateral
@@ -325,10 +379,29 @@ class ImuCalibrator:
             self.status = missing
             return None
         self.calibration = cal
-        self.status = "calibrated"
+        self.checking = all(m.source == "configured" for m in cal.mounts)
+        self.status = TO_BE_CHECKED if self.checking else "calibrated"
         self._keep_lateral = None
         self._clear()
         return cal
+
+    def _columns(self, first: int, stop: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Buffered samples first..stop as (4, T, 3) arrays: up directions, gyro, accelerometer."""
+        rows = self._rows[first:stop].transpose(1, 0, 2)
+        return rows[:, :, 0:3], rows[:, :, 3:6], rows[:, :, 6:9]
+
+
+def check_stream(time_s: Sequence[float], ups: Any, gyro: Any, acc: Any, cal: ImuCalibration,
+                 params: ImuLearnParams = DEFAULT_LEARN) -> tuple[CalibrationCheck | None, int, str]:
+    """The live check (``ImuCalibrator.check``) over a whole recording of paired samples (per
+    sample: time s, then four up directions, gyros deg/s, accelerometers g): (the check, the
+    index of the sample it came with, '') or (None, -1, why there was none)."""
+    checker = ImuCalibrator([None] * N_CHANNELS, [None] * N_CHANNELS, [0.0] * N_CHANNELS, cal, params, check=True)
+    for k, (t, u, g, a) in enumerate(zip(time_s, ups, gyro, acc, strict=True)):
+        found = checker.check(float(t), u, g, a)
+        if found is not None:
+            return found, k, ""
+    return None, -1, checker.status.removeprefix(TO_BE_CHECKED).removeprefix(": ") or "too short"
 
 
 # ---------------------------------------------------------------------------------------------

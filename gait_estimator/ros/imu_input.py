@@ -5,8 +5,11 @@ from gyro + accelerometer when ``orientation_covariance[0] == -1``); the four st
 by stamp (``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting
 calibration and goes to the node's estimator like any other sample. Until the calibration is
 complete (saved file, configured axes, or learnt: stand still, then walk a few strides) no sample
-reaches the estimator; a sensor silent for ``imu_timeout_s`` is named in the diagnostics and the
-estimate waits, since no sample pairs without it. Bad messages are dropped, counted and logged
+reaches the estimator. A saved or configured calibration is checked on the first walking
+(``core/imu_learn.check_calibration``): a saved one that does not fit is learnt again (the
+estimate waits); configured axes that do not fit stay, reported (an error line and a diagnostics
+problem). A sensor silent for ``imu_timeout_s`` is named in the diagnostics and the estimate
+waits, since no sample pairs without it. Bad messages are dropped, counted and logged
 through the node (throttled); raw messages while the fusion library (the ``imu`` extra) is missing
 are dropped and counted (``no_fusion``), with one error line.
 
@@ -32,7 +35,7 @@ from std_srvs.srv import Trigger
 from ..analysis.teach import TAUGHT_LIBRARY
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount
-from ..core.imu_learn import STILL_S, WALK_S, check_configured
+from ..core.imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
 from ..io.cdr import CdrError, Stamp, read_imu
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.imu_stream import (
@@ -105,7 +108,10 @@ class ImuInput:
         self.inputs = [SensorInput(None, f.strip(), fusion, back)  # raw: rate from stamps
                        for f, fusion in zip(frames, FUSION_BY_CHANNEL, strict=True)]
         self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
-        self.calibrator = ImuCalibrator(lateral, proximal, standing, saved)
+        self.from_file = from_file
+        self.calibrator = ImuCalibrator(lateral, proximal, standing, saved, check=True)
+        self.check_problem = ""
+        """Configured axes that do not fit the walking (they stay in use): the check's line."""
         if saved is not None:
             self._apply_biases(saved)
         self.rejected: Counter = Counter()
@@ -201,13 +207,50 @@ class ImuInput:
         node._period_received += 1
         i0, i1, i2, i3 = items  # SensorInput.convert's (up, gyro, acc) per sensor
         ups = (i0[0], i1[0], i2[0], i3[0])
-        cal = self.calibrator.calibration
-        if cal is None:
-            learnt = self.calibrator.add(stamp_ns * 1e-9, ups, [i[1] for i in items], [i[2] for i in items])
-            if learnt is not None:
-                self._learnt(learnt)
-            return
-        node._process(cal.angles_deg(ups), Stamp(*divmod(stamp_ns, 1_000_000_000)), t0)
+        calibrator = self.calibrator
+        if calibrator.calibration is None or calibrator.checking:
+            gyro, acc = (i0[1], i1[1], i2[1], i3[1]), (i0[2], i1[2], i2[2], i3[2])
+            if calibrator.calibration is None:
+                learnt = calibrator.add(stamp_ns * 1e-9, ups, gyro, acc)
+                if learnt is not None:
+                    self._learnt(learnt)
+                return
+            found = calibrator.check(stamp_ns * 1e-9, ups, gyro, acc)
+            if found is not None:
+                self._checked(found)
+                if calibrator.calibration is None:
+                    return
+        node._process(calibrator.calibration.angles_deg(ups), Stamp(*divmod(stamp_ns, 1_000_000_000)), t0)
+
+    def _checked(self, found: CalibrationCheck) -> None:
+        """The check of a saved or configured calibration on the first walking: a saved one that
+        does not fit is forgotten and learnt again (or the configured axes used, and checked),
+        with what the estimator learnt from its angles; configured axes are kept and reported."""
+        node, log = self.node, self.node.get_logger()
+        source = str(self.path) if self.from_file else "imu_lateral_axes/imu_proximal_axes"
+        if found.fits:
+            log.info(f"IMU calibration from {source} checked on the walking: {found.summary()}")
+        elif self.from_file:
+            self.from_file = False
+            self.calibrator.reset()
+            for s in self.inputs:
+                s.set_gyro_bias((0.0, 0.0, 0.0))
+            if node._estimator is not None:  # its window and learnt offsets came from wrong angles
+                node._estimator.reset_calibration()
+                node._estimator.reset()
+            node._teacher.stream_restarted()
+            if self.configured:  # the configured axes take over; the file would be read again at the next start
+                try:
+                    self.path.unlink(missing_ok=True)
+                    then = "the file deleted, the configured axes used (and checked)"
+                except OSError as exc:
+                    then = f"the configured axes used (and checked); the file NOT deleted ({exc})"
+            else:
+                then = f"learning it again: stand still {STILL_S:g} s, then walk {WALK_S:g} s (the estimate waits)"
+            log.warn(f"IMU calibration from {self.path} does not fit the sensors now ({found.summary()}): {then}")
+        else:
+            self.check_problem = f"the configured {source} do not fit the walking: {found.summary()}"
+            log.error(self.check_problem + " (the angles are wrong; correct the parameters)")
 
     def _learnt(self, cal: ImuCalibration) -> None:
         self._apply_biases(cal)
@@ -257,6 +300,7 @@ class ImuInput:
     def reset_calibration(self) -> str:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""
         self.calibrator.reset()
+        self.check_problem = ""
         removed = ""
         try:
             self.path.unlink()
@@ -291,6 +335,8 @@ class ImuInput:
             problems.append("IMU silent: " + ", ".join(silent) + " (estimate waits)")
         if cal is None:
             problems.append(f"IMU calibration: {self.calibrator.status}")
+        if self.check_problem:
+            problems.append("IMU calibration: " + self.check_problem)
         if self.no_fusion:
             problems.append(f"{self.rejected[NO_FUSION]} raw IMU message(s) dropped: {self.no_fusion}")
         return values, problems
