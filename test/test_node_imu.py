@@ -1,4 +1,4 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-69, 85, 86):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-69, 85-87):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
 IMUs: of the same messages read from a bag); learning the calibration live (also without a
 library), saving it (also beside a saved library) and forgetting it; checking a saved calibration
@@ -25,7 +25,7 @@ from std_srvs.srv import Trigger
 
 from gait_estimator import load_library
 from gait_estimator.core.channels import CHANNELS
-from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY
+from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, ImuCalibration, SegmentMount
 from gait_estimator.core.imu_learn import learn_calibration
 from gait_estimator.io.cdr import read_imu
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
@@ -41,7 +41,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, [*range(60, 70), 86])
+    yield from in_process_factory(monkeypatch, [*range(60, 70), 86, 87])
 
 
 @pytest.fixture
@@ -193,6 +193,30 @@ def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path)
     assert "do not fit the walking" in client.received.diagnostics_message[-1]
     got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
     assert got.max() > 9.5, "configured axes stay in use (the user's statement), reported"
+
+
+def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tmp_path):
+    """Configured axes and an older file (which wins at start): the file does not fit, so it is
+    deleted and the configured axes are used and checked in turn; samples go to the input directly."""
+    rng = np.random.default_rng(14)
+    mount = Rotation.from_matrix(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))  # z right, x down
+    s = synthesize(gait_angles(RATE, walk_s=18.0), RATE, [mount] * 4, rng)
+    h = ros(87)
+    configured = {"imu_lateral_axes": ["+z"] * 4, "imu_proximal_axes": ["-x"] * 4}
+    right = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4)))
+    path = save_calibration(turned(right, 0, 90.0), tmp_path / "old.imu.yaml")
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path), **configured)
+    imu, inputs = node._imu, [SensorInput() for _ in range(4)]
+    assert imu.from_file and imu.calibrator.checking
+    for k, t in enumerate(s.time_s):
+        stamp = BASE_NS + round(t * 1e9)
+        items = [inputs[c].convert(stamp, s.quat_xyzw[c, k], 0.0, np.radians(s.gyro_dps[c, k]), s.acc_g[c, k] * STANDARD_GRAVITY)
+                 for c in range(4)]
+        imu._sample(stamp, items, time.perf_counter())
+        if k == round(9.0 * RATE):
+            assert not path.exists() and not imu.from_file, "the file gave way after the first check"
+            assert imu.calibrator.calibration == right and imu.calibrator.checking
+    assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within") and not imu.check_problem
 
 
 def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_path):

@@ -229,6 +229,7 @@ class ImuInput:
         node, log = self.node, self.node.get_logger()
         source = str(self.path) if self.from_file else "imu_lateral_axes/imu_proximal_axes"
         if found.fits:
+            self.check_problem = ""
             log.info(f"IMU calibration from {source} checked on the walking: {found.summary()}")
         elif self.from_file:
             self.from_file = False
@@ -301,6 +302,7 @@ class ImuInput:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""
         self.calibrator.reset()
         self.check_problem = ""
+        self.from_file = False  # what is learnt or configured next does not come from it
         removed = ""
         try:
             self.path.unlink()
