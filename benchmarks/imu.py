@@ -552,7 +552,7 @@ def check_table(r: dict) -> str:
     leg), and the walking (samples the data set labels as walking) before the verdict."""
     chk = r["calibration_check"]
     rows = ["| saved calibration checked on | checks | fits / does not fit / no verdict | lateral axis change, "
-            "deg (largest) | knee past straight, deg (largest) | walking before the verdict (labelled), s |",
+            "deg (largest) | right knee past straight, deg (largest) | walking before the verdict (labelled), s |",
             "|---|---|---|---|---|---|"]
 
     def row(name: str, runs: list[dict]) -> str:

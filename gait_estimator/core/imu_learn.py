@@ -315,8 +315,9 @@ class CalibrationCheck:
         """One line: the problems, or how close the calibration fits."""
         if self.problems:
             return "; ".join(self.problems)
-        return (f"lateral axes within {max(self.axis_change_deg):.0f} deg of the swing, knee at most "
-                f"{max(self.knee_extension_deg):.0f} deg past straight")
+        knee = max(self.knee_extension_deg)
+        return (f"lateral axes within {max(self.axis_change_deg):.0f} deg of the swing, "
+                + (f"knee at most {knee:.0f} deg past straight" if round(knee) > 0 else "knee not past straight"))
 
 
 def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, gyro_dps: np.ndarray | None = None,

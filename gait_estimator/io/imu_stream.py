@@ -257,7 +257,7 @@ class ImuCalibrator:
         calibration: A complete calibration to start with (saved or configured), or None.
         params: Learning thresholds and how often to try.
         check: Check ``calibration`` on the first walking (``check``; ``checking`` until then).
-            A calibration built from configured axes alone is always checked.
+            One that ``add`` builds from configured axes alone is always checked.
     """
 
     def __init__(self, lateral: list[Vec3 | None], proximal: list[Vec3 | None], standing_deg: list[float],
@@ -268,6 +268,8 @@ class ImuCalibrator:
         self.calibration = calibration
         self.checking = check and calibration is not None
         """``calibration`` is in use but not checked yet: pass every sample to ``check``."""
+        self.missing = "no whole window of stream yet"
+        """Why the last check attempt gave no verdict."""
         self.status = "calibrated" if calibration is not None else "waiting for samples"
         if self.checking:
             self.status = TO_BE_CHECKED
@@ -301,7 +303,7 @@ class ImuCalibrator:
         self.status = "waiting for samples"
         self._clear()
 
-    def _keep(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> int:
+    def _append(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> int:
         """Append one sample to the buffer; its new length."""
         if self._n and t <= self._t[self._n - 1]:  # a restarted stream: what was kept has the old stamps
             self._standing = None
@@ -328,7 +330,7 @@ class ImuCalibrator:
         on the last ``check_window_s`` of stream once it has enough walking (then ``checking``
         ends; the caller decides what a calibration that does not fit means)."""
         assert self.calibration is not None
-        n = self._keep(t, ups, gyro, acc)
+        n = self._append(t, ups, gyro, acc)
         if t < self._next_try:
             return None
         params = self.params
@@ -344,6 +346,7 @@ class ImuCalibrator:
         found, missing = check_calibration(self._t[first:n], ups, self.calibration,
                                            gyro_a if np.isfinite(gyro_a).any() else None, params)
         if found is None:
+            self.missing = missing
             self.status = f"{TO_BE_CHECKED}: {missing}"
             return None
         self.checking = False
@@ -353,7 +356,7 @@ class ImuCalibrator:
 
     def add(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> ImuCalibration | None:
         """One paired sample (t in s); returns the calibration when it has just been learnt."""
-        n = self._keep(t, ups, gyro, acc)
+        n = self._append(t, ups, gyro, acc)
         if t < self._next_try:
             return None
         self._next_try = t + self.params.learn_every_s
@@ -401,7 +404,7 @@ def check_stream(time_s: Sequence[float], ups: Any, gyro: Any, acc: Any, cal: Im
         found = checker.check(float(t), u, g, a)
         if found is not None:
             return found, k, ""
-    return None, -1, checker.status.removeprefix(TO_BE_CHECKED).removeprefix(": ") or "too short"
+    return None, -1, checker.missing
 
 
 # ---------------------------------------------------------------------------------------------

@@ -14,8 +14,8 @@ through the node (throttled); raw messages while the fusion library (the ``imu``
 are dropped and counted (``no_fusion``), with one error line.
 
 Services: ``~/calibrate_standing`` takes a new standing pose from the next still second (keeping
-learnt sagittal axes); the node's ``~/reset_calibration`` also forgets the IMU calibration (and
-deletes its saved file).
+learnt sagittal axes, unless the calibration was still to be checked: then strides too); the
+node's ``~/reset_calibration`` also forgets the IMU calibration (and deletes its saved file).
 """
 
 from __future__ import annotations
@@ -239,7 +239,7 @@ class ImuInput:
             if node._estimator is not None:  # its window and learnt offsets came from wrong angles
                 node._estimator.reset_calibration()
                 node._estimator.reset()
-            node._teacher.stream_restarted()
+            node._teacher.stream_restarted("the IMU calibration did not fit")
             if self.configured:  # the configured axes take over; the file would be read again at the next start
                 try:
                     self.path.unlink(missing_ok=True)
@@ -255,6 +255,7 @@ class ImuInput:
 
     def _learnt(self, cal: ImuCalibration) -> None:
         self._apply_biases(cal)
+        self.from_file = False  # learnt now, or the configured axes: what a check reports is about them
         log = self.node.get_logger()
         if self.configured:
             log.info(f"IMU calibration from the configured axes: {cal.summary()}")
@@ -291,10 +292,12 @@ class ImuInput:
     # -----------------------------------------------------------------------------------------
 
     def _calibrate_standing(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        relearn = self.calibrator.checking
         self.calibrator.request_standing()
         response.success = True
-        response.message = (f"stand still for {STILL_S:g} s: the next still stretch becomes the standing pose "
-                            "(the estimate waits until then)")
+        response.message = (f"stand still for {STILL_S:g} s: the next still stretch becomes the standing pose"
+                            + (f", then walk {WALK_S:g} s (the calibration was not checked yet)" if relearn else "")
+                            + " (the estimate waits until then)")
         self.node.get_logger().info(response.message)
         return response
 

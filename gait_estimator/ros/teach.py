@@ -170,15 +170,14 @@ class NodeTeacher:
         if session.result is not None:
             self._finish(session.result)
 
-    def stream_restarted(self) -> None:
-        """The input's stamps jumped back (a restarted publisher, a bag played again): the samples
-        kept and a stride collection in progress belong to the old stamps, so both start again."""
+    def stream_restarted(self, why: str = "input stamps jumped back (a restarted stream)") -> None:
+        """The samples kept and a stride collection in progress no longer hold (the input's stamps
+        jumped back: a restarted publisher, a bag played again; or ``why``): both start again."""
         self._recent.clear()
         if self.session is not None:
             mode = self.session.mode
             self._start(mode)
-            self._log(f"{mode}: input stamps jumped back (a restarted stream): collecting its strides again",
-                      warn=True)
+            self._log(f"{mode}: {why}: collecting its strides again", warn=True)
 
     def replay_s(self) -> float:
         """Seconds of input kept for a new estimator: the longest stride a kernel may have (a
