@@ -232,10 +232,7 @@ class ImuInput:
             self.check_problem = ""
             log.info(f"IMU calibration from {source} checked on the walking: {found.summary()}")
         elif self.from_file:
-            self.from_file = False
-            self.calibrator.reset()
-            for s in self.inputs:
-                s.set_gyro_bias((0.0, 0.0, 0.0))
+            self._forget()
             if node._estimator is not None:  # its window and learnt offsets came from wrong angles
                 node._estimator.reset_calibration()
                 node._estimator.reset()
@@ -301,11 +298,18 @@ class ImuInput:
         self.node.get_logger().info(response.message)
         return response
 
-    def reset_calibration(self) -> str:
-        """Forget the IMU calibration (and its file); what happened, for the service reply."""
+    def _forget(self) -> None:
+        """Forget the calibration in use: back to the configured axes, without gyro biases, and
+        what is learnt or configured next neither comes from the file nor has a check's problem."""
         self.calibrator.reset()
         self.check_problem = ""
-        self.from_file = False  # what is learnt or configured next does not come from it
+        self.from_file = False
+        for s in self.inputs:
+            s.set_gyro_bias((0.0, 0.0, 0.0))
+
+    def reset_calibration(self) -> str:
+        """Forget the IMU calibration (and its file); what happened, for the service reply."""
+        self._forget()
         removed = ""
         try:
             self.path.unlink()
@@ -314,8 +318,6 @@ class ImuInput:
             pass
         except OSError as exc:
             removed = f", {self.path} NOT deleted ({exc})"
-        for s in self.inputs:
-            s.set_gyro_bias((0.0, 0.0, 0.0))
         return f"; IMU calibration forgotten{removed}: {self.calibrator.status} to learn it again"
 
     def diagnostics(self) -> tuple[dict[str, str], list[str]]:
