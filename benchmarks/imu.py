@@ -62,6 +62,7 @@ from gait_estimator.core.imu import (  # noqa: E402
     ImuCalibration,
     SegmentMount,
     fuse_raw,
+    ups_from_quaternions,
 )
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag  # noqa: E402
 from gait_estimator.io.imu_stream import ImuPairer, SensorInput, check_stream  # noqa: E402
@@ -219,8 +220,9 @@ def trial_imu(path: Path, tmp: Path) -> dict:
         angles[kind] = a
         if kind == "raw":
             mounts = {c: got.calibration.mounts[c] for c in RIGHT.values()}
+    virtual_ups = {c: ups_from_quaternions(left[c]) for c in left}
     return {"stats": out, "angles": angles, "rec": rec, "gyro": gyro, "acc_g": acc / STANDARD_GRAVITY, "mounts": mounts,
-            "faults": faults}
+            "faults": faults, "virtual_ups": virtual_ups}
 
 
 FUSION_GRID = [FusionParams(gain=g) for g in (0.2, 0.3, 0.5, 1.0)] + [
@@ -312,12 +314,10 @@ TURNS_DEG = (20.0, 45.0, 90.0, 180.0)
 limit, ``ImuLearnParams.max_axis_change_deg``)."""
 
 
-def _checked(tr: dict, cal: ImuCalibration, turn: tuple[int, float] | None = None) -> dict:
+def first_check(tr: dict, cal: ImuCalibration, turn: tuple[int, float] | None = None) -> dict:
     """The node's first check of ``cal`` on one trial (raw input fused with the calibration's gyro
     biases, as the node applies a saved file's), optionally with sensor c turned by deg."""
     from scipy.spatial.transform import Rotation
-
-    from gait_estimator.core.imu import ups_from_quaternions
 
     rec = tr["rec"]
     t = rec.time_s
@@ -329,8 +329,8 @@ def _checked(tr: dict, cal: ImuCalibration, turn: tuple[int, float] | None = Non
     ups = np.empty((4, len(t), 3))
     for c in RIGHT.values():
         ups[c] = fuse_raw(t, gyro[c], acc[c], cal.mounts[c].gyro_bias_dps, FUSION_BY_CHANNEL[c])
-    for c in (1, 3):  # the virtual left sensors: orientations without rates
-        ups[c] = ups_from_quaternions(virtual_quaternions(rec.angles_deg[:, c]))
+    for c, up in tr["virtual_ups"].items():  # the virtual left sensors: orientations without rates
+        ups[c] = up
         gyro[c] = np.nan
     found, k, _ = check_stream(t, ups.transpose(1, 0, 2), gyro.transpose(1, 0, 2), acc.transpose(1, 0, 2), cal)
     if found is None:
@@ -346,9 +346,9 @@ def calibration_checks(trials: list[dict]) -> dict:
     raw-input calibration checked on every trial, and each trial's own with a turned sensor."""
     left = SegmentMount.from_axes("+z", "+y")
     cals = {tr["stats"]["trial"]: ImuCalibration((tr["mounts"][0], left, tr["mounts"][2], left)) for tr in trials}
-    same = [{"from": a, "on": tr["stats"]["trial"], **_checked(tr, cal)} for a, cal in cals.items() for tr in trials]
+    same = [{"from": a, "on": tr["stats"]["trial"], **first_check(tr, cal)} for a, cal in cals.items() for tr in trials]
     turned = [{"trial": tr["stats"]["trial"], "segment": seg, "turn_deg": deg,
-               **_checked(tr, cals[tr["stats"]["trial"]], (c, deg))}
+               **first_check(tr, cals[tr["stats"]["trial"]], (c, deg))}
               for tr in trials for seg, c in RIGHT.items() for deg in TURNS_DEG]
     return {"same_sensors": same, "turned": turned}
 
@@ -356,7 +356,6 @@ def calibration_checks(trials: list[dict]) -> dict:
 def synthetic(seeds: int = 6) -> dict:
     from imu_synth import gait_angles, random_mounts, synthesize
 
-    from gait_estimator.core.imu import ups_from_quaternions
     from gait_estimator.core.imu_learn import learn_calibration
 
     ang = gait_angles(200.0, walk_s=18.0)

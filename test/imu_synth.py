@@ -22,6 +22,11 @@ S0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """Columns: segment forward, proximal, right in the world (x walking direction, z up) at theta 0."""
 
 
+ALONG_SEGMENT = Rotation.from_matrix(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
+"""A mounting with the sensor's axes on the segment's: x = -proximal (down the segment), y =
+forward, z = right (configured lateral ``+z``, proximal ``-x``)."""
+
+
 @dataclass
 class SyntheticImu:
     time_s: np.ndarray  # (T,)

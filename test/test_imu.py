@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 import pytest
-from imu_synth import gait_angles, random_mounts, synthesize, turned
+from imu_synth import ALONG_SEGMENT, gait_angles, random_mounts, synthesize, turned
 from scipy.spatial.transform import Rotation
 
 from gait_estimator.analysis.evaluate import read_predictions_csv
@@ -98,9 +98,7 @@ def test_configured_axes_need_no_learning(angles):
     """Sensors mounted along the segment axes: configured '+z'/'-x' style axes give the angles
     with no standing pose or strides at all."""
     rng = np.random.default_rng(3)
-    # sensor axes in segment (forward, proximal, right) coordinates: x = -proximal, y = forward, z = right
-    mount = Rotation.from_matrix(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
-    s = synthesize(angles[400:], RATE, [mount] * 4, rng, stand_s=0.0)
+    s = synthesize(angles[400:], RATE, [ALONG_SEGMENT] * 4, rng, stand_s=0.0)
     lateral, proximal = check_configured(["+z"] * 4, ["-x"] * 4)
     cal, standing, missing = learn_calibration(s.time_s, _ups(s), lateral=lateral, proximal=proximal)
     assert missing == "" and standing is None

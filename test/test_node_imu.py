@@ -16,10 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from imu_synth import gait_angles, random_mounts, synthesize, turned
+from imu_synth import ALONG_SEGMENT, gait_angles, random_mounts, synthesize, turned
 from rclpy.serialization import serialize_message
 from ros_helpers import answered_indices, assert_same_trace, in_process_factory, offline, wait_all_answered
-from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
@@ -180,8 +179,7 @@ def test_a_saved_calibration_that_does_not_fit_the_sensors_is_learnt_again(ros, 
 
 def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path):
     rng = np.random.default_rng(13)
-    mount = Rotation.from_matrix(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))  # z right, x down
-    s = synthesize(gait_angles(RATE, walk_s=8.0), RATE, [mount] * 4, rng)
+    s = synthesize(gait_angles(RATE, walk_s=8.0), RATE, [ALONG_SEGMENT] * 4, rng)
     h = ros(86)
     node = h.estimator(input_type="imu", imu_calibration_path=str(tmp_path / "never.imu.yaml"),
                        imu_lateral_axes=["+z", "+z", "-z", "+z"], imu_proximal_axes=["-x"] * 4)
@@ -200,8 +198,7 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
     """Configured axes and an older file (which wins at start): the file does not fit, so it is
     deleted and the configured axes are used and checked in turn; samples go to the input directly."""
     rng = np.random.default_rng(14)
-    mount = Rotation.from_matrix(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))  # z right, x down
-    s = synthesize(gait_angles(RATE, walk_s=18.0), RATE, [mount] * 4, rng)
+    s = synthesize(gait_angles(RATE, walk_s=18.0), RATE, [ALONG_SEGMENT] * 4, rng)
     h = ros(87)
     configured = {"imu_lateral_axes": ["+z"] * 4, "imu_proximal_axes": ["-x"] * 4}
     right = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4)))
