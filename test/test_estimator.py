@@ -415,6 +415,27 @@ def test_personalisation_never_uses_held_or_unconfident_strides(able_bodied) -> 
     assert est.adapter.skipped["held"] > 0
 
 
+def test_personalisation_paused_adopts_nothing_then_resumes(able_bodied) -> None:
+    """``pause_adaptation(True)`` (input angles not yet checked): strides that end are counted as
+    'unchecked' and no kernel changes; released, the same strides are adopted again."""
+    med = able_bodied.mode_names.index("Med")
+    x = np.concatenate([able_bodied.mode("Med").samples] * 24)
+    t = np.arange(len(x)) / 230.0
+    est = Estimator(able_bodied, EstimatorConfig(adapt_rate=0.2))
+    before = [k.copy() for k in est.adapter.kernels]
+    est.pause_adaptation(True)
+    half = len(x) // 2
+    for ti, xi in zip(t[:half], x[:half], strict=True):
+        est.update(float(ti), xi)
+    assert est.adapter.accepted.sum() == 0 and est.adapter.skipped["unchecked"] >= 8
+    for k, b in zip(est.adapter.kernels, before, strict=True):
+        np.testing.assert_array_equal(k, b)
+    est.pause_adaptation(False)
+    for ti, xi in zip(t[half:], x[half:], strict=True):
+        est.update(float(ti), xi)
+    assert est.adapter.accepted[med] >= 8
+
+
 def test_cli_save_adapted(tmp_path: Path, multispeed_csv: Path, capsys) -> None:
     out = tmp_path / "adapted.yaml"
     assert cli_main(["process", str(multispeed_csv), "--start", "4000", "--stop", "9000", "--adapt-rate", "0.1",

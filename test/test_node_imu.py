@@ -182,7 +182,7 @@ def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path)
     s = synthesize(gait_angles(RATE, walk_s=8.0), RATE, [ALONG_SEGMENT] * 4, rng)
     h = ros(86)
     node = h.estimator(input_type="imu", imu_calibration_path=str(tmp_path / "never.imu.yaml"),
-                       imu_lateral_axes=["+z", "+z", "-z", "+z"], imu_proximal_axes=["-x"] * 4)
+                       imu_lateral_axes=["+z", "+z", "-z", "+z"], imu_proximal_axes=["-x"] * 4, adapt_rate=0.2)
     client = h.client(node)
     stream(client, publishers(client), make_messages(s, len(s.time_s)), rate_hz=RATE / 2)
     client.spin_for(0.5)
@@ -192,18 +192,20 @@ def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path)
     assert "do not fit the walking" in client.received.diagnostics_message[-1]
     got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
     assert got.max() > 9.5, "configured axes stay in use (the user's statement), reported"
+    assert node._estimator.personaliser.paused, "kernels learn nothing from angles known to be wrong"
 
 
 def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tmp_path):
     """Configured axes and an older file (which wins at start): the file does not fit, so it is
-    deleted and the configured axes are used and checked in turn; samples go to the input directly."""
+    deleted and the configured axes are used and checked in turn; personalisation (adapt_rate)
+    waits for the verdicts; samples go to the input directly."""
     rng = np.random.default_rng(14)
     s = synthesize(gait_angles(RATE, walk_s=18.0), RATE, [ALONG_SEGMENT] * 4, rng)
     h = ros(87)
     configured = {"imu_lateral_axes": ["+z"] * 4, "imu_proximal_axes": ["-x"] * 4}
     right = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4)))
     path = save_calibration(turned(right, 0, 90.0), tmp_path / "old.imu.yaml")
-    node = h.estimator(input_type="imu", imu_calibration_path=str(path), **configured)
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path), adapt_rate=0.2, **configured)
     inputs = [SensorInput() for _ in range(4)]
     samples = [(BASE_NS + round(t * 1e9), k) for k, t in enumerate(s.time_s)]
 
@@ -211,13 +213,15 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
         return [inputs[c].convert(stamp, s.quat_xyzw[c, k], 0.0, np.radians(s.gyro_dps[c, k]),
                                   s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
 
-    imu = node._imu
+    imu, adapter = node._imu, node._estimator.adapter
     assert imu.from_file and imu.calibrator.checking
     for stamp, k in samples:
         imu._sample(stamp, items(stamp, k), time.perf_counter())
         if k == round(9.0 * RATE):
             assert not path.exists() and not imu.from_file, "the file gave way after the first check"
             assert imu.calibrator.calibration == right and imu.calibrator.checking
+            assert set(adapter.skipped) == {"unchecked"}, "no stride of unchecked angles reached the kernels"
+    assert adapter.skipped["warmup"] >= 2, "checked, the strides are personalised again"
     assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within") and not imu.check_problem
     # ~/calibrate_standing before the file's verdict: the configured axes take over, and their
     # verdict is theirs (the file, never checked, is kept for the next start)

@@ -41,7 +41,7 @@ from .matcher import IncrementalMatcher, StepResult
 from .supervisor import Estimate
 
 MAD_TO_SIGMA = 1.4826  # median absolute deviation -> standard deviation of a normal distribution
-SKIP_REASONS = ("held", "confidence", "duration", "warmup", "shape")  # keys of KernelAdapter.skipped
+SKIP_REASONS = ("held", "confidence", "duration", "warmup", "shape", "unchecked")  # keys of KernelAdapter.skipped
 
 
 @dataclass(frozen=True)
@@ -173,6 +173,10 @@ class KernelAdapter:
         self._clean = self._clean and not held
         self._min_conf = min(self._min_conf, confidence)
 
+    def skip_stride(self, reason: str) -> None:
+        """Count a stride that ended without being adopted, for ``reason`` (SKIP_REASONS)."""
+        self._skip(reason)
+
     def _skip(self, reason: str) -> None:
         assert reason in SKIP_REASONS, reason
         self.skipped[reason] += 1
@@ -213,6 +217,9 @@ class Personaliser:
     def __init__(self, library: KernelLibrary, params: AdaptParams, matcher: IncrementalMatcher) -> None:
         self.adapter = KernelAdapter(library, params)
         self.matcher = matcher
+        self.paused = False
+        """True: strides that end are counted as skipped ('unchecked') and no kernel changes
+        (the input's angles are not known to be right yet)."""
         self._history = np.zeros((2 * matcher.max_length, N_CHANNELS))  # the last stride, however long
 
     def observe(self, x: Sample, est: Estimate, result: StepResult) -> None:
@@ -224,11 +231,14 @@ class Personaliser:
         m = est.mode_index
         start = adapter.stride_start
         if est.ready and start is not None and adapter.ends_stride(m, est.phase) and step - start <= h:
-            stride = self._history[np.arange(start, step) % h]
-            variant = 0 if result.variant is None else int(result.variant[m])
-            new = adapter.finish_stride(m, stride, float(matcher.lengths[m * matcher.n_scales + variant]))
-            if new is not None:
-                matcher.set_kernel(m, new)
+            if self.paused:
+                adapter.skip_stride("unchecked")
+            else:
+                stride = self._history[np.arange(start, step) % h]
+                variant = 0 if result.variant is None else int(result.variant[m])
+                new = adapter.finish_stride(m, stride, float(matcher.lengths[m * matcher.n_scales + variant]))
+                if new is not None:
+                    matcher.set_kernel(m, new)
         adapter.track(step, m, est.phase, est.held, est.confidence, est.ready)
 
     def adopt(self, other: Personaliser, same_library: bool) -> None:

@@ -161,6 +161,12 @@ class Estimator:
         another wearer)."""
         self.calibration.reset()
 
+    def pause_adaptation(self, paused: bool) -> None:
+        """``paused`` True: personalisation (``adapt_rate`` > 0) adopts no stride until called with
+        False; for input angles not known to be right yet (an IMU calibration not yet checked)."""
+        if self.personaliser is not None:
+            self.personaliser.paused = paused
+
     def set_gap_options(self, config: EstimatorConfig) -> None:
         """Take ``config``, which differs from this estimator's only in GAP_OPTIONS: keeps the
         window and what was learnt."""

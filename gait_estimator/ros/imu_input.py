@@ -220,6 +220,9 @@ class ImuInput:
                 self._checked(found)
                 if calibrator.calibration is None:
                     return
+        est = node._estimator
+        if est is not None and est.personaliser is not None:  # kernels learn only from angles known to be right
+            est.pause_adaptation(calibrator.checking or bool(self.check_problem))
         node._process(calibrator.calibration.angles_deg(ups), Stamp(*divmod(stamp_ns, 1_000_000_000)), t0)
 
     def _checked(self, found: CalibrationCheck) -> None:
