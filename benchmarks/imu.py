@@ -27,6 +27,9 @@ synthetic checks and the per-sample conversion cost. One command:
   checked on every trial (the same sensors, no false alarm wanted), and on each trial with its
   right thigh or shank sensor turned about the segment's long axis by TURNS_DEG (the recorded
   gyro and accelerometer rotated into the turned sensor's frame).
+* Gyro bias of a calibration made earlier (``bias_sources``): each trial's learnt mounts on each
+  other trial, fused with the saved biases, with this trial's standing-pose biases (what the node
+  now uses), or with none (configured axes used to be).
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
   (best of 3 rounds by median), the inputs built as the node builds them (rate from the stamps,
   per-segment fusion settings); the message fields as Python floats, as the node reads them.
@@ -309,6 +312,43 @@ def estimator_runs(trials: list[dict], skip_faults: bool = False) -> dict:
     return out
 
 
+def _after_rms(tr: dict, c: int, mount: SegmentMount, bias: tuple) -> float:
+    """RMS (deg) of one right segment's raw-input angle vs mocap with ``mount`` and gyro ``bias``,
+    tared as ``trial_imu``, on the walking after the first standing without the data set's faults."""
+    rec = tr["rec"]
+    a = mount.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], bias, FUSION_BY_CHANNEL[c]))
+    stand, mocap = first_stand(rec), rec.angles_deg[:, c]
+    a -= (a[stand] - mocap[stand]).mean()
+    sel = (rec.labels != "stand") & ~tr["faults"][c] & (rec.time_s > rec.time_s[stand][-1])
+    return float(np.sqrt(np.mean((a[sel] - mocap[sel]) ** 2)))
+
+
+def bias_sources(trials: list[dict]) -> dict:
+    """Each trial's learnt raw-input mounts used on each other trial, fused with: the saved gyro
+    biases (the other trial's), the biases of this trial's standing pose (what the node measures
+    for a calibration made earlier, as a learnt one's), or none (configured axes before that)."""
+    out: dict = {}
+    for seg, c in RIGHT.items():
+        runs = [(tr_a["mounts"][c], tr) for tr_a in trials for tr in trials if tr_a is not tr]
+        out[seg] = {
+            "saved": float(np.mean([_after_rms(tr, c, m, m.gyro_bias_dps) for m, tr in runs])),
+            "standing": float(np.mean([_after_rms(tr, c, m, tr["mounts"][c].gyro_bias_dps) for m, tr in runs])),
+            "none": float(np.mean([_after_rms(tr, c, m, (0.0, 0.0, 0.0)) for m, tr in runs])),
+            "runs": len(runs),
+        }
+    return out
+
+
+def bias_table(r: dict) -> str:
+    b = r["bias_sources"]
+    rows = ["| a calibration made earlier, fused with the gyro biases | right thigh RMS | right shank RMS |",
+            "|---|---|---|"]
+    for key, name in (("saved", "saved with it (another trial's)"), ("standing", "of this trial's standing pose"),
+                      ("none", "none (zero)")):
+        rows.append(f"| {name} | {b['thigh'][key]:.2f}° | {b['shank'][key]:.2f}° |")
+    return "\n".join(rows)
+
+
 TURNS_DEG = (20.0, 45.0, 90.0, 180.0)
 """Sensor turns about the segment's long axis tried by ``calibration_checks`` (around the check's
 limit, ``ImuLearnParams.max_axis_change_deg``)."""
@@ -476,6 +516,7 @@ def main(argv: list[str] | None = None) -> int:
         "estimator_without_faults": estimator_runs(trials, skip_faults=True),
         "fusion_selection": select_fusion(trials),
         "calibration_check": calibration_checks(trials),
+        "bias_sources": bias_sources(trials),
         "synthetic": synthetic(),
         "cost": conversion_cost(),
         "decode": decode_cost(),
@@ -498,6 +539,7 @@ def write_tables(out: Path) -> str:
                       "### Angles", "", angles_table(r), "",
                       "### Fusion settings, leave-one-trial-out", "", selection_table(r), "",
                       "### Calibration check", "", check_table(r), "",
+                      "### Gyro bias of a calibration made earlier", "", bias_table(r), "",
                       "### Estimator", "", estimator_table(r), "", "### Cost", "", cost_table(r)])
     (out / "tables.md").write_text(text + "\n", encoding="utf-8")
     return text

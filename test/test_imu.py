@@ -29,7 +29,13 @@ from gait_estimator.core.imu import (
     up_from_quaternion,
     ups_from_quaternions,
 )
-from gait_estimator.core.imu_learn import ImuLearnParams, check_calibration, check_configured, learn_calibration
+from gait_estimator.core.imu_learn import (
+    ImuLearnParams,
+    check_calibration,
+    check_configured,
+    find_standing,
+    learn_calibration,
+)
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
@@ -117,8 +123,9 @@ def test_raw_input_within_one_degree_after_ten_seconds(angles):
         first = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], params=FUSION_BY_CHANNEL[c]) for c in range(4)])
         _, standing, _ = learn_calibration(s.time_s, first, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
         assert standing is not None
-        bias_err = np.linalg.norm(np.array(standing.gyro_bias_dps) - (s.gyro_dps[:, :200].mean(axis=1)), axis=1)
-        assert (bias_err < 1e-9).all()
+        assert standing.ended and standing.still_until > standing.stop, "the whole still stretch, not its first second"
+        whole = s.gyro_dps[:, standing.start:standing.still_until].mean(axis=1)
+        assert np.allclose(standing.gyro_bias_dps, whole, atol=1e-9)
         ups = np.stack([fuse_raw(s.time_s, s.gyro_dps[c], s.acc_g[c], standing.gyro_bias_dps[c], FUSION_BY_CHANNEL[c])
                         for c in range(4)])
         cal, _, missing = learn_calibration(s.time_s, ups, gyro_dps=s.gyro_dps, acc_g=s.acc_g)
@@ -286,7 +293,12 @@ def test_live_calibrator_checks_a_calibration_on_the_first_walking(angles):
                 break
         assert found is not None and found.fits == fits
         assert 8.0 <= s.time_s[k] < 8.6, "checked on the first window of stream with walking"
-        assert not calib.checking and calib.calibration is given and calib.status.endswith(": " + found.summary())
+        assert not calib.checking and calib.status.endswith(": " + found.summary())
+        standing = find_standing(s.time_s, ups, s.gyro_dps)
+        assert standing.start == 0 and standing.still_until >= round(2.0 * RATE) - 1 and standing.ended
+        assert calib.bias_measured and calib.calibration == given.with_gyro_biases(standing.gyro_bias_dps), \
+            "the axes given, the gyro bias of the whole standing"
+        assert calib.calibration.mounts[0].lateral == given.mounts[0].lateral
     assert not ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, cal).checking  # asked for only
     # stamps going back (a restarted stream) while checking: the window starts again on the new stamps
     calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, cal, check=True)

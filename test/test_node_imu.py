@@ -1,4 +1,4 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 61-69, 85-87):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 60-69, 85-87):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
 IMUs: of the same messages read from a bag); learning the calibration live (also without a
 library), saving it (also beside a saved library) and forgetting it; checking a saved calibration
@@ -231,24 +231,59 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
     assert "then walk 4 s" in imu._calibrate_standing(Trigger.Request(), Trigger.Response()).message
     for stamp, k in samples:
         imu._sample(stamp, items(stamp, k), time.perf_counter())
-    assert not imu.from_file and imu.calibrator.calibration == right and path.exists()
+    assert not imu.from_file and imu.calibrator.calibration == right.with_gyro_biases(
+        [i.gyro_bias_dps for i in imu.inputs]) and path.exists(), "the gyro biases of the standing pose"
     assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within")
+
+
+def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path):
+    """Raw sensors with gyro biases and configured axes (nothing to learn, so used from the first
+    sample with no bias): the stream's standing pose gives the biases, fused with from then on;
+    the angles after it are as good as with the true biases. Samples go to the input directly."""
+    pytest.importorskip("imufusion")
+    rng = np.random.default_rng(16)
+    s = synthesize(gait_angles(RATE, walk_s=10.0), RATE, [ALONG_SEGMENT] * 4, rng, acc_noise_g=0.01,
+                   gyro_noise_dps=0.3, gyro_bias_dps=3.0)
+    true_bias = s.gyro_dps[:, :round(1.9 * RATE)].mean(axis=1)  # standing: no rotation, bias + noise
+    h = ros(60)
+    node = h.estimator(input_type="imu", imu_calibration_path=str(tmp_path / "never.imu.yaml"),
+                       imu_lateral_axes=["+z"] * 4, imu_proximal_axes=["-x"] * 4)
+    imu = node._imu
+    angles = []
+    for k, t in enumerate(s.time_s):
+        stamp = BASE_NS + round(t * 1e9)
+        items = [imu.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
+                                       s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
+        imu._sample(stamp, items, time.perf_counter())
+        angles.append(imu.calibrator.calibration.angles_deg([i[0] for i in items]))
+        if t < 1.5:
+            assert not any(any(i.gyro_bias_dps) for i in imu.inputs), "configured: no bias before the standing"
+    assert imu.calibrator.bias_measured
+    got = np.array([i.gyro_bias_dps for i in imu.inputs])
+    assert np.abs(got - true_bias).max() < 0.1, (got, true_bias)
+    late = s.time_s > 6.0
+    assert (np.sqrt(np.mean((np.array(angles) - s.angles_deg)[late] ** 2, axis=0)) < 1.0).all()
 
 
 def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_path):
     """Raw IMUs (no orientation) with gyro bias, the node started with the calibration learnt from
-    a bag of the same messages (its gyro biases included): the estimates equal offline processing
-    of ``read_imu_bag``'s angles with that calibration file. A lost message (best-effort QoS)
-    changes the node's fusion state: then there is nothing exact to compare (skipped)."""
+    an earlier bag (its gyro biases included) on a stream without a standing pose (so the saved
+    biases stay): the estimates equal offline processing of ``read_imu_bag``'s angles with that
+    calibration file. A lost message (best-effort QoS) changes the node's fusion state: then there
+    is nothing exact to compare (skipped)."""
     pytest.importorskip("imufusion")
     rng = np.random.default_rng(9)
-    s = synthesize(gait_angles(RATE, walk_s=6.0), RATE, random_mounts(rng), rng, acc_noise_g=0.01,
-                   gyro_noise_dps=0.3, gyro_bias_dps=1.0)
-    stamps4 = BASE_NS + np.round(s.time_s * 1e9).astype(np.int64)[None, :] + np.array(OFFSETS_NS)[:, None]
-    bag = write_imu_bag(tmp_path / "raw", stamps4, np.radians(s.gyro_dps), s.acc_g * STANDARD_GRAVITY)
-    path = save_calibration(read_imu_bag(bag).calibration, tmp_path / "user.imu.yaml")
+    mounts = random_mounts(rng)
+    noise = {"acc_noise_g": 0.01, "gyro_noise_dps": 0.3, "gyro_bias_dps": 1.0}
+    earlier = synthesize(gait_angles(RATE, walk_s=6.0), RATE, mounts, rng, **noise)
+    s = synthesize(gait_angles(RATE, walk_s=6.0, stand_s=0.0), RATE, mounts, rng, stand_s=0.0, **noise)
+    for name, x in (("earlier", earlier), ("raw", s)):
+        stamps4 = BASE_NS + np.round(x.time_s * 1e9).astype(np.int64)[None, :] + np.array(OFFSETS_NS)[:, None]
+        bag = write_imu_bag(tmp_path / name, stamps4, np.radians(x.gyro_dps), x.acc_g * STANDARD_GRAVITY)
+    path = save_calibration(read_imu_bag(tmp_path / "earlier").calibration, tmp_path / "user.imu.yaml")
     assert any(any(m.gyro_bias_dps) for m in load_calibration(path).mounts)
     rec = read_imu_bag(bag, imu_calibration=path)
+    assert "gyro bias of the standing pose" not in rec.calibration_note
     h = ros(68)
     node = h.estimator(input_type="imu", imu_calibration_path=str(path))
     client = h.client(node)

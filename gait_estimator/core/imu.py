@@ -24,8 +24,9 @@ configured). Mounts are configured (sensor axes such as ``+z``) or learnt (``cor
 
 from __future__ import annotations
 
+import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -167,6 +168,17 @@ class ImuCalibration:
                 b6 + deg * atan2(b0 * x1 + b1 * y1 + b2 * z1, b3 * x1 + b4 * y1 + b5 * z1),
                 c6 + deg * atan2(c0 * x2 + c1 * y2 + c2 * z2, c3 * x2 + c4 * y2 + c5 * z2),
                 d6 + deg * atan2(d0 * x3 + d1 * y3 + d2 * z3, d3 * x3 + d4 * y3 + d5 * z3))
+
+    def with_gyro_biases(self, biases_dps: Any) -> ImuCalibration:
+        """The same mounts (axes to the bit) with these gyro biases (deg/s, sensor frames,
+        CHANNELS order)."""
+        mounts = []
+        for m, b in zip(self.mounts, biases_dps, strict=True):
+            bias = replace(m, gyro_bias_dps=tuple(b)).gyro_bias_dps  # validated
+            mount = copy.copy(m)
+            object.__setattr__(mount, "gyro_bias_dps", bias)
+            mounts.append(mount)
+        return ImuCalibration(tuple(mounts))  # type: ignore[arg-type]
 
     def summary(self) -> str:
         """One line: each segment's lateral and proximal axes and standing angle."""

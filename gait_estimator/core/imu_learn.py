@@ -2,7 +2,7 @@
 
 * **Standing pose** (the first still ``still_s`` seconds, or the first after a request): every
   sensor's mean up direction is the segment's ``proximal`` axis (segments taken as vertical, or at
-  ``standing_deg``), the mean gyro its bias.
+  ``standing_deg``); the mean gyro over the whole still stretch that the pose begins is its bias.
 * **Strides** after it: the up direction rotates, in the sensor frame, about the segment's
   sagittal axis; the principal axis of those rotations (u[k] x u[k+lag], summed as outer
   products), made perpendicular to ``proximal``, is ``lateral`` up to its sign.
@@ -90,12 +90,24 @@ LEGS = ((0, 2), (1, 3))
 
 @dataclass(frozen=True)
 class Standing:
-    """A standing pose found in a stream: sample range and, per sensor, up direction and bias."""
+    """A standing pose found in a stream.
+
+    Attributes:
+        start, stop: Sample range of the pose (``still_s`` long).
+        proximal: Per sensor, the mean up direction over the pose (sensor frame).
+        gyro_bias_dps: Per sensor, the mean gyro (deg/s) from ``start`` to ``still_until``.
+        still_until: End (exclusive sample index) of the still stretch the pose begins: it goes
+            on while the stillness tests hold and every up direction stays within the tilt
+            tolerance of the pose's.
+        ended: The stretch ended within the stream (False: still at its last sample).
+    """
 
     start: int
     stop: int
     proximal: tuple[Vec3, ...]
     gyro_bias_dps: tuple[Vec3, ...]
+    still_until: int
+    ended: bool
 
 
 def _norm_rows(v: np.ndarray) -> np.ndarray:
@@ -167,10 +179,12 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
             mean = _norm_rows(win.mean(axis=1))  # at rest the accelerometer reads up, unaffected by gyro bias
             spread = np.degrees(np.arccos(np.clip(np.einsum("stk,sk->st", win, mean), -1, 1))).max(axis=1)
             if (spread <= tilt_limit).all():
+                near = (np.einsum("stk,sk->st", u[:, stop:end], mean) >= cos_lim).all(axis=0)
+                until = stop + (int(np.argmin(near)) if not near.all() else len(near))
                 bias = (np.zeros((N_CHANNELS, 3)) if gyro_dps is None
-                        else np.nan_to_num(np.asarray(gyro_dps, dtype=np.float64)[:, i:stop].mean(axis=1)))
+                        else np.nan_to_num(np.asarray(gyro_dps, dtype=np.float64)[:, i:until].mean(axis=1)))
                 return Standing(i, stop, tuple(tuple(map(float, m)) for m in mean),
-                                tuple(tuple(map(float, b)) for b in bias))
+                                tuple(tuple(map(float, b)) for b in bias), until, until < len(t))
     return None
 
 
@@ -242,7 +256,8 @@ def learn_calibration(
         ups: (4, T, 3) up directions (sensor frames).
         lateral, proximal: Configured sensor-frame axes per segment, None = learn.
         standing_deg: Angle (deg) each segment is taken to have in the standing pose.
-        standing: A standing pose already found (else the first in the stream, if needed).
+        standing: A standing pose already found (else the first in the stream: needed for a
+            learnt proximal axis, else only for the gyro bias when ``gyro_dps`` is given).
         gyro_dps, acc_g: (4, T, 3) raw rates and accelerations for the still test and the bias.
         walk_s: Seconds of stream after the standing pose needed before learning axes.
         still_s: Length of the still stretch taken as the standing pose (s).
@@ -254,9 +269,9 @@ def learn_calibration(
     t = np.asarray(time_s, dtype=np.float64)
     ups = np.asarray(ups, dtype=np.float64)
     need_stand = any(p is None for p in proximal)
-    if need_stand and standing is None:
+    if standing is None and (need_stand or gyro_dps is not None):  # configured axes: for the gyro bias only
         standing = find_standing(t, ups, gyro_dps, acc_g, still_s=still_s, params=params)
-        if standing is None:
+        if standing is None and need_stand:
             return None, None, f"stand still for {still_s:g} s"
     prox = [p if p is not None else standing.proximal[i] for i, p in enumerate(proximal)]  # type: ignore[union-attr]
     bias = standing.gyro_bias_dps if standing is not None else ((0.0, 0.0, 0.0),) * N_CHANNELS

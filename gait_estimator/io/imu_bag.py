@@ -4,7 +4,8 @@ The same code as the node's ``input_type: imu`` (``imu_stream.py``): each messag
 sensor's up direction, the four streams are paired by stamp, and the calibration (given, or
 learnt from the first still second and the strides after it) turns them into angles. Unlike the
 node, the whole file is known: a learnt calibration applies from the first sample, and with raw
-input (no orientation) the fusion is run again with the gyro bias measured while standing.
+input (no orientation) the fusion is run again with the gyro bias measured while standing (for a
+given or configured calibration too, as the node measures it at the stream's standing pose).
 
 Topics: ``imu_topics`` (four names, CHANNELS order), else ``/imu/right_thigh``, ... if present,
 else the four Imu topics whose names end in the channel names.
@@ -27,7 +28,14 @@ import numpy as np
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
 from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, FusionParams, ImuCalibration
-from ..core.imu_learn import DEFAULT_LEARN, STILL_S, ImuLearnParams, check_configured, learn_calibration
+from ..core.imu_learn import (
+    DEFAULT_LEARN,
+    STILL_S,
+    ImuLearnParams,
+    check_configured,
+    find_standing,
+    learn_calibration,
+)
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
 from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, check_stream, load_calibration
 from .stream import SampleRejected
@@ -172,6 +180,14 @@ def read_imu_bag(
             note += _check_note(p, paired, cal, learn_params, given=False)
     else:
         note = "IMU calibration given: " + cal.summary() + _check_note(p, paired, cal, learn_params, given=True)
+        biases, raw = _standing_biases(paired, learn_params)
+        if biases is not None:  # the gyro bias of this recording's standing pose, not the file's
+            cal = cal.with_gyro_biases(biases)
+        if biases is not None and raw:
+            paired, rejected = _front_end(messages, rate, list(biases), tolerance_s, fusion_params)
+            if undecodable:
+                rejected["undecodable"] += undecodable
+            note += "; raw input fused with the gyro bias of the standing pose"
     assert cal is not None
     stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
     angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)
@@ -236,19 +252,32 @@ def _measured_tolerance(messages: list[tuple[int, int, Any]]) -> float:
         return 0.0  # too few messages to pair anyway: the caller's "fewer than 2 samples" line
 
 
-def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list,
-           params: ImuLearnParams) -> tuple[ImuCalibration, str]:
+def _arrays(paired: list) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Paired samples -> time (s from the first), ups, gyro and acc (4, T, 3; None: no sensor has them)."""
     t = np.array([s[0] for s in paired], dtype=np.int64)
-    time_s = (t - t[0]) * 1e-9
     ups = np.asarray([s[2] for s in paired], dtype=np.float64).transpose(1, 0, 2)
     gyro = np.asarray([s[3] for s in paired], dtype=np.float64).transpose(1, 0, 2)
     acc = np.asarray([s[4] for s in paired], dtype=np.float64).transpose(1, 0, 2)
+    return ((t - t[0]) * 1e-9, ups, gyro if np.isfinite(gyro).any() else None,
+            acc if np.isfinite(acc).any() else None)
+
+
+def _standing_biases(paired: list, params: ImuLearnParams) -> tuple[tuple | None, bool]:
+    """(The gyro biases (deg/s) of the recording's first standing pose, as the node measures them
+    for a calibration made earlier, or None without rates or a standing pose; any raw sensor)."""
+    time_s, ups, gyro, acc = _arrays(paired)
+    standing = None if gyro is None else find_standing(time_s, ups, gyro, acc, params=params)
+    return (None if standing is None else standing.gyro_bias_dps), acc is not None
+
+
+def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list,
+           params: ImuLearnParams) -> tuple[ImuCalibration, str]:
+    time_s, ups, gyro, acc = _arrays(paired)
     try:
         for still_s in (STILL_S, params.short_still_s):  # a short still stretch if the file has no longer one
             cal, standing, missing = learn_calibration(
                 time_s, ups, lateral=lateral, proximal=proximal, standing_deg=standing_deg,
-                gyro_dps=gyro if np.isfinite(gyro).any() else None, acc_g=acc if np.isfinite(acc).any() else None,
-                still_s=still_s, params=params)
+                gyro_dps=gyro, acc_g=acc, still_s=still_s, params=params)
             if cal is not None:
                 break
     except CalibrationError as exc:

@@ -268,6 +268,9 @@ class ImuCalibrator:
         self.calibration = calibration
         self.checking = check and calibration is not None
         """``calibration`` is in use but not checked yet: pass every sample to ``check``."""
+        self.bias_measured = not self.checking
+        """``calibration``'s gyro biases are this stream's: learnt at its standing pose, or (while
+        checking) measured at it once it ended; ``check`` replaces ``calibration`` then."""
         self.missing = "no whole window of stream yet"
         """Why the last check attempt gave no verdict."""
         self.status = "calibrated" if calibration is not None else "waiting for samples"
@@ -334,9 +337,11 @@ class ImuCalibrator:
         if t < self._next_try:
             return None
         params = self.params
+        self._next_try = t + params.learn_every_s
+        if not self.bias_measured:
+            self._measure_bias(n)
         if t - self._t[0] < params.check_window_s:  # a whole window of stream first
             return None
-        self._next_try = t + params.learn_every_s
         first = int(np.searchsorted(self._t[:n], t - params.check_window_s, side="right"))
         if first > n // 2:  # keep the buffer to about the window
             self._t[:n - first], self._rows[:n - first] = self._t[first:n], self._rows[first:n]
@@ -354,6 +359,18 @@ class ImuCalibrator:
         self._clear()
         return found
 
+    def _measure_bias(self, n: int) -> None:
+        """Once the stream's first standing pose has ended: ``calibration`` with its gyro biases."""
+        ups, gyro, acc = self._columns(0, n)
+        if not np.isfinite(gyro).any():
+            self.bias_measured = True  # no rates: nothing to measure
+            return
+        standing = find_standing(self._t[:n], ups, gyro, acc if np.isfinite(acc).any() else None, params=self.params)
+        if standing is not None and standing.ended:
+            assert self.calibration is not None
+            self.calibration = self.calibration.with_gyro_biases(standing.gyro_bias_dps)
+            self.bias_measured = True
+
     def add(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> ImuCalibration | None:
         """One paired sample (t in s); returns the calibration when it has just been learnt."""
         n = self._append(t, ups, gyro, acc)
@@ -367,7 +384,8 @@ class ImuCalibrator:
         lateral = self.lateral
         if self._keep_lateral is not None:
             lateral = [a if a is not None else k for a, k in zip(self.lateral, self._keep_lateral, strict=False)]
-        if self._standing is None and any(p is None for p in self.proximal):
+        if (self._standing is None or not self._standing.ended) and any(p is None for p in self.proximal):
+            # until the wearer moves, each try lengthens the still stretch the gyro bias averages
             self._standing = find_standing(time_s, ups_a, gyro_a if have_rates else None, acc_a if have_acc else None,
                                            params=self.params)
         try:
@@ -383,6 +401,7 @@ class ImuCalibrator:
             return None
         self.calibration = cal
         self.checking = all(m.source == "configured" for m in cal.mounts)
+        self.bias_measured = not self.checking
         self.status = TO_BE_CHECKED if self.checking else "calibrated"
         self._keep_lateral = None
         self._clear()

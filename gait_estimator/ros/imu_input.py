@@ -1,17 +1,18 @@
 """``input_type: imu`` for ``estimator_node``: four ``sensor_msgs/Imu`` topics -> segment angles.
 
-Each message becomes its sensor's up direction (``io/imu_stream.py``: from the orientation, or
-from gyro + accelerometer when ``orientation_covariance[0] == -1``); the four streams are paired
-by stamp (``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting
+Each message becomes its sensor's up direction (``io/imu_stream.py``: from the orientation, or from
+gyro + accelerometer when ``orientation_covariance[0] == -1``); the four streams are paired by
+stamp (``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting
 calibration and goes to the node's estimator like any other sample. Until the calibration is
 complete (saved file, configured axes, or learnt: stand still, then walk a few strides) no sample
 reaches the estimator. A saved or configured calibration is checked on the first walking
-(``core/imu_learn.check_calibration``): a saved one that does not fit is learnt again (the
-estimate waits); configured axes that do not fit stay, reported (an error line and a diagnostics
-problem). A sensor silent for ``imu_timeout_s`` is named in the diagnostics and the estimate
-waits, since no sample pairs without it. Bad messages are dropped, counted and logged
-through the node (throttled); raw messages while the fusion library (the ``imu`` extra) is missing
-are dropped and counted (``no_fusion``), with one error line.
+(``core/imu_learn.check_calibration``): a saved one that does not fit is learnt again (the estimate
+waits); configured axes that do not fit stay, reported (an error line and a diagnostics problem).
+Its gyro biases are replaced by the ones measured at the stream's first standing pose (before the
+check's verdict), as a learnt calibration's are. A sensor silent for ``imu_timeout_s`` is named in
+the diagnostics and the estimate waits, since no sample pairs without it. Bad messages are dropped,
+counted and logged through the node (throttled); raw messages while the fusion library (the ``imu``
+extra) is missing are dropped and counted (``no_fusion``), with one error line.
 
 Services: ``~/calibrate_standing`` takes a new standing pose from the next still second (keeping
 learnt sagittal axes, unless the calibration was still to be checked: then strides too); the
@@ -215,7 +216,13 @@ class ImuInput:
                 if learnt is not None:
                     self._learnt(learnt)
                 return
+            before = calibrator.calibration
             found = calibrator.check(stamp_ns * 1e-9, ups, gyro, acc)
+            if calibrator.calibration is not before:  # this stream's gyro biases, from its standing pose
+                self._apply_biases(calibrator.calibration)
+                self.node.get_logger().info("IMU gyro bias measured at the standing pose (deg/s): " + "; ".join(
+                    f"{c} ({', '.join(f'{v:+.2f}' for v in m.gyro_bias_dps)})"
+                    for c, m in zip(CHANNELS, calibrator.calibration.mounts, strict=True)))
             if found is not None:
                 self._checked(found)
                 if calibrator.calibration is None:
