@@ -276,6 +276,28 @@ def test_a_calibration_made_earlier_is_checked_on_the_walking(angles):
     assert found is None and missing.endswith("walk a few more strides")
 
 
+def test_live_calibrator_looks_for_a_standing_pose_only_after_quiet_gyros(angles, monkeypatch):
+    """The bias search runs in the node's callback: on walking alone it never calls the (costly)
+    standing-pose search; a standing pose is searched once its quiet stretch has ended."""
+    import gait_estimator.io.imu_stream as imu_stream
+
+    calls = []
+    monkeypatch.setattr(imu_stream, "find_standing", lambda *a, **k: calls.append(1) or find_standing(*a, **k))
+    rng = np.random.default_rng(11)
+    mounts = random_mounts(rng)
+    nan3 = (math.nan,) * 3
+    for stand_s, searches in ((0.0, 0), (2.0, 1)):
+        s = synthesize(gait_angles(RATE, walk_s=6.0, stand_s=stand_s), RATE, mounts, rng, stand_s=stand_s)
+        ups = _ups(s)
+        calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, learn_calibration(s.time_s, ups)[0] if stand_s else
+                              ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4))), check=True)
+        calls.clear()
+        for k in range(len(s.time_s)):
+            calib.check(float(s.time_s[k]), [tuple(ups[c, k]) for c in range(4)],
+                        [tuple(s.gyro_dps[c, k]) for c in range(4)], [nan3] * 4)
+        assert len(calls) == searches and calib.bias_measured == bool(searches), (stand_s, len(calls))
+
+
 def test_live_calibrator_checks_a_calibration_on_the_first_walking(angles):
     rng = np.random.default_rng(10)
     s = synthesize(angles, RATE, random_mounts(rng), rng)

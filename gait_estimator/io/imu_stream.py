@@ -29,6 +29,7 @@ from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import DEFAULT_FUSION, STANDARD_GRAVITY, CalibrationError, FusionParams, ImuCalibration, RawFusion, Vec3
 from ..core.imu_learn import (
     DEFAULT_LEARN,
+    STILL_S,
     CalibrationCheck,
     ImuLearnParams,
     Standing,
@@ -285,6 +286,7 @@ class ImuCalibrator:
         self._rows = np.empty((1024, N_CHANNELS, 9))  # per sensor: up, gyro, acc
         self._n = 0
         self._next_try = -math.inf
+        self._quiet_examined = -math.inf  # end (s) of the last quiet stretch looked at for a standing pose
 
     def request_standing(self) -> None:
         """Take a new standing pose from the next still stretch, keeping learnt lateral axes; a
@@ -360,12 +362,24 @@ class ImuCalibrator:
         return found
 
     def _measure_bias(self, n: int) -> None:
-        """Once the stream's first standing pose has ended: ``calibration`` with its gyro biases."""
+        """Once the stream's first standing pose has ended: ``calibration`` with its gyro biases.
+        The standing pose is looked for only when a new stretch of quiet gyros, long enough for
+        one, has ended (a cheap necessary condition: this runs in the subscription callback)."""
         ups, gyro, acc = self._columns(0, n)
         if not np.isfinite(gyro).any():
             self.bias_measured = True  # no rates: nothing to measure
             return
-        standing = find_standing(self._t[:n], ups, gyro, acc if np.isfinite(acc).any() else None, params=self.params)
+        t, params = self._t[:n], self.params
+        with np.errstate(invalid="ignore"):  # a sensor without rates (nan) does not move the gyros
+            loud = (np.einsum("stk,stk->st", gyro, gyro) > params.still_max_rate_dps ** 2).any(axis=0)
+        edges = np.diff(np.concatenate(([1], loud.astype(np.int8))))
+        starts, ends = np.flatnonzero(edges == -1), np.flatnonzero(edges == 1)  # quiet runs: [start, end)
+        runs = [(a, b) for a, b in zip(starts, ends, strict=False)
+                if t[b - 1] - t[a] >= STILL_S - 0.01 and t[b - 1] > self._quiet_examined]
+        if not runs:
+            return
+        self._quiet_examined = float(t[runs[-1][1] - 1])
+        standing = find_standing(t, ups, gyro, acc if np.isfinite(acc).any() else None, params=params)
         if standing is not None and standing.ended:
             assert self.calibration is not None
             self.calibration = self.calibration.with_gyro_biases(standing.gyro_bias_dps)
