@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 from rclpy.executors import Executor, SingleThreadedExecutor
@@ -25,8 +26,9 @@ def make_executor(kind: str, context: Any = None) -> Executor:
     raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, got {kind!r}")
 
 
-def spin(node: Node, executor: Executor) -> None:
-    """Run ``node``'s callbacks until its context shuts down (SIGINT/SIGTERM, rclpy.shutdown).
+def spin(node: Node, executor: Executor, stop: threading.Event | None = None) -> None:
+    """Run ``node``'s callbacks until its context shuts down (rclpy.shutdown) or ``stop`` is set
+    (``main``'s SIGINT/SIGTERM handler), within SPIN_PERIOD_S.
 
     Always with a finite timeout (SPIN_PERIOD_S): rclpy 7.1's EventsExecutor dispatches nothing
     from ``spin()`` or ``spin_once()`` without one (it busy-waits on the clock instead; timers
@@ -35,7 +37,7 @@ def spin(node: Node, executor: Executor) -> None:
     """
     executor.add_node(node)
     try:
-        while node.context.ok():
+        while node.context.ok() and not (stop is not None and stop.is_set()):
             executor.spin_once(timeout_sec=SPIN_PERIOD_S)
     finally:
         executor.remove_node(node)

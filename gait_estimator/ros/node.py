@@ -36,7 +36,9 @@ from __future__ import annotations
 
 import gc
 import math
+import signal
 import sys
+import threading
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -54,6 +56,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.serialization import deserialize_message
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 from std_srvs.srv import Trigger
@@ -495,7 +498,12 @@ def main(args: Sequence[str] | None = None) -> int:
     Returns 0 after SIGINT/SIGTERM or an external shutdown, 2 if it cannot start (an invalid
     parameter or an unreadable library: usage/input errors, as for the CLI).
     """
-    rclpy.init(args=args)
+    # SIGINT/SIGTERM only ask the spin loop to stop: rclpy's own handler raises KeyboardInterrupt
+    # inside whatever callback runs, which the EventsExecutor then logs as a fatal error.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
     node: EstimatorNode | None = None
     executor: Executor | None = None
     code = 0
@@ -507,7 +515,7 @@ def main(args: Sequence[str] | None = None) -> int:
             node.max_batch = 1  # one event per message already; see EstimatorNode._on_input
         gc.collect()
         gc.freeze()  # start-up objects stay out of later collections: shorter GC pauses
-        spin(node, executor)
+        spin(node, executor, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as exc:
