@@ -29,7 +29,7 @@ synthetic checks and the per-sample conversion cost. One command:
   gyro and accelerometer rotated into the turned sensor's frame).
 * Gyro bias of a calibration made earlier (``bias_sources``): each trial's learnt mounts on each
   other trial, fused with the saved biases, with this trial's standing-pose biases (what the node
-  now uses), or with none (configured axes used to be).
+  uses when a standing pose ends before the check's verdict), or with none.
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
   (best of 3 rounds by median), the inputs built as the node builds them (rate from the stamps,
   per-segment fusion settings); the message fields as Python floats, as the node reads them.
@@ -326,7 +326,7 @@ def _after_rms(tr: dict, c: int, mount: SegmentMount, bias: tuple) -> float:
 def bias_sources(trials: list[dict]) -> dict:
     """Each trial's learnt raw-input mounts used on each other trial, fused with: the saved gyro
     biases (the other trial's), the biases of this trial's standing pose (what the node measures
-    for a calibration made earlier, as a learnt one's), or none (configured axes before that)."""
+    for a calibration made earlier, as for a learnt one), or none."""
     out: dict = {}
     for seg, c in RIGHT.items():
         runs = [(tr_a["mounts"][c], tr) for tr_a in trials for tr in trials if tr_a is not tr]
@@ -372,7 +372,7 @@ def first_check(tr: dict, cal: ImuCalibration, turn: tuple[int, float] | None = 
     for c, up in tr["virtual_ups"].items():  # the virtual left sensors: orientations without rates
         ups[c] = up
         gyro[c] = np.nan
-    found, k, _ = check_stream(t, ups.transpose(1, 0, 2), gyro.transpose(1, 0, 2), acc.transpose(1, 0, 2), cal)
+    found, k, _, _ = check_stream(t, ups.transpose(1, 0, 2), gyro.transpose(1, 0, 2), acc.transpose(1, 0, 2), cal)
     if found is None:
         return {"fits": None}
     walking = (rec.labels != "stand")[:k + 1]

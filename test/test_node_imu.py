@@ -193,6 +193,7 @@ def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path)
     got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
     assert got.max() > 9.5, "configured axes stay in use (the user's statement), reported"
     assert node._estimator.personaliser.paused, "kernels learn nothing from angles known to be wrong"
+    assert node._estimator.adapter.accepted.sum() == 0
 
 
 def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tmp_path):
@@ -231,38 +232,47 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
     assert "then walk 4 s" in imu._calibrate_standing(Trigger.Request(), Trigger.Response()).message
     for stamp, k in samples:
         imu._sample(stamp, items(stamp, k), time.perf_counter())
-    assert not imu.from_file and imu.calibrator.calibration == right.with_gyro_biases(
-        [i.gyro_bias_dps for i in imu.inputs]) and path.exists(), "the gyro biases of the standing pose"
+    assert not imu.from_file and imu.calibrator.calibration == right and path.exists()  # orientations: no bias
     assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within")
 
 
 def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path):
     """Raw sensors with gyro biases and configured axes (nothing to learn, so used from the first
     sample with no bias): the stream's standing pose gives the biases, fused with from then on;
-    the angles after it are as good as with the true biases. Samples go to the input directly."""
+    the angles after it are as good as with the true biases. With a saved file that does not fit,
+    the biases measured while it was checked carry over to the configured axes that replace it.
+    Samples go to the input directly."""
     pytest.importorskip("imufusion")
     rng = np.random.default_rng(16)
     s = synthesize(gait_angles(RATE, walk_s=10.0), RATE, [ALONG_SEGMENT] * 4, rng, acc_noise_g=0.01,
                    gyro_noise_dps=0.3, gyro_bias_dps=3.0)
     true_bias = s.gyro_dps[:, :round(1.9 * RATE)].mean(axis=1)  # standing: no rotation, bias + noise
     h = ros(60)
-    node = h.estimator(input_type="imu", imu_calibration_path=str(tmp_path / "never.imu.yaml"),
-                       imu_lateral_axes=["+z"] * 4, imu_proximal_axes=["-x"] * 4)
-    imu = node._imu
-    angles = []
-    for k, t in enumerate(s.time_s):
-        stamp = BASE_NS + round(t * 1e9)
-        items = [imu.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
-                                       s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
-        imu._sample(stamp, items, time.perf_counter())
-        angles.append(imu.calibrator.calibration.angles_deg([i[0] for i in items]))
-        if t < 1.5:
-            assert not any(any(i.gyro_bias_dps) for i in imu.inputs), "configured: no bias before the standing"
-    assert imu.calibrator.bias_measured
-    got = np.array([i.gyro_bias_dps for i in imu.inputs])
-    assert np.abs(got - true_bias).max() < 0.1, (got, true_bias)
-    late = s.time_s > 6.0
-    assert (np.sqrt(np.mean((np.array(angles) - s.angles_deg)[late] ** 2, axis=0)) < 1.0).all()
+    right = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4)))
+    for saved in (None, turned(right, 0, 90.0)):
+        path = tmp_path / "user.imu.yaml"
+        if saved is not None:
+            save_calibration(saved, path)
+        node = h.estimator(input_type="imu", imu_calibration_path=str(path),
+                           imu_lateral_axes=["+z"] * 4, imu_proximal_axes=["-x"] * 4)
+        imu = node._imu
+        angles = []
+        for k, t in enumerate(s.time_s):
+            stamp = BASE_NS + round(t * 1e9)
+            items = [imu.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
+                                           s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
+            imu._sample(stamp, items, time.perf_counter())
+            cal = imu.calibrator.calibration  # None for a sample after the file's misfit verdict
+            angles.append(cal.angles_deg([i[0] for i in items]) if cal else (math.nan,) * 4)
+            if t < 1.5:
+                assert not any(any(i.gyro_bias_dps) for i in imu.inputs), "no bias before the standing"
+        assert not imu.from_file and not path.exists(), "the misfit file gave way" if saved else "no file"
+        assert imu.calibrator.calibration.mounts[0].lateral == right.mounts[0].lateral
+        got = np.array([i.gyro_bias_dps for i in imu.inputs])
+        assert np.abs(got - true_bias).max() < 0.1, (saved, got, true_bias)
+        assert got.tolist() == [list(m.gyro_bias_dps) for m in imu.calibrator.calibration.mounts]
+        late = s.time_s > 10.0
+        assert (np.sqrt(np.mean((np.array(angles) - s.angles_deg)[late] ** 2, axis=0)) < 1.0).all()
 
 
 def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_path):

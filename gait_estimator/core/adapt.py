@@ -21,7 +21,9 @@ failing one is skipped, counted by reason):
 * ``shape``: its RMS distance from the kernel exceeds the median distance of the mode's recent
   candidate strides by more than max(``shape_sigmas`` robust sigmas, the median) (``train``'s
   shape rule, applied to a sliding history of ``history`` strides); the first ``warmup``
-  candidates of a mode only fill that history.
+  candidates of a mode only fill that history;
+* ``unchecked``: the stride ended while the personalisation was paused (``Personaliser.paused``:
+  input angles not known to be right yet, such as an IMU calibration not yet checked).
 
 ``Personaliser`` is the pipeline stage: it keeps the last stride's samples and hands every ended
 stride to ``KernelAdapter``, then the adapted kernel to the matcher.

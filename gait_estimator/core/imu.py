@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -169,13 +170,13 @@ class ImuCalibration:
                 c6 + deg * atan2(c0 * x2 + c1 * y2 + c2 * z2, c3 * x2 + c4 * y2 + c5 * z2),
                 d6 + deg * atan2(d0 * x3 + d1 * y3 + d2 * z3, d3 * x3 + d4 * y3 + d5 * z3))
 
-    def with_gyro_biases(self, biases_dps: Any) -> ImuCalibration:
+    def with_gyro_biases(self, biases_dps: Sequence[Sequence[float]]) -> ImuCalibration:
         """The same mounts (axes to the bit) with these gyro biases (deg/s, sensor frames,
         CHANNELS order)."""
         mounts = []
         for m, b in zip(self.mounts, biases_dps, strict=True):
             bias = replace(m, gyro_bias_dps=tuple(b)).gyro_bias_dps  # validated
-            mount = copy.copy(m)
+            mount = copy.copy(m)  # not replace(): __post_init__ would normalise the axes again (last bits)
             object.__setattr__(mount, "gyro_bias_dps", bias)
             mounts.append(mount)
         return ImuCalibration(tuple(mounts))  # type: ignore[arg-type]

@@ -248,6 +248,7 @@ def learn_calibration(
     walk_s: float = WALK_S,
     still_s: float = STILL_S,
     params: ImuLearnParams = DEFAULT_LEARN,
+    search: bool = True,
 ) -> tuple[ImuCalibration | None, Standing | None, str]:
     """Complete the configured axes into a calibration from a stream.
 
@@ -256,12 +257,13 @@ def learn_calibration(
         ups: (4, T, 3) up directions (sensor frames).
         lateral, proximal: Configured sensor-frame axes per segment, None = learn.
         standing_deg: Angle (deg) each segment is taken to have in the standing pose.
-        standing: A standing pose already found (else the first in the stream: needed for a
-            learnt proximal axis, else only for the gyro bias when ``gyro_dps`` is given).
+        standing: A standing pose already found, or None: then (``search``) the first in the
+            stream, needed for a learnt proximal axis, else used for the gyro bias alone.
         gyro_dps, acc_g: (4, T, 3) raw rates and accelerations for the still test and the bias.
         walk_s: Seconds of stream after the standing pose needed before learning axes.
         still_s: Length of the still stretch taken as the standing pose (s).
         params: Learning thresholds.
+        search: Look for a standing pose when ``standing`` is None (False: the caller looked).
 
     Returns:
         (calibration or None, the standing pose used or None, what is missing: '' when done).
@@ -269,17 +271,17 @@ def learn_calibration(
     t = np.asarray(time_s, dtype=np.float64)
     ups = np.asarray(ups, dtype=np.float64)
     need_stand = any(p is None for p in proximal)
-    if standing is None and (need_stand or gyro_dps is not None):  # configured axes: for the gyro bias only
+    if search and standing is None and (need_stand or gyro_dps is not None):  # configured axes: for the bias only
         standing = find_standing(t, ups, gyro_dps, acc_g, still_s=still_s, params=params)
-        if standing is None and need_stand:
-            return None, None, f"stand still for {still_s:g} s"
+    if standing is None and need_stand:
+        return None, None, f"stand still for {still_s:g} s"
     prox = [p if p is not None else standing.proximal[i] for i, p in enumerate(proximal)]  # type: ignore[union-attr]
     bias = standing.gyro_bias_dps if standing is not None else ((0.0, 0.0, 0.0),) * N_CHANNELS
     tags = ["configured" if (lateral[i] is not None and proximal[i] is not None) else "learnt" for i in range(N_CHANNELS)]
     if all(a is not None for a in lateral):
         return ImuCalibration(tuple(SegmentMount(lateral[i], prox[i], standing_deg[i], bias[i], tags[i])  # type: ignore[arg-type]
                                     for i in range(N_CHANNELS))), standing, ""
-    begin = standing.stop if standing is not None else 0
+    begin = standing.stop if need_stand and standing is not None else 0  # else the pose gave only the bias
     walk = slice(begin, None)
     if len(t) <= begin or t[-1] - t[begin] < walk_s:
         return None, standing, f"walk {walk_s:g} s"

@@ -5,7 +5,8 @@ sensor's up direction, the four streams are paired by stamp, and the calibration
 learnt from the first still second and the strides after it) turns them into angles. Unlike the
 node, the whole file is known: a learnt calibration applies from the first sample, and with raw
 input (no orientation) the fusion is run again with the gyro bias measured while standing (for a
-given or configured calibration too, as the node measures it at the stream's standing pose).
+given or configured calibration: as the node measures it, at a standing pose before the check's
+verdict).
 
 Topics: ``imu_topics`` (four names, CHANNELS order), else ``/imu/right_thigh``, ... if present,
 else the four Imu topics whose names end in the channel names.
@@ -33,7 +34,6 @@ from ..core.imu_learn import (
     STILL_S,
     ImuLearnParams,
     check_configured,
-    find_standing,
     learn_calibration,
 )
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
@@ -154,41 +154,37 @@ def read_imu_bag(
         raise RecordingError(str(exc)) from None
     standing_deg = list(imu_standing_deg or [0.0] * N_CHANNELS)
     names, messages, undecodable = _read_messages(p, imu_topics)
-    stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for s, _, m in messages[:800] if s == 0]
-    rate = 200.0
-    if len(stamps) > 8:
-        d = float(np.median(np.diff(np.array(stamps, dtype=np.int64)))) * 1e-9
-        rate = 1.0 / d if d > 0 else rate
+    rate = _rate_hz(messages)
     tolerance_s = imu_tolerance_s if imu_tolerance_s is not None else _measured_tolerance(messages)
-    biases = None if cal is None else [m.gyro_bias_dps for m in cal.mounts]  # as the node applies a saved one
-    paired, rejected = _front_end(messages, rate, biases, tolerance_s, fusion_params)
-    if undecodable:
-        rejected["undecodable"] += undecodable
+
+    def fused(c: ImuCalibration | None) -> tuple[list, Counter]:
+        """The messages paired, raw ones fused with ``c``'s gyro biases (None: none)."""
+        paired, rejected = _front_end(messages, rate, None if c is None else [m.gyro_bias_dps for m in c.mounts],
+                                      tolerance_s, fusion_params)
+        if undecodable:
+            rejected["undecodable"] += undecodable
+        return paired, rejected
+
+    paired, rejected = fused(cal)  # as the node applies a saved calibration
     if len(paired) < 2:
         raise RecordingError(
             f"{p}: fewer than 2 samples with all four IMUs within {tolerance_s:g} s; skipped: {dict(rejected)}")
-    note = ""
+    given = cal is not None
     if cal is None:
         cal, note = _learn(p, paired, lateral, proximal, standing_deg, learn_params)
-        if cal is not None and any(any(b) for m in cal.mounts for b in [m.gyro_bias_dps]):
-            paired, rejected = _front_end(messages, rate, [m.gyro_bias_dps for m in cal.mounts], tolerance_s,
-                                          fusion_params)
-            if undecodable:
-                rejected["undecodable"] += undecodable
+        if any(any(b) for m in cal.mounts for b in [m.gyro_bias_dps]):
+            paired, rejected = fused(cal)
             cal, note = _learn(p, paired, lateral, proximal, standing_deg, learn_params)
-        if all(m.source == "configured" for m in cal.mounts):
-            note += _check_note(p, paired, cal, learn_params, given=False)
     else:
-        note = "IMU calibration given: " + cal.summary() + _check_note(p, paired, cal, learn_params, given=True)
-        biases, raw = _standing_biases(paired, learn_params)
-        if biases is not None:  # the gyro bias of this recording's standing pose, not the file's
-            cal = cal.with_gyro_biases(biases)
-        if biases is not None and raw:
-            paired, rejected = _front_end(messages, rate, list(biases), tolerance_s, fusion_params)
-            if undecodable:
-                rejected["undecodable"] += undecodable
-            note += "; raw input fused with the gyro bias of the standing pose"
-    assert cal is not None
+        note = "IMU calibration given: " + cal.summary()
+    if given or all(m.source == "configured" for m in cal.mounts):  # made earlier: checked, as in the node
+        ending, checked = _check_note(p, paired, cal, learn_params, given)
+        note += ending
+        if checked != cal:  # the biases of a standing pose before the verdict replace the file's (or none)
+            cal = checked
+            if _arrays(paired)[3] is not None:  # raw sensors: fused again with them, from the first sample
+                paired, rejected = fused(cal)
+            note += "; gyro biases from the standing pose"
     stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
     angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)
     return ImuBagRecording(
@@ -252,6 +248,13 @@ def _measured_tolerance(messages: list[tuple[int, int, Any]]) -> float:
         return 0.0  # too few messages to pair anyway: the caller's "fewer than 2 samples" line
 
 
+def _rate_hz(messages: list[tuple[int, int, Any]]) -> float:
+    """The first sensor's message rate (Hz) from its first stamps; 200 Hz if too few."""
+    stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for s, _, m in messages[:800] if s == 0]
+    d = float(np.median(np.diff(np.array(stamps, dtype=np.int64)))) * 1e-9 if len(stamps) > 8 else 0.0
+    return 1.0 / d if d > 0 else 200.0
+
+
 def _arrays(paired: list) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Paired samples -> time (s from the first), ups, gyro and acc (4, T, 3; None: no sensor has them)."""
     t = np.array([s[0] for s in paired], dtype=np.int64)
@@ -262,14 +265,6 @@ def _arrays(paired: list) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np
             acc if np.isfinite(acc).any() else None)
 
 
-def _standing_biases(paired: list, params: ImuLearnParams) -> tuple[tuple | None, bool]:
-    """(The gyro biases (deg/s) of the recording's first standing pose, as the node measures them
-    for a calibration made earlier, or None without rates or a standing pose; any raw sensor)."""
-    time_s, ups, gyro, acc = _arrays(paired)
-    standing = None if gyro is None else find_standing(time_s, ups, gyro, acc, params=params)
-    return (None if standing is None else standing.gyro_bias_dps), acc is not None
-
-
 def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list,
            params: ImuLearnParams) -> tuple[ImuCalibration, str]:
     time_s, ups, gyro, acc = _arrays(paired)
@@ -277,7 +272,8 @@ def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: l
         for still_s in (STILL_S, params.short_still_s):  # a short still stretch if the file has no longer one
             cal, standing, missing = learn_calibration(
                 time_s, ups, lateral=lateral, proximal=proximal, standing_deg=standing_deg,
-                gyro_dps=gyro, acc_g=acc, still_s=still_s, params=params)
+                gyro_dps=gyro, acc_g=acc, still_s=still_s, params=params,
+                search=any(a is None for a in (*lateral, *proximal)))  # configured axes: biases from the check
             if cal is not None:
                 break
     except CalibrationError as exc:
@@ -289,20 +285,22 @@ def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: l
     return cal, "IMU calibration learnt" + where + ": " + cal.summary()
 
 
-def _check_note(p: Path, paired: list, cal: ImuCalibration, params: ImuLearnParams, given: bool) -> str:
-    """The node's check of a calibration made earlier, on the recording's first walking: the
-    note's ending; RecordingError for a given calibration that does not fit (configured axes that
-    do not fit are kept, as in the node, with a warning in the note)."""
-    found, _, missing = check_stream([s[0] * 1e-9 for s in paired], [s[2] for s in paired], [s[3] for s in paired],
-                                     [s[4] for s in paired], cal, params)
+def _check_note(p: Path, paired: list, cal: ImuCalibration, params: ImuLearnParams,
+                given: bool) -> tuple[str, ImuCalibration]:
+    """The node's check of a calibration made earlier, on the recording's first walking: (the
+    note's ending, ``cal`` with the gyro biases the node would have measured before the verdict);
+    RecordingError for a given calibration that does not fit (configured axes that do not fit are
+    kept, as in the node, with a warning in the note)."""
+    found, _, missing, checked = check_stream([s[0] * 1e-9 for s in paired], [s[2] for s in paired],
+                                              [s[3] for s in paired], [s[4] for s in paired], cal, params)
     if found is None:
-        return f"; not checked ({missing})"
+        return f"; not checked ({missing})", checked
     if found.fits:
-        return "; checked on the walking: " + found.summary()
+        return "; checked on the walking: " + found.summary(), checked
     if given:
         raise RecordingError(f"{p}: the IMU calibration given does not fit this recording ({found.summary()}); "
                              "without --imu-calibration one is learnt from it")
-    return "; WARNING: the configured axes do not fit the walking (the angles are wrong): " + found.summary()
+    return "; WARNING: the configured axes do not fit the walking (the angles are wrong): " + found.summary(), checked
 
 
 def imu_msg(ts: Any, stamp_ns: int, frame_id: str, quat_xyzw: Any | None, gyro_rps: Any, acc_mps2: Any) -> Any:

@@ -10,7 +10,8 @@
 * ``ImuCalibrator``: while no calibration is complete, keeps the paired samples and learns the
   mounts from them (``core/imu_learn.py``); the standing pose can be asked for again. A
   calibration made earlier (a file, configured axes) is checked on the first walking while in
-  use (``check``; ``check_stream`` over a whole recording).
+  use (``check``; ``check_stream`` over a whole recording), and takes the raw sensors' gyro
+  biases of a standing pose that ends before the verdict (``gyro_biases``).
 * ``save_calibration`` / ``load_calibration``: the calibration as YAML (atomic write).
 """
 
@@ -272,6 +273,9 @@ class ImuCalibrator:
         self.bias_measured = not self.checking
         """``calibration``'s gyro biases are this stream's: learnt at its standing pose, or (while
         checking) measured at it once it ended; ``check`` replaces ``calibration`` then."""
+        self.gyro_biases: tuple[Vec3, ...] | None = None
+        """The raw sensors' gyro biases (deg/s) last measured at a standing pose of this stream;
+        kept through ``reset`` (a property of the sensors, not of their mounting)."""
         self.missing = "no whole window of stream yet"
         """Why the last check attempt gave no verdict."""
         self.status = "calibrated" if calibration is not None else "waiting for samples"
@@ -300,7 +304,7 @@ class ImuCalibrator:
         self._clear()
 
     def reset(self) -> None:
-        """Forget everything learnt: back to the configured axes."""
+        """Forget everything learnt (but ``gyro_biases``): back to the configured axes."""
         self.calibration = None
         self.checking = False
         self._keep_lateral = None
@@ -333,7 +337,8 @@ class ImuCalibrator:
               acc: Sequence[Vec3]) -> CalibrationCheck | None:
         """While ``checking``: one paired sample (t in s); returns the check of ``calibration``
         on the last ``check_window_s`` of stream once it has enough walking (then ``checking``
-        ends; the caller decides what a calibration that does not fit means)."""
+        ends; the caller decides what a calibration that does not fit means). Until then, once a
+        standing pose has ended, ``calibration`` is replaced by one with its gyro biases."""
         assert self.calibration is not None
         n = self._append(t, ups, gyro, acc)
         if t < self._next_try:
@@ -366,22 +371,24 @@ class ImuCalibrator:
         The standing pose is looked for only when a new stretch of quiet gyros, long enough for
         one, has ended (a cheap necessary condition: this runs in the subscription callback)."""
         ups, gyro, acc = self._columns(0, n)
-        if not np.isfinite(gyro).any():
-            self.bias_measured = True  # no rates: nothing to measure
+        if not np.isfinite(acc).any():
+            self.bias_measured = True  # no raw sensor (they always carry an acceleration): no bias in use
             return
         t, params = self._t[:n], self.params
         with np.errstate(invalid="ignore"):  # a sensor without rates (nan) does not move the gyros
             loud = (np.einsum("stk,stk->st", gyro, gyro) > params.still_max_rate_dps ** 2).any(axis=0)
         edges = np.diff(np.concatenate(([1], loud.astype(np.int8))))
         starts, ends = np.flatnonzero(edges == -1), np.flatnonzero(edges == 1)  # quiet runs: [start, end)
+        half_step = 0.5 * (t[-1] - t[0]) / max(n - 1, 1)  # as find_standing's still_s - dt / 2
         runs = [(a, b) for a, b in zip(starts, ends, strict=False)
-                if t[b - 1] - t[a] >= STILL_S - 0.01 and t[b - 1] > self._quiet_examined]
+                if t[b - 1] - t[a] >= STILL_S - half_step and t[b - 1] > self._quiet_examined]
         if not runs:
             return
         self._quiet_examined = float(t[runs[-1][1] - 1])
-        standing = find_standing(t, ups, gyro, acc if np.isfinite(acc).any() else None, params=params)
+        standing = find_standing(t, ups, gyro, acc, params=params)
         if standing is not None and standing.ended:
             assert self.calibration is not None
+            self.gyro_biases = standing.gyro_bias_dps
             self.calibration = self.calibration.with_gyro_biases(standing.gyro_bias_dps)
             self.bias_measured = True
 
@@ -398,7 +405,8 @@ class ImuCalibrator:
         lateral = self.lateral
         if self._keep_lateral is not None:
             lateral = [a if a is not None else k for a, k in zip(self.lateral, self._keep_lateral, strict=False)]
-        if (self._standing is None or not self._standing.ended) and any(p is None for p in self.proximal):
+        need_stand = any(p is None for p in self.proximal)
+        if (self._standing is None or not self._standing.ended) and (need_stand or have_acc):
             # until the wearer moves, each try lengthens the still stretch the gyro bias averages
             self._standing = find_standing(time_s, ups_a, gyro_a if have_rates else None, acc_a if have_acc else None,
                                            params=self.params)
@@ -406,13 +414,19 @@ class ImuCalibrator:
             cal, standing, missing = learn_calibration(
                 time_s, ups_a, lateral=lateral, proximal=self.proximal, standing_deg=self.standing_deg,
                 standing=self._standing, gyro_dps=gyro_a if have_rates else None, acc_g=acc_a if have_acc else None,
-                params=self.params)
+                params=self.params, search=False)
         except CalibrationError as exc:
             cal, standing, missing = None, self._standing, str(exc)
         self._standing = standing
+        if cal is not None and have_acc and standing is not None and not standing.ended:
+            cal, missing = None, "standing: the gyro bias is measured until you move"
         if cal is None:
             self.status = missing
             return None
+        if have_acc and standing is not None:
+            self.gyro_biases = standing.gyro_bias_dps
+        elif self.gyro_biases is not None:  # configured axes and no standing pose yet: this stream's last
+            cal = cal.with_gyro_biases(self.gyro_biases)
         self.calibration = cal
         self.checking = all(m.source == "configured" for m in cal.mounts)
         self.bias_measured = not self.checking
@@ -428,16 +442,18 @@ class ImuCalibrator:
 
 
 def check_stream(time_s: Sequence[float], ups: Any, gyro: Any, acc: Any, cal: ImuCalibration,
-                 params: ImuLearnParams = DEFAULT_LEARN) -> tuple[CalibrationCheck | None, int, str]:
+                 params: ImuLearnParams = DEFAULT_LEARN) -> tuple[CalibrationCheck | None, int, str, ImuCalibration]:
     """The live check (``ImuCalibrator.check``) over a whole recording of paired samples (per
     sample: time s, then four up directions, gyros deg/s, accelerometers g): (the check, the
-    index of the sample it came with, '') or (None, -1, why there was none)."""
+    index of the sample it came with, '') or (None, -1, why there was none); then ``cal`` as the
+    node has it after the check (with the gyro biases of a standing pose before the verdict)."""
     checker = ImuCalibrator([None] * N_CHANNELS, [None] * N_CHANNELS, [0.0] * N_CHANNELS, cal, params, check=True)
     for k, (t, u, g, a) in enumerate(zip(time_s, ups, gyro, acc, strict=True)):
         found = checker.check(float(t), u, g, a)
         if found is not None:
-            return found, k, ""
-    return None, -1, checker.missing
+            return found, k, "", checker.calibration
+    assert checker.calibration is not None
+    return None, -1, checker.missing, checker.calibration
 
 
 # ---------------------------------------------------------------------------------------------

@@ -309,13 +309,14 @@ class ImuInput:
         return response
 
     def _forget(self) -> None:
-        """Forget the calibration in use: back to the configured axes, without gyro biases, and
-        what is learnt or configured next neither comes from the file nor has a check's problem."""
+        """Forget the calibration in use: back to the configured axes (the gyro biases last
+        measured at a standing pose stay), and what is learnt or configured next neither comes
+        from the file nor has a check's problem."""
         self.calibrator.reset()
         self.check_problem = ""
         self.from_file = False
-        for s in self.inputs:
-            s.set_gyro_bias((0.0, 0.0, 0.0))
+        for s, b in zip(self.inputs, self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS, strict=True):
+            s.set_gyro_bias(b)
 
     def reset_calibration(self) -> str:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""
