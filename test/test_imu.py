@@ -35,6 +35,7 @@ from gait_estimator.core.imu_learn import (
     check_configured,
     find_standing,
     learn_calibration,
+    quiet_runs,
 )
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
@@ -306,6 +307,18 @@ def test_live_learning_waits_for_the_end_of_the_standing_for_the_gyro_bias(angle
     truth = s.gyro_dps[:, :round(2.0 * RATE)].mean(axis=1)
     assert np.abs(np.array([m.gyro_bias_dps for m in done.mounts]) - truth).max() < 0.05
     assert calib.gyro_biases == tuple(m.gyro_bias_dps for m in done.mounts)
+
+
+def test_quiet_runs_are_where_a_standing_pose_can_be(angles):
+    rng = np.random.default_rng(14)
+    s = synthesize(angles, RATE, random_mounts(rng), rng, gyro_noise_dps=0.5)
+    (start, end), = quiet_runs(s.time_s, s.gyro_dps)  # the 2 s standing, then walking and turning
+    assert start == 0 and 2.0 * RATE - 1 <= end < 2.6 * RATE
+    walking = slice(end, None)
+    assert quiet_runs(s.time_s[walking], s.gyro_dps[:, walking]) == []
+    assert find_standing(s.time_s[walking], _ups(s)[:, walking], s.gyro_dps[:, walking]) is None
+    no_rates = np.full_like(s.gyro_dps, np.nan)
+    assert quiet_runs(s.time_s, no_rates) == [(0, len(s.time_s))], "no rates: quiet, to the last sample"
 
 
 def test_live_calibrator_looks_for_a_standing_pose_only_after_quiet_gyros(angles, monkeypatch):

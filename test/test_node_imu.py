@@ -271,7 +271,7 @@ def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path)
         got = np.array([i.gyro_bias_dps for i in imu.inputs])
         assert np.abs(got - true_bias).max() < 0.1, (saved, got, true_bias)
         assert got.tolist() == [list(m.gyro_bias_dps) for m in imu.calibrator.calibration.mounts]
-        late = s.time_s > 10.0
+        late = s.time_s > (10.0 if saved else 6.0)  # after the misfit file gave way
         assert (np.sqrt(np.mean((np.array(angles) - s.angles_deg)[late] ** 2, axis=0)) < 1.0).all()
 
 
@@ -293,7 +293,7 @@ def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_
     path = save_calibration(read_imu_bag(tmp_path / "earlier").calibration, tmp_path / "user.imu.yaml")
     assert any(any(m.gyro_bias_dps) for m in load_calibration(path).mounts)
     rec = read_imu_bag(bag, imu_calibration=path)
-    assert "gyro bias of the standing pose" not in rec.calibration_note
+    assert "gyro biases from the standing pose" not in rec.calibration_note
     h = ros(68)
     node = h.estimator(input_type="imu", imu_calibration_path=str(path))
     client = h.client(node)

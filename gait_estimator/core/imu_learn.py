@@ -125,6 +125,21 @@ def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
     return out / count[None, :, None]
 
 
+def quiet_runs(time_s: np.ndarray, gyro_dps: np.ndarray, still_s: float = STILL_S,
+               params: ImuLearnParams = DEFAULT_LEARN) -> list[tuple[int, int]]:
+    """Sample ranges [start, end) at least ``still_s`` long in which no gyro (4, T, 3; nan = no
+    rates, quiet) exceeds ``still_max_rate_dps``: the only places a standing pose can be (a cheap
+    necessary condition; ``end`` == T: still quiet at the last sample)."""
+    t = np.asarray(time_s, dtype=np.float64)
+    g = np.asarray(gyro_dps, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        loud = (np.einsum("stk,stk->st", g, g) > params.still_max_rate_dps ** 2).any(axis=0)
+    edges = np.diff(np.concatenate(([1], loud.astype(np.int8), [1])))
+    step = (t[-1] - t[0]) / max(len(t) - 1, 1)
+    return [(int(a), int(b)) for a, b in zip(np.flatnonzero(edges == -1), np.flatnonzero(edges == 1), strict=True)
+            if t[b - 1] - t[a] >= still_s - step]  # find_standing's length test is still_s - dt / 2
+
+
 def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | None = None,
                   acc_g: np.ndarray | None = None, start_s: float | None = None,
                   still_s: float = STILL_S, params: ImuLearnParams = DEFAULT_LEARN) -> Standing | None:
@@ -142,8 +157,8 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
         params: The stillness thresholds.
     """
     t = np.asarray(time_s, dtype=np.float64)
-    if len(t) < 2:
-        return None
+    if len(t) < 2 or (gyro_dps is not None and not quiet_runs(t, gyro_dps, still_s, params)):
+        return None  # (walking: the cheap test is enough)
     ups_a = np.asarray(ups, dtype=np.float64)
     acc_a = None if acc_g is None else np.asarray(acc_g, dtype=np.float64)
     raw = np.zeros(len(ups_a), dtype=bool) if acc_a is None else np.isfinite(acc_a).all(axis=(1, 2))
@@ -347,7 +362,7 @@ def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, 
     mounts = cal.mounts
     fresh, _, missing = learn_calibration(
         t, ups, proximal=[m.proximal for m in mounts], standing_deg=[m.standing_deg for m in mounts],
-        gyro_dps=gyro_dps, params=params)
+        gyro_dps=gyro_dps, params=params, search=False)  # the axes only: no bias wanted
     if fresh is None:
         return None, missing
     change = tuple(float(np.degrees(np.arccos(np.clip(np.dot(f.lateral, m.lateral), -1.0, 1.0))))

@@ -180,7 +180,7 @@ def read_imu_bag(
     if given or all(m.source == "configured" for m in cal.mounts):  # made earlier: checked, as in the node
         ending, checked = _check_note(p, paired, cal, learn_params, given)
         note += ending
-        if checked != cal:  # the biases of a standing pose before the verdict replace the file's (or none)
+        if checked is not cal:  # the biases of a standing pose before the verdict replace the file's (or none)
             cal = checked
             if _arrays(paired)[3] is not None:  # raw sensors: fused again with them, from the first sample
                 paired, rejected = fused(cal)

@@ -37,6 +37,7 @@ from ..core.imu_learn import (
     check_calibration,
     find_standing,
     learn_calibration,
+    quiet_runs,
 )
 from .atomic import atomic_write_text
 from .stream import NON_FINITE, NON_INCREASING_STAMP, STREAM_RESTART_S, SampleRejected
@@ -374,18 +375,12 @@ class ImuCalibrator:
         if not np.isfinite(acc).any():
             self.bias_measured = True  # no raw sensor (they always carry an acceleration): no bias in use
             return
-        t, params = self._t[:n], self.params
-        with np.errstate(invalid="ignore"):  # a sensor without rates (nan) does not move the gyros
-            loud = (np.einsum("stk,stk->st", gyro, gyro) > params.still_max_rate_dps ** 2).any(axis=0)
-        edges = np.diff(np.concatenate(([1], loud.astype(np.int8))))
-        starts, ends = np.flatnonzero(edges == -1), np.flatnonzero(edges == 1)  # quiet runs: [start, end)
-        half_step = 0.5 * (t[-1] - t[0]) / max(n - 1, 1)  # as find_standing's still_s - dt / 2
-        runs = [(a, b) for a, b in zip(starts, ends, strict=False)
-                if t[b - 1] - t[a] >= STILL_S - half_step and t[b - 1] > self._quiet_examined]
-        if not runs:
+        t = self._t[:n]
+        runs = [b for _, b in quiet_runs(t, gyro, STILL_S, self.params) if b < n and t[b - 1] > self._quiet_examined]
+        if not runs:  # no quiet stretch has ended since the last look
             return
-        self._quiet_examined = float(t[runs[-1][1] - 1])
-        standing = find_standing(t, ups, gyro, acc, params=params)
+        self._quiet_examined = float(t[runs[-1] - 1])
+        standing = find_standing(t, ups, gyro, acc, params=self.params)
         if standing is not None and standing.ended:
             assert self.calibration is not None
             self.gyro_biases = standing.gyro_bias_dps

@@ -304,7 +304,7 @@ class ImuInput:
         response.success = True
         response.message = (f"stand still for {STILL_S:g} s: the next still stretch becomes the standing pose"
                             + (f", then walk {WALK_S:g} s (the calibration was not checked yet)" if relearn else "")
-                            + " (the estimate waits until then)")
+                            + " (the estimate waits until then; with raw IMUs until you move)")
         self.node.get_logger().info(response.message)
         return response
 

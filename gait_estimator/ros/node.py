@@ -297,8 +297,8 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         except (RuntimeError, InvalidHandle):
             if self.context.ok():
                 raise
-            # SIGINT/SIGTERM shut the context down while we were publishing or taking (rclpy's
-            # signal handling runs in another thread): nothing left to do.
+            # an external shutdown (rclpy.shutdown) invalidated the context while we were
+            # publishing or taking: nothing left to do.
 
     def _handle_joint_state(self, msg: bytes | JointState) -> None:
         """One JointState sample, serialised (as the subscription delivers it) or not: angles by
@@ -499,11 +499,17 @@ def main(args: Sequence[str] | None = None) -> int:
     parameter or an unreadable library: usage/input errors, as for the CLI).
     """
     # SIGINT/SIGTERM only ask the spin loop to stop: rclpy's own handler raises KeyboardInterrupt
-    # inside whatever callback runs, which the EventsExecutor then logs as a fatal error.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    # inside whatever callback runs, which the EventsExecutor then logs as a fatal error. A second
+    # signal gets the default action (a hung shutdown still ends).
     stop = threading.Event()
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        stop.set()
+        signal.signal(signum, signal.SIG_DFL)
+
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
+        signal.signal(signum, on_signal)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node: EstimatorNode | None = None
     executor: Executor | None = None
     code = 0
