@@ -180,10 +180,9 @@ def read_imu_bag(
     if given or all(m.source == "configured" for m in cal.mounts):  # made earlier: checked, as in the node
         ending, checked = _check_note(p, paired, cal, learn_params, given)
         note += ending
-        if checked is not cal:  # the biases of a standing pose before the verdict replace the file's (or none)
+        if checked is not cal:  # raw sensors' biases of a standing pose before the verdict replace the file's
             cal = checked
-            if _arrays(paired)[3] is not None:  # raw sensors: fused again with them, from the first sample
-                paired, rejected = fused(cal)
+            paired, rejected = fused(cal)  # (only raw sensors get measured biases), from the first sample
             note += "; gyro biases from the standing pose"
     stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
     angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,7 @@ from std_srvs.srv import Trigger
 
 from ..analysis.teach import TAUGHT_LIBRARY
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount
+from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount, Vec3
 from ..core.imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
 from ..io.cdr import CdrError, Stamp, read_imu
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
@@ -293,8 +294,11 @@ class ImuInput:
             sensor.restart_back_ns = round(seconds * 1e9)
 
     def _apply_biases(self, cal: ImuCalibration) -> None:
-        for s, m in zip(self.inputs, cal.mounts, strict=True):
-            s.set_gyro_bias(m.gyro_bias_dps)
+        self._set_biases([m.gyro_bias_dps for m in cal.mounts])
+
+    def _set_biases(self, biases_dps: Sequence[Vec3]) -> None:
+        for s, b in zip(self.inputs, biases_dps, strict=True):
+            s.set_gyro_bias(b)
 
     # -----------------------------------------------------------------------------------------
 
@@ -315,8 +319,7 @@ class ImuInput:
         self.calibrator.reset()
         self.check_problem = ""
         self.from_file = False
-        for s, b in zip(self.inputs, self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS, strict=True):
-            s.set_gyro_bias(b)
+        self._set_biases(self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS)
 
     def reset_calibration(self) -> str:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""
