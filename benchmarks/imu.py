@@ -58,13 +58,14 @@ sys.path.insert(0, str(REPO / "test"))
 from gait_estimator.analysis.evaluate import PredictionTable, evaluate  # noqa: E402
 from gait_estimator.analysis.strides import heel_strikes  # noqa: E402
 from gait_estimator.analysis.train import TrainOptions, train_library  # noqa: E402
+from gait_estimator.core.ahrs import fuse_raw  # noqa: E402
 from gait_estimator.core.imu import (  # noqa: E402
     FUSION_BY_CHANNEL,
     STANDARD_GRAVITY,
     FusionParams,
     ImuCalibration,
+    RawFusion,
     SegmentMount,
-    fuse_raw,
     ups_from_quaternions,
 )
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag  # noqa: E402
@@ -420,7 +421,8 @@ def synthetic(seeds: int = 6) -> dict:
 
 def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
     """us per four-sensor sample: convert x4 + pair + angles (median, p99), both inputs, as the
-    node's ImuInput does it (the pairer keeps each message's (up, gyro, acc)); of ``rounds``
+    node's ImuInput does it (the pairer keeps each message's (up, gyro, acc)), raw input with the
+    node's fusion (compiled when numba is installed) and with imufusion's; of ``rounds``
     rounds of ``n`` samples, the one with the lowest median (the machine is shared)."""
     rng = np.random.default_rng(0)
     cal = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4)))
@@ -428,8 +430,13 @@ def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
     w = rng.normal(0, 1, size=(n, 4, 3))
     a = rng.normal(0, 1, size=(n, 4, 3)) + np.array([0.0, 0.0, 9.8])
     out = {}
-    for kind, cov0 in [(k, c) for _ in range(rounds) for k, c in (("orientation", 0.0), ("raw", -1.0))]:
-        converts = [SensorInput(None, "", FUSION_BY_CHANNEL[c], 0.5).convert for c in range(4)]  # as the node builds them
+    kinds = [("orientation", 0.0, True), ("raw", -1.0, True), ("raw, imufusion (without numba)", -1.0, False)]
+    for kind, cov0, compiled in [k for _ in range(rounds) for k in kinds]:
+        inputs = [SensorInput(None, "", FUSION_BY_CHANNEL[c], 0.5) for c in range(4)]  # as the node builds them
+        if not compiled:  # the fusion make_fusion takes without numba
+            for sensor in inputs:
+                sensor.fusion = RawFusion(200.0, sensor.gyro_bias_dps, sensor.params)
+        converts = [sensor.convert for sensor in inputs]
         pairer = ImuPairer()
         # Python floats, as the node reads them (numpy scalars would make the arithmetic slower)
         rows = [[(tuple(q[k, c].tolist()), tuple(w[k, c].tolist()), tuple(a[k, c].tolist())) for c in range(4)]

@@ -15,16 +15,19 @@ from imu_synth import ALONG_SEGMENT, gait_angles, random_mounts, synthesize, tur
 from scipy.spatial.transform import Rotation
 
 from gait_estimator.analysis.evaluate import read_predictions_csv
+from gait_estimator.core import ahrs, compiled
+from gait_estimator.core.ahrs import CompiledFusion, fuse_raw, make_fusion
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.errors import RecordingError
 from gait_estimator.core.imu import (
+    DEFAULT_FUSION,
     FUSION_BY_CHANNEL,
+    SHANK_FUSION,
     CalibrationError,
     FusionParams,
     ImuCalibration,
     RawFusion,
     SegmentMount,
-    fuse_raw,
     parse_axis,
     up_from_quaternion,
     ups_from_quaternions,
@@ -149,25 +152,68 @@ def test_live_raw_input_measures_its_rate_as_bag_reading_does(angles):
         gyro, acc = np.radians(s.gyro_dps[0][k]), s.acc_g[0][k] * G
         for x in (live, known, guess):
             ups[id(x)].append(x.convert(ns, (0.0, 0.0, 0.0, 1.0), -1.0, gyro, acc)[0])
-    assert live._rate_hz == pytest.approx(100.0, rel=0.01) and live.fusion._still_needed == known.fusion._still_needed
+    assert live._rate_hz == pytest.approx(100.0, rel=0.01) and live.fusion.rate_hz == live._rate_hz
     late = slice(300, None)
     live_err = np.abs(np.array(ups[id(live)]) - np.array(ups[id(known)]))[late].max()
     guess_err = np.abs(np.array(ups[id(guess)]) - np.array(ups[id(known)]))[late].max()
     assert live_err < 1e-6 <= guess_err
 
 
-def test_raw_fusion_integrates_each_step_more_than_a_microsecond_off_its_period():
+@pytest.mark.parametrize("fusion", ["imufusion", "compiled"])
+def test_raw_fusion_integrates_each_step_more_than_a_microsecond_off_its_period(fusion):
     """Drivers stamp with microsecond jitter: a 5.001 ms step at 200 Hz is integrated over 5.001 ms,
     a step within 1 us of the period in use over that period."""
-    pytest.importorskip("imufusion")
+    if fusion == "imufusion":
+        pytest.importorskip("imufusion")
+    cls = RawFusion if fusion == "imufusion" else CompiledFusion
 
     def up_after(step_s: float) -> list[float]:
-        f = RawFusion(200.0, params=FusionParams(gain=0.0, still_gain=0.0))  # the gyro alone
+        f = cls(200.0, params=FusionParams(gain=0.0, still_gain=0.0))  # the gyro alone
         f.update((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
-        return f.update((500.0, 0.0, 0.0), (0.0, 0.0, 1.0), step_s)
+        return list(f.update((500.0, 0.0, 0.0), (0.0, 0.0, 1.0), step_s))
 
     assert up_after(0.005001) != up_after(0.005)
     assert up_after(0.0050009) == up_after(0.005)
+
+
+def test_compiled_fusion_is_imufusions_filter_to_rounding():
+    """CompiledFusion (core/ahrs.py) against imufusion's AHRS through RawFusion: every gain tier,
+    acceleration rejection and its recovery, a gyroscope overrange (soft restart, startup ramp), a
+    new rate and jittered steps give the same gravity direction to 1e-5 (single vs double
+    precision); make_fusion takes the compiled one when numba is there."""
+    pytest.importorskip("imufusion")
+    rng = np.random.default_rng(11)
+    n = 3000
+    gyro = rng.normal(0.0, 80.0, (n, 3))
+    gyro[:400] *= 0.05  # still, then turning slowly, then moving
+    gyro[400:800] *= 0.4
+    gyro[1500:1503, 1] = 2500.0  # beyond 98 % of the 2000 deg/s range
+    tilted = np.array([0.3, 0.1, 0.95])
+    acc = tilted + rng.normal(0.0, 0.2, (n, 3))
+    acc[:800] = tilted / np.linalg.norm(tilted) + rng.normal(0.0, 0.005, (800, 3))
+    steps = 0.005 * (1.0 + 0.01 * np.sin(np.arange(n)))
+    for params in (DEFAULT_FUSION, SHANK_FUSION, FusionParams(acceleration_rejection_deg=5.0, rejection_timeout_s=0.2)):
+        ref, ours = RawFusion(200.0, (1.0, -2.0, 0.5), params), CompiledFusion(200.0, (1.0, -2.0, 0.5), params)
+        worst, tiers = 0.0, set()
+        for k in range(n):
+            if k == 1000:
+                ref.set_rate(190.0), ours.set_rate(190.0)
+            dt = None if k == 0 else float(steps[k])
+            a, b = ref.update(gyro[k], acc[k], dt), ours.update(gyro[k], acc[k], dt)
+            worst = max(worst, float(np.abs(np.subtract(a, b)).max()))
+            tiers.add(ref._tier)
+        assert worst < 1e-5, (params, worst)
+        assert tiers == ({0, 2} if params.quasi_gain is None else {0, 1, 2})
+    assert isinstance(make_fusion(), CompiledFusion if compiled.AVAILABLE else RawFusion)
+
+
+def test_raw_input_needs_no_imufusion_when_numba_compiles_the_filter(monkeypatch):
+    if not compiled.AVAILABLE:
+        pytest.skip("numba is not installed")
+    monkeypatch.setitem(sys.modules, "imufusion", None)  # `import imufusion` raises ImportError
+    sensor = SensorInput(200.0)
+    up = sensor.convert(BASE_NS, (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, 9.80665))[0]
+    assert isinstance(sensor.fusion, CompiledFusion) and np.allclose(up, (0.0, 0.0, 1.0))
 
 
 def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):
@@ -195,8 +241,6 @@ def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):
 def test_shanks_fuse_with_their_own_settings_in_the_node_and_offline():
     """FUSION_BY_CHANNEL: thighs DEFAULT_FUSION, shanks SHANK_FUSION, in read_imu_bag as in the node."""
     import inspect
-
-    from gait_estimator.core.imu import DEFAULT_FUSION, SHANK_FUSION
 
     assert FUSION_BY_CHANNEL == (DEFAULT_FUSION, DEFAULT_FUSION, SHANK_FUSION, SHANK_FUSION)
     assert SHANK_FUSION.quasi_gain is not None and SHANK_FUSION.gain < DEFAULT_FUSION.gain
@@ -731,7 +775,8 @@ def test_standing_pose_on_request_keeps_the_learnt_axes(angles):
         assert np.allclose(a.lateral, b.lateral) and np.allclose(a.proximal, b.proximal, atol=1e-6)
 
 
-def test_raw_input_without_imufusion_names_the_extra(monkeypatch):
+def test_raw_input_without_numba_or_imufusion_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "imufusion", None)
-    with pytest.raises(CalibrationError, match=r"pip install 'gait_estimator\[imu\]'"):
+    monkeypatch.setattr(ahrs, "AVAILABLE", False)
+    with pytest.raises(CalibrationError, match=r"needs numba or the imufusion package: pip install 'gait_estimator\[imu\]'"):
         SensorInput().convert(1, (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))

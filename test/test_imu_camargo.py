@@ -43,3 +43,25 @@ def test_raw_camargo_imus_learn_the_documented_frames_and_follow_mocap(tmp_path)
         d = got.angles_deg[walk, c] - mocap[walk, c]
         assert np.corrcoef(got.angles_deg[walk, c], mocap[walk, c])[0, 1] > 0.9
         assert np.std(d) < 8.0
+
+
+def test_compiled_fusion_gives_imufusions_angles_on_real_imus():
+    """core/ahrs.CompiledFusion against imufusion (RawFusion) on the real thigh and shank IMUs,
+    each with its node settings and with acceleration rejection on: the same angles to 0.001 deg."""
+    from gait_estimator.core.ahrs import CompiledFusion
+    from gait_estimator.core.imu import FUSION_BY_CHANNEL, FusionParams, RawFusion, SegmentMount
+
+    rec = read_project_csv(TRIAL)
+    t, ex = rec.time_s, rec.extra
+    mounts = {"thigh": SegmentMount.from_axes("+z", "-x"), "shank": SegmentMount.from_axes("-y", "-x")}
+    for seg, c in (("thigh", 0), ("shank", 2)):
+        gyro = np.stack([ex[f"right_{seg}_gyro_{k}_dps"] for k in "xyz"], axis=1)
+        acc = np.stack([ex[f"right_{seg}_acc_{k}_mps2"] for k in "xyz"], axis=1) / 9.80665
+        for params in (FUSION_BY_CHANNEL[c], FusionParams(acceleration_rejection_deg=10.0, rejection_timeout_s=0.5)):
+            ref, ours = RawFusion(200.0, (0.5, -0.5, 0.5), params), CompiledFusion(200.0, (0.5, -0.5, 0.5), params)
+            ups = np.empty((2, len(t), 3))
+            for k in range(len(t)):
+                dt = None if k == 0 else float(t[k] - t[k - 1])
+                ups[0, k], ups[1, k] = ref.update(gyro[k], acc[k], dt), ours.update(gyro[k], acc[k], dt)
+            a, b = mounts[seg].angles_deg(ups[0]), mounts[seg].angles_deg(ups[1])
+            assert np.abs(a - b).max() < 1e-3, (seg, params, np.abs(a - b).max())

@@ -23,6 +23,7 @@ from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
 from gait_estimator import load_library
+from gait_estimator.core import ahrs
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, ImuCalibration, SegmentMount
 from gait_estimator.core.imu_learn import learn_calibration
@@ -422,8 +423,9 @@ def test_save_library_writes_the_imu_calibration_where_the_next_start_reads_it(r
     assert again._imu.path == beside and again._imu.calibrator.calibration == load_calibration(beside)
 
 
-def test_raw_input_without_imufusion_is_dropped_counted_and_named(ros, tmp_path, monkeypatch):
+def test_raw_input_without_numba_or_imufusion_is_dropped_counted_and_named(ros, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "imufusion", None)  # `import imufusion` raises ImportError
+    monkeypatch.setattr(ahrs, "AVAILABLE", False)  # as without numba
     rng = np.random.default_rng(7)
     s = synthesize(gait_angles(RATE, walk_s=1.0), RATE, random_mounts(rng), rng)
     h = ros(67)

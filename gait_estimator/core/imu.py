@@ -8,8 +8,8 @@ A sensor on the segment sees gravity; ``up`` is the world's up direction express
 frame (unit vector). From an orientation quaternion (world <- sensor, world z up as in REP 103 /
 REP 145, ENU or NWU) ``up`` is the quaternion's rotation matrix' third row, so the heading (yaw,
 drifting without a magnetometer) never enters. Without an orientation, ``up`` is the gravity
-direction of a gyro + accelerometer fusion (``RawFusion``: the ``imufusion`` library, extra
-``imu``).
+direction of a gyro + accelerometer fusion: the ``imufusion`` library's AHRS (``RawFusion``), or
+its port compiled with numba (``core/ahrs.py``, used when numba is installed); extra ``imu``.
 
 The mounting (``SegmentMount``) is three orthonormal sensor-frame axes: ``lateral`` (the sagittal
 rotation axis, pointing to the wearer's right, so that a forward swing is a positive rotation by
@@ -234,7 +234,7 @@ def _imufusion() -> Any:
         import imufusion
     except ImportError:
         raise CalibrationError(
-            "raw IMU input (no orientation) needs the imufusion package: pip install 'gait_estimator[imu]'"
+            "raw IMU input (no orientation) needs numba or the imufusion package: pip install 'gait_estimator[imu]'"
         ) from None
     return imufusion
 
@@ -295,7 +295,8 @@ def _tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
 
 
 class RawFusion:
-    """Gyro + accelerometer -> ``up`` for one sensor, with imufusion's AHRS (no magnetometer).
+    """Gyro + accelerometer -> ``up`` for one sensor, with imufusion's AHRS (no magnetometer);
+    ``core/ahrs.CompiledFusion`` is the same filter in one compiled call per sample.
 
     Args:
         rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given.
@@ -334,6 +335,7 @@ class RawFusion:
                        params.still_gain)]
         self._still_needed = max(1, round(params.still_after_s * rate_hz))
         self._period = 1.0 / rate_hz
+        self.rate_hz = rate_hz
 
     def set_rate(self, rate_hz: float) -> None:
         """Use ``rate_hz`` (Hz) as the nominal rate from now on (a live stream's measured rate)."""
@@ -379,18 +381,3 @@ class RawFusion:
             self._tier = tier
             ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)
         return ahrs.update_no_magnetometer((gx, gy, gz), (ax, ay, az)).get_gravity().tolist()
-
-
-def fuse_raw(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
-             gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0), params: FusionParams = DEFAULT_FUSION) -> np.ndarray:
-    """``RawFusion`` over a whole stream: (T,), (T, 3), (T, 3) -> up (T, 3)."""
-    t = np.asarray(time_s, dtype=np.float64)
-    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 200.0
-    fusion = RawFusion(rate, gyro_bias_dps, params)
-    out = np.empty((len(t), 3))
-    prev = None
-    for i in range(len(t)):
-        dt = None if prev is None else t[i] - prev
-        out[i] = fusion.update(gyro_dps[i], acc_g[i], dt)
-        prev = t[i]
-    return out

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..core.ahrs import CompiledFusion, make_fusion
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import DEFAULT_FUSION, STANDARD_GRAVITY, CalibrationError, FusionParams, ImuCalibration, RawFusion, Vec3
 from ..core.imu_learn import (
@@ -86,7 +87,7 @@ class SensorInput:
         self.params = params
         self.frame_id = frame_id
         self.restart_back_ns = round(restart_back_s * 1e9)
-        self.fusion: RawFusion | None = None
+        self.fusion: CompiledFusion | RawFusion | None = None
         self.gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
         self.last_ns: int | None = None
         self.restarts = 0
@@ -137,7 +138,7 @@ class SensorInput:
             raise SampleRejected(ZERO_NORM, "zero acceleration (no gravity in the accelerometer)")
         fusion = self.fusion
         if fusion is None:
-            fusion = self.fusion = RawFusion(self._rate_hz, self.gyro_bias_dps, self.params)
+            fusion = self.fusion = make_fusion(self._rate_hz, self.gyro_bias_dps, self.params)
         gx, gy, gz, ax, ay, az = gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG, ax / _G, ay / _G, az / _G
         up = fusion.update_xyz(gx, gy, gz, ax, ay, az, None if last is None else (stamp_ns - last) * 1e-9)
         self.last_ns = stamp_ns

@@ -11,8 +11,8 @@ waits); configured axes that do not fit stay, reported (an error line and a diag
 Its gyro biases are replaced by the ones measured at the stream's first standing pose (before the
 check's verdict), as a learnt calibration's are. A sensor silent for ``imu_timeout_s`` is named in
 the diagnostics and the estimate waits, since no sample pairs without it. Bad messages are dropped,
-counted and logged through the node (throttled); raw messages while the fusion library (the ``imu``
-extra) is missing are dropped and counted (``no_fusion``), with one error line.
+counted and logged through the node (throttled); raw messages while the fusion (numba or imufusion,
+the ``imu`` extra) is missing are dropped and counted (``no_fusion``), with one error line.
 
 Services: ``~/calibrate_standing`` takes a new standing pose from the next still second (keeping
 learnt sagittal axes, unless the calibration was still to be checked: then strides too); the
@@ -35,6 +35,7 @@ from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
 from ..analysis.teach import TAUGHT_LIBRARY
+from ..core.ahrs import warm_up
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount, Vec3
 from ..core.imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
@@ -110,6 +111,7 @@ class ImuInput:
         self.inputs = [SensorInput(None, f.strip(), fusion, back)  # raw: rate from stamps
                        for f, fusion in zip(frames, FUSION_BY_CHANNEL, strict=True)]
         self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
+        warm_up()  # the raw fusion's compiled step, before the first message waits for it
         self.from_file = from_file
         self.calibrator = ImuCalibrator(lateral, proximal, standing, saved, check=True)
         self.check_problem = ""
