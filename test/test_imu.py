@@ -353,6 +353,28 @@ def test_live_learning_waits_for_the_end_of_the_standing_for_the_gyro_bias(angle
     assert calib.gyro_biases == tuple(m.gyro_bias_dps for m in done.mounts)
 
 
+def test_live_learning_gives_the_gyro_biases_when_the_standing_ends_before_the_strides(angles):
+    """Raw sensors, axes learnt: the standing pose's gyro biases are the calibrator's (the node
+    fuses with them from then on) once the wearer moves, not only when the strides complete the
+    calibration seconds later; the calibration carries the same."""
+    rng = np.random.default_rng(15)
+    s = synthesize(angles, RATE, random_mounts(rng), rng, acc_noise_g=0.01, gyro_noise_dps=0.3, gyro_bias_dps=2.0)
+    calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4)
+    ups = _ups(s)
+    biases_at = done = None
+    for k, t in enumerate(s.time_s):
+        done = calib.add(float(t), [tuple(ups[c, k]) for c in range(4)], [tuple(s.gyro_dps[c, k]) for c in range(4)],
+                         [tuple(s.acc_g[c, k]) for c in range(4)])
+        if biases_at is None and calib.gyro_biases is not None:
+            biases_at, biases = float(t), calib.gyro_biases
+        if done is not None:
+            break
+    assert done is not None and biases_at is not None and 2.0 <= biases_at < 3.0 and float(t) >= biases_at + 2.5
+    truth = s.gyro_dps[:, :round(2.0 * RATE)].mean(axis=1)
+    assert np.abs(np.array(biases) - truth).max() < 0.05
+    assert calib.gyro_biases is biases and tuple(m.gyro_bias_dps for m in done.mounts) == biases
+
+
 def test_quiet_runs_are_where_a_standing_pose_can_be(angles):
     rng = np.random.default_rng(14)
     s = synthesize(angles, RATE, random_mounts(rng), rng, gyro_noise_dps=0.5)
@@ -579,6 +601,21 @@ def synthetic_bags(tmp_path_factory, angles):
     write_imu_bag(d / "orientation", stamps4, np.radians(s.gyro_dps), s.acc_g * G, s.quat_xyzw)
     write_imu_bag(d / "raw.db3dir", stamps4, np.radians(s.gyro_dps), s.acc_g * G, None, storage="sqlite3")
     return s, d
+
+
+def test_imu_bag_note_says_what_the_standing_pose_gave(tmp_path, angles):
+    """Configured proximal axes: the standing pose gives raw sensors their gyro biases only, and
+    orientation sensors nothing; the note says so instead of 'learnt from the standing pose'."""
+    rng = np.random.default_rng(23)
+    s = synthesize(angles[:3000], RATE, [ALONG_SEGMENT] * 4, rng, acc_noise_g=0.01, gyro_noise_dps=0.3, gyro_bias_dps=1.0)
+    stamps = BASE_NS + np.round(s.time_s * 1e9).astype(np.int64)
+    notes = {}
+    for kind, quat in (("raw", None), ("orientation", s.quat_xyzw)):
+        bag = write_imu_bag(tmp_path / kind, stamps, np.radians(s.gyro_dps), s.acc_g * G, quat)
+        got = read_imu_bag(bag, imu_proximal_axes=["-x"] * 4)
+        notes[kind] = next(n for n in got.notes if n.startswith("IMU calibration learnt"))
+    assert notes["raw"].startswith("IMU calibration learnt (gyro biases from the standing pose at "), notes
+    assert notes["orientation"].startswith("IMU calibration learnt: "), notes
 
 
 def test_imu_bag_reads_as_a_recording_of_the_four_angles(synthetic_bags):

@@ -41,7 +41,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, [*range(60, 70), 86, 87])
+    yield from in_process_factory(monkeypatch, [59, *range(60, 70), 86, 87])
 
 
 @pytest.fixture
@@ -274,6 +274,33 @@ def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path)
         assert got.tolist() == [list(m.gyro_bias_dps) for m in imu.calibrator.calibration.mounts]
         late = s.time_s > (10.0 if saved else 6.0)  # after the misfit file gave way
         assert (np.sqrt(np.mean((np.array(angles) - s.angles_deg)[late] ** 2, axis=0)) < 1.0).all()
+
+
+def test_learning_fuses_with_the_standing_biases_from_the_end_of_the_standing(ros, tmp_path):
+    """Raw sensors with gyro biases, axes learnt: the node fuses with the standing pose's biases
+    from the wearer's first move on, while the strides that complete the calibration are still to
+    come (so they and the first angles put out are fused with them). Samples go to the input directly."""
+    rng = np.random.default_rng(17)
+    s = synthesize(gait_angles(RATE, walk_s=6.0), RATE, random_mounts(rng), rng, acc_noise_g=0.01,
+                   gyro_noise_dps=0.3, gyro_bias_dps=3.0)
+    true_bias = s.gyro_dps[:, :round(1.9 * RATE)].mean(axis=1)
+    node = ros(59).estimator(input_type="imu", imu_calibration_path=str(tmp_path / "user.imu.yaml"))
+    imu = node._imu
+    biased_at = learnt_at = None
+    for k, t in enumerate(s.time_s):
+        stamp = BASE_NS + round(t * 1e9)
+        items = [imu.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
+                                       s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
+        imu._sample(stamp, items, time.perf_counter())
+        if biased_at is None and any(any(i.gyro_bias_dps) for i in imu.inputs):
+            biased_at = t
+            assert imu.calibrator.calibration is None
+            assert np.abs(np.array([i.gyro_bias_dps for i in imu.inputs]) - true_bias).max() < 0.1
+        if imu.calibrator.calibration is not None:
+            learnt_at = t
+            break
+    assert biased_at is not None and learnt_at is not None and 2.0 <= biased_at < 2.6 and learnt_at - biased_at >= 2.5
+    assert [list(i.gyro_bias_dps) for i in imu.inputs] == [list(m.gyro_bias_dps) for m in imu.calibrator.calibration.mounts]
 
 
 def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_path):

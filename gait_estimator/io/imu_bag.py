@@ -280,7 +280,13 @@ def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: l
     if cal is None:
         raise RecordingError(f"{p}: cannot learn the IMU mounting from this file: {missing} "
                              "(or give --imu-calibration FILE)")
-    where = f" from the standing pose at {time_s[standing.start]:.1f}-{time_s[standing.stop - 1]:.1f} s" if standing else ""
+    where = ""
+    if standing is not None:
+        span = f"the standing pose at {time_s[standing.start]:.1f}-{time_s[standing.stop - 1]:.1f} s"
+        if any(a is None for a in proximal):
+            where = " from " + span
+        elif acc is not None:  # configured proximal axes: the pose gives the raw sensors' gyro biases only
+            where = f" (gyro biases from {span})"
     return cal, "IMU calibration learnt" + where + ": " + cal.summary()
 
 

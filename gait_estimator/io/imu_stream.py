@@ -389,7 +389,8 @@ class ImuCalibrator:
             self.bias_measured = True
 
     def add(self, t: float, ups: Sequence[Sequence[float]], gyro: Sequence[Vec3], acc: Sequence[Vec3]) -> ImuCalibration | None:
-        """One paired sample (t in s); returns the calibration when it has just been learnt."""
+        """One paired sample (t in s); returns the calibration when it has just been learnt. With
+        raw sensors, ``gyro_biases`` are the standing pose's as soon as it has ended."""
         n = self._append(t, ups, gyro, acc)
         if t < self._next_try:
             return None
@@ -414,14 +415,15 @@ class ImuCalibrator:
         except CalibrationError as exc:
             cal, standing, missing = None, self._standing, str(exc)
         self._standing = standing
+        if have_acc and standing is not None and standing.ended and self.gyro_biases is not standing.gyro_bias_dps:
+            self.gyro_biases = standing.gyro_bias_dps  # the fusion's from now on, before the strides are in
         if cal is not None and have_acc and standing is not None and not standing.ended:
             cal, missing = None, "standing: the gyro bias is measured until you move"
         if cal is None:
             self.status = missing
             return None
-        if have_acc and standing is not None:
-            self.gyro_biases = standing.gyro_bias_dps
-        elif self.gyro_biases is not None:  # configured axes and no standing pose yet: this stream's last
+        if not (have_acc and standing is not None) and self.gyro_biases is not None:
+            # configured axes and no standing pose yet: this stream's last
             cal = cal.with_gyro_biases(self.gyro_biases)
         self.calibration = cal
         self.checking = all(m.source == "configured" for m in cal.mounts)

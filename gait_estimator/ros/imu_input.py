@@ -215,7 +215,10 @@ class ImuInput:
         if calibrator.calibration is None or calibrator.checking:
             gyro, acc = (i0[1], i1[1], i2[1], i3[1]), (i0[2], i1[2], i2[2], i3[2])
             if calibrator.calibration is None:
+                biases = calibrator.gyro_biases
                 learnt = calibrator.add(stamp_ns * 1e-9, ups, gyro, acc)
+                if calibrator.gyro_biases is not biases:  # a standing pose has ended: its biases from now on
+                    self._set_biases(calibrator.gyro_biases)
                 if learnt is not None:
                     self._learnt(learnt)
                 return
