@@ -18,14 +18,12 @@ import math
 import numpy as np
 
 from .compiled import AVAILABLE, njit
-from .imu import DEFAULT_FUSION, FusionParams, RawFusion, Vec3, _tilt_quaternion_wxyz
+from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, FusionParams, RawFusion, Vec3, tilt_quaternion_wxyz
 
 INITIAL_STARTUP_GAIN = 10.0
 """The library's gain at the start of its startup ramp (after a gyroscope overrange)."""
 STARTUP_PERIOD_S = 3.0
 """The library's startup ramp (s)."""
-GYROSCOPE_RANGE_DPS = 2000.0
-"""The range ``RawFusion`` gives the library: rates beyond 98 % of it restart the filter."""
 
 # state: quaternion w x y z, sample period, tier, still count, recovery trigger, recovery
 # threshold, startup (0/1), startup gain
@@ -177,7 +175,7 @@ class CompiledFusion:
         """``update`` with the six components as Python floats (deg/s, g)."""
         if self._first:  # start from the accelerometer's tilt, not from a level sensor
             self._first = False
-            self._s[_Q:_Q + 4] = _tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64))
+            self._s[_Q:_Q + 4] = tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64))
         return _step(self._s, self._p, g0, g1, g2, ax, ay, az, -1.0 if dt_s is None else dt_s)
 
 

@@ -272,6 +272,9 @@ class FusionParams:
     quasi_acc_g: float = 0.1
 
 
+GYROSCOPE_RANGE_DPS = 2000.0
+"""The gyroscope range the fusion assumes: rates beyond 98 % of it restart the AHRS (imufusion's
+overrange recovery)."""
 DEFAULT_FUSION = FusionParams()
 """The default fusion settings (a default argument value); the thighs' settings."""
 SHANK_FUSION = FusionParams(gain=0.2, quasi_gain=2.0)
@@ -281,7 +284,7 @@ FUSION_BY_CHANNEL = (DEFAULT_FUSION, DEFAULT_FUSION, SHANK_FUSION, SHANK_FUSION)
 """Fusion settings per sensor, CHANNELS order (right_thigh, left_thigh, right_shank, left_shank)."""
 
 
-def _tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
+def tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
     """The smallest rotation (world <- sensor, [w, x, y, z]) that turns ``acc`` to world up."""
     n = float(np.linalg.norm(acc))
     if not (math.isfinite(n) and n > 0):
@@ -327,7 +330,7 @@ class RawFusion:
             sample_rate=float(rate_hz),
             convention=fusion.CONVENTION_NWU,
             gain=gain,
-            gyroscope_range=2000.0,
+            gyroscope_range=GYROSCOPE_RANGE_DPS,
             acceleration_rejection=params.acceleration_rejection_deg,
             magnetic_rejection=0.0,
             rejection_timeout=params.rejection_timeout_s,
@@ -361,7 +364,7 @@ class RawFusion:
             ahrs.set_sample_period(dt_s)
         if self._first:  # start from the accelerometer's tilt, not from a level sensor
             self._first = False
-            ahrs.set_quaternion(_tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64)))
+            ahrs.set_quaternion(tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64)))
             ahrs.skip_startup()
         r2 = gx * gx + gy * gy + gz * gz
         if r2 >= self._calm_rate2:  # faster than both tiers allow (most of a stride); _still_needed >= 1
