@@ -23,7 +23,7 @@ EXTRAS = {
     "ros": [*ROS, "rosbags>=0.10"],  # estimator_node, demo, play; numba recommended: [ros,fast]
     "test": ["pytest>=7", "hypothesis>=6.80", "ruff>=0.5", "wheel"],
     "colcon": ["colcon-common-extensions", "ros-jazzy-ament-package"],
-    "imu": ["imufusion>=1.3", "numba>=0.59"],  # raw IMUs' fusion: imufusion's AHRS, compiled with numba (docs/imu.md)
+    "imu": ["imufusion>=1.3.3", "numba>=0.59"],  # raw IMUs' fusion: imufusion's AHRS, compiled with numba (docs/imu.md)
 }
 EXTRAS["all"] = sorted({r for reqs in EXTRAS.values() for r in reqs})
 

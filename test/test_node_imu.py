@@ -1,8 +1,8 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 60-69, 85-87):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 59-69, 85-87):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
 IMUs: of the same messages read from a bag); learning the calibration live (also without a
 library), saving it (also beside a saved library) and forgetting it; checking a saved calibration
-or configured axes on the walking; bad messages, a silent sensor, raw input without imufusion;
+or configured axes on the walking; bad messages, a silent sensor, raw input without a fusion (numba or imufusion);
 the node's reading of serialised Imu messages (io/cdr.py) against rclpy's, and undecodable bytes."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from imu_synth import ALONG_SEGMENT, gait_angles, random_mounts, synthesize, turned
+from imu_synth import ALONG_SEGMENT, gait_angles, random_mounts, require_raw_fusion, synthesize, turned
 from rclpy.serialization import serialize_message
 from ros_helpers import answered_indices, assert_same_trace, in_process_factory, offline, wait_all_answered
 from sensor_msgs.msg import Imu
@@ -243,7 +243,7 @@ def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path)
     the angles after it are as good as with the true biases. With a saved file that does not fit,
     the biases measured while it was checked carry over to the configured axes that replace it.
     Samples go to the input directly."""
-    pytest.importorskip("imufusion")
+    require_raw_fusion()
     rng = np.random.default_rng(16)
     s = synthesize(gait_angles(RATE, walk_s=10.0), RATE, [ALONG_SEGMENT] * 4, rng, acc_noise_g=0.01,
                    gyro_noise_dps=0.3, gyro_bias_dps=3.0)
@@ -280,6 +280,7 @@ def test_learning_fuses_with_the_standing_biases_from_the_end_of_the_standing(ro
     """Raw sensors with gyro biases, axes learnt: the node fuses with the standing pose's biases
     from the wearer's first move on, while the strides that complete the calibration are still to
     come (so they and the first angles put out are fused with them). Samples go to the input directly."""
+    require_raw_fusion()
     rng = np.random.default_rng(17)
     s = synthesize(gait_angles(RATE, walk_s=6.0), RATE, random_mounts(rng), rng, acc_noise_g=0.01,
                    gyro_noise_dps=0.3, gyro_bias_dps=3.0)
@@ -309,7 +310,7 @@ def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_
     biases stay): the estimates equal offline processing of ``read_imu_bag``'s angles with that
     calibration file. A lost message (best-effort QoS) changes the node's fusion state: then there
     is nothing exact to compare (skipped)."""
-    pytest.importorskip("imufusion")
+    require_raw_fusion()
     rng = np.random.default_rng(9)
     mounts = random_mounts(rng)
     noise = {"acc_noise_g": 0.01, "gyro_noise_dps": 0.3, "gyro_bias_dps": 1.0}

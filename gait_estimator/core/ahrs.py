@@ -145,7 +145,7 @@ class CompiledFusion:
         period = 1.0 / rate_hz
         quasi = params.quasi_gain is not None and params.quasi_gain != params.gain
         for t, gain in enumerate((params.gain, params.quasi_gain if quasi else params.gain, params.still_gain)):
-            timeout = float(math.trunc(rate_hz * params.rejection_timeout_s))
+            timeout = float(int(np.float32(rate_hz) * np.float32(params.rejection_timeout_s)))  # as the library's float32
             off = params.acceleration_rejection_deg == 0.0 or gain == 0.0 or params.rejection_timeout_s == 0.0
             rejection = math.inf if off else (0.5 * math.sin(math.radians(params.acceleration_rejection_deg))) ** 2
             p[4 * t:4 * t + 4] = gain, (INITIAL_STARTUP_GAIN - gain) / STARTUP_PERIOD_S * period, rejection, timeout
@@ -181,7 +181,7 @@ class CompiledFusion:
 
 def warm_up() -> None:
     """Compile (or load from numba's cache) ``CompiledFusion``'s step now rather than at the first
-    raw message (0.3-1 s); nothing without numba."""
+    raw message, which would wait for it; nothing without numba."""
     if AVAILABLE:
         CompiledFusion().update_xyz(0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 

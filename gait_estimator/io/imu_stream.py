@@ -2,7 +2,7 @@
 
 * ``SensorInput``: one sensor's message fields -> its up direction (``core/imu.py``): from the
   orientation, or (``orientation_covariance[0] == -1``, REP 145: no orientation) from gyro +
-  accelerometer through ``RawFusion``; bad messages raise ``SampleRejected`` (non-finite values,
+  accelerometer through ``core/ahrs.make_fusion``; bad messages raise ``SampleRejected`` (non-finite values,
   a zero quaternion or acceleration, a stamp not after the sensor's previous one).
 * ``ImuPairer``: the four streams paired by stamp within a tolerance; a message without partners
   is dropped (``unpaired``), so a silent sensor stops the samples instead of repeating its last
@@ -423,7 +423,7 @@ class ImuCalibrator:
             self.status = missing
             return None
         if not (have_acc and standing is not None) and self.gyro_biases is not None:
-            # configured axes and no standing pose yet: this stream's last
+            # configured axes and no standing pose yet: the last measured
             cal = cal.with_gyro_biases(self.gyro_biases)
         self.calibration = cal
         self.checking = all(m.source == "configured" for m in cal.mounts)
