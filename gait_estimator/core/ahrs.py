@@ -144,8 +144,8 @@ class CompiledFusion:
         p, params = self._p, self.params
         period = 1.0 / rate_hz
         quasi = params.quasi_gain is not None and params.quasi_gain != params.gain
+        timeout = float(int(np.float32(rate_hz) * np.float32(params.rejection_timeout_s)))  # as the library's float32
         for t, gain in enumerate((params.gain, params.quasi_gain if quasi else params.gain, params.still_gain)):
-            timeout = float(int(np.float32(rate_hz) * np.float32(params.rejection_timeout_s)))  # as the library's float32
             off = params.acceleration_rejection_deg == 0.0 or gain == 0.0 or params.rejection_timeout_s == 0.0
             rejection = math.inf if off else (0.5 * math.sin(math.radians(params.acceleration_rejection_deg))) ** 2
             p[4 * t:4 * t + 4] = gain, (INITIAL_STARTUP_GAIN - gain) / STARTUP_PERIOD_S * period, rejection, timeout
