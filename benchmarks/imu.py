@@ -13,7 +13,7 @@ synthetic checks and the per-sample conversion cost. One command:
   - **orientation** input: each right IMU's orientation computed with imufusion (its defaults, as
     a driver running Fusion would publish it), sent as the quaternion;
   - **raw** input: gyro + accelerometer only (orientation_covariance[0] = -1): the project's
-    fusion (imufusion, gyro bias from the standing pose).
+    fusion (imufusion's AHRS, compiled with numba when installed; gyro bias from the standing pose).
   RMS of IMU - mocap over the walking samples after the standing tare (IMU - mocap mean over the
   first standing bout removed), per segment.
 * Estimator: kernels (walk_slow, walk_normal, walk_fast; heel strikes from the data set) trained
@@ -30,6 +30,8 @@ synthetic checks and the per-sample conversion cost. One command:
 * Gyro bias of a calibration made earlier (``bias_sources``): each trial's learnt mounts on each
   other trial, fused with the saved biases, with this trial's standing-pose biases (what the node
   uses when a standing pose ends before the check's verdict), or with none.
+* The node's own calibration (``imu_live.py``): each trial fed to a real estimator_node's IMU
+  input, which learns the mounting live; its angles from then on against mocap.
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
   (best of 3 rounds by median), the inputs built as the node builds them (rate from the stamps,
   per-segment fusion settings); the message fields as Python floats, as the node reads them.
@@ -54,6 +56,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "test"))
+
+from imu_live import live_runs  # noqa: E402
 
 from gait_estimator.analysis.evaluate import PredictionTable, evaluate  # noqa: E402
 from gait_estimator.analysis.strides import heel_strikes  # noqa: E402
@@ -524,6 +528,8 @@ def main(argv: list[str] | None = None) -> int:
         "fusion_selection": select_fusion(trials),
         "calibration_check": calibration_checks(trials),
         "bias_sources": bias_sources(trials),
+        "live": live_runs(trials, {tr["stats"]["trial"]: {c: virtual_quaternions(tr["rec"].angles_deg[:, c]) for c in (1, 3)}
+                                   for tr in trials}),
         "synthetic": synthetic(),
         "cost": conversion_cost(),
         "decode": decode_cost(),
@@ -547,9 +553,27 @@ def write_tables(out: Path) -> str:
                       "### Fusion settings, leave-one-trial-out", "", selection_table(r), "",
                       "### Calibration check", "", check_table(r), "",
                       "### Gyro bias of a calibration made earlier", "", bias_table(r), "",
+                      "### The node's own calibration", "", live_table(r), "",
                       "### Estimator", "", estimator_table(r), "", "### Cost", "", cost_table(r)])
     (out / "tables.md").write_text(text + "\n", encoding="utf-8")
     return text
+
+
+def live_table(r: dict) -> str:
+    """``imu_live``: per trial when the node calibrated and its angles' RMS vs mocap, and the mean."""
+    rows = ["| trial | node calibrated at | fused with the standing biases from | right thigh RMS | right shank RMS |",
+            "|---|---|---|---|---|"]
+    done = [x for x in r.get("live", []) if x["calibrated_at_s"] is not None]
+    for x in r.get("live", []):
+        if x["calibrated_at_s"] is None:
+            rows.append(f"| {x['trial']} | never (\"{x['status']}\") | | | |")
+        else:
+            rows.append(f"| {x['trial']} | {x['calibrated_at_s']:.1f} s | {x['standing_s']:.1f} s | "
+                        f"{x['thigh']:.2f}° | {x['shank']:.2f}° |")
+    if done:
+        rows.append(f"| mean of {len(done)} | | | {np.mean([x['thigh'] for x in done]):.2f}° | "
+                    f"{np.mean([x['shank'] for x in done]):.2f}° |")
+    return "\n".join(rows)
 
 
 def angles_table(r: dict) -> str:

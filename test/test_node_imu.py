@@ -1,4 +1,4 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 59-69, 85-87):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 85-87):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
 IMUs: of the same messages read from a bag); learning the calibration live (also without a
 library), saving it (also beside a saved library) and forgetting it; checking a saved calibration
@@ -41,7 +41,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, [59, *range(60, 70), 86, 87])
+    yield from in_process_factory(monkeypatch, [58, 59, *range(60, 70), 86, 87])
 
 
 @pytest.fixture
@@ -302,6 +302,51 @@ def test_learning_fuses_with_the_standing_biases_from_the_end_of_the_standing(ro
             break
     assert biased_at is not None and learnt_at is not None and 2.0 <= biased_at < 2.6 and learnt_at - biased_at >= 2.5
     assert [list(i.gyro_bias_dps) for i in imu.inputs] == [list(m.gyro_bias_dps) for m in imu.calibrator.calibration.mounts]
+
+
+def test_benchmarks_replay_of_the_live_calibration_is_the_nodes(ros, tmp_path):
+    """benchmarks/imu_live.py replays the node's IMU flow with its ROS-free parts to score the
+    node's own calibration on camargo_ab06: a real node's ImuInput, fed the same raw right IMUs and
+    virtual left sensors, learns at the same sample and puts out the same angles, bit for bit."""
+    import importlib.util
+
+    from scipy.spatial.transform import Rotation
+
+    from gait_estimator.io.recording import read_project_csv
+
+    require_raw_fusion()
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("imu_live", root / "benchmarks" / "imu_live.py")
+    live = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(live)
+    rec = read_project_csv(root / "data" / "camargo_ab06" / "levelground_cw_slow.csv")
+    t, ex, mocap = rec.time_s, rec.extra, rec.angles_deg
+    gyro, acc = np.zeros((4, len(t), 3)), np.zeros((4, len(t), 3))
+    for seg, c in (("thigh", 0), ("shank", 2)):
+        gyro[c] = np.stack([ex[f"right_{seg}_gyro_{k}_dps"] for k in "xyz"], axis=1)
+        acc[c] = np.stack([ex[f"right_{seg}_acc_{k}_mps2"] for k in "xyz"], axis=1) / STANDARD_GRAVITY
+    s0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # segment frame: +z lateral, +y proximal
+    left = {c: (Rotation.from_euler("y", -np.radians(mocap[:, c])[:, None]) * Rotation.from_matrix(s0)).as_quat()
+            for c in (1, 3)}
+    want, biased_at, _ = live.live_angles(t, gyro, acc, left)
+    assert biased_at is not None and np.isfinite(want[:, 0]).any(), "the replay calibrates on this trial"
+    node = ros(58).estimator(input_type="imu", imu_calibration_path=str(tmp_path / "user.imu.yaml"),
+                             **live.VIRTUAL_AXES)
+    imu, got = node._imu, np.full_like(want, np.nan)
+    zero = (0.0, 0.0, 0.0)
+    for k in range(len(t)):
+        stamp = live.BASE_NS + round(float(t[k]) * 1e9)
+        for c in range(4):
+            msg = (stamp, tuple(left[c][k].tolist()), 0.0, zero, zero) if c in left else \
+                (stamp, (0.0, 0.0, 0.0, 1.0), -1.0, tuple(np.radians(gyro[c, k]).tolist()),
+                 tuple((acc[c, k] * STANDARD_GRAVITY).tolist()))
+            item = imu.inputs[c].convert(*msg)
+            for sample_ns, items in imu.pairer.push(c, stamp, item):
+                cal_before = imu.calibrator.calibration
+                imu._sample(sample_ns, items, time.perf_counter())
+                if cal_before is not None:
+                    got[k] = cal_before.angles_deg([i[0] for i in items])
+    assert np.array_equal(got, want, equal_nan=True)
 
 
 def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_path):
