@@ -30,8 +30,9 @@ synthetic checks and the per-sample conversion cost. One command:
 * Gyro bias of a calibration made earlier (``bias_sources``): each trial's learnt mounts on each
   other trial, fused with the saved biases, with this trial's standing-pose biases (what the node
   uses when a standing pose ends before the check's verdict), or with none.
-* The node's own calibration (``imu_live.py``): each trial fed to a real estimator_node's IMU
-  input, which learns the mounting live; its angles from then on against mocap.
+* The node's own calibration (``imu_live.py``): each trial through a replay of estimator_node's
+  IMU input flow (pinned to a real node's by a test), which learns the mounting live; the angles
+  it puts out from then on against mocap.
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
   (best of 3 rounds by median), the inputs built as the node builds them (rate from the stamps,
   per-segment fusion settings); the message fields as Python floats, as the node reads them.
@@ -561,17 +562,17 @@ def write_tables(out: Path) -> str:
 
 def live_table(r: dict) -> str:
     """``imu_live``: per trial when the node calibrated and its angles' RMS vs mocap, and the mean."""
-    rows = ["| trial | node calibrated at | fused with the standing biases from | right thigh RMS | right shank RMS |",
-            "|---|---|---|---|---|"]
+    rows = ["| trial (times: the data set's) | standing pose from | fused with its gyro biases from | node calibrated at "
+            "| right thigh RMS | right shank RMS |", "|---|---|---|---|---|---|"]
     done = [x for x in r.get("live", []) if x["calibrated_at_s"] is not None]
     for x in r.get("live", []):
         if x["calibrated_at_s"] is None:
-            rows.append(f"| {x['trial']} | never (\"{x['status']}\") | | | |")
+            rows.append(f"| {x['trial']} | | | never (\"{x['status']}\") | | |")
         else:
-            rows.append(f"| {x['trial']} | {x['calibrated_at_s']:.1f} s | {x['standing_s']:.1f} s | "
-                        f"{x['thigh']:.2f}° | {x['shank']:.2f}° |")
+            rows.append(f"| {x['trial']} | {x['pose_s']:.1f} s | {x['biases_from_s']:.1f} s | {x['calibrated_at_s']:.1f} s "
+                        f"| {x['thigh']:.2f}° | {x['shank']:.2f}° |")
     if done:
-        rows.append(f"| mean of {len(done)} | | | {np.mean([x['thigh'] for x in done]):.2f}° | "
+        rows.append(f"| mean of {len(done)} | | | | {np.mean([x['thigh'] for x in done]):.2f}° | "
                     f"{np.mean([x['shank'] for x in done]):.2f}° |")
     return "\n".join(rows)
 

@@ -1,13 +1,13 @@
 """The node's own IMU calibration on camargo_ab06, for ``benchmarks/imu.py``'s table of that name.
 
-``live_angles`` runs the flow of estimator_node's IMU input (``ros/imu_input.py``) with no
+``live_angles`` replays the flow of estimator_node's IMU input (``ros/imu_input.py``) with no
 calibration file, with its ROS-free parts: ``SensorInput`` per sensor as the node builds them,
 ``ImuPairer``, and ``ImuCalibrator`` learning the mounting from the first standing pose (1 s
 still) and 4 s of walking, the raw sensors fused with the pose's gyro biases from the wearer's
-first move on; angles from the complete calibration on. ``test/test_node_imu.py`` checks that a
-real node gives the same angles. ``live_runs`` scores them against mocap like ``trial_imu``: the
-walking without the data set's faults, the node's standing angle (0) taken as mocap's mean over
-the standing bout its gyro biases came from.
+first move on; the angles the node passes to its estimator, from the sample after the
+calibration is complete. ``test/test_node_imu.py`` checks them against a real node's. ``live_runs``
+scores them against mocap like ``trial_imu``: the walking without the data set's faults, the
+node's standing angle (0) taken as mocap's mean over the node's standing pose.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, parse_axis
 from gait_estimator.io.imu_stream import ImuCalibrator, ImuPairer, SensorInput
-from gait_estimator.io.stream import STREAM_RESTART_S
+from gait_estimator.io.stream import StreamGuard, restart_threshold
 
 RIGHT = {"thigh": 0, "shank": 2}
 VIRTUAL_AXES = {"imu_lateral_axes": ["", "+z", "", "+z"], "imu_proximal_axes": ["", "+y", "", "+y"]}
@@ -25,12 +25,13 @@ BASE_NS = 1_700_000_000 * 1_000_000_000
 
 
 def live_angles(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
-                quaternions: dict[int, np.ndarray]) -> tuple[np.ndarray, int | None, str]:
+                quaternions: dict[int, np.ndarray]) -> tuple[np.ndarray, int | None, ImuCalibrator]:
     """Raw sensors (T,), (4, T, 3) deg/s and g, and orientation sensors {channel: (T, 4) x, y, z, w}
-    -> (the angles the node puts out (T, 4), nan before its calibration; the sample at which it
-    first fused with standing biases, or None; its calibration status)."""
+    -> (the angles the node puts out (T, 4), nan elsewhere; the sample from which it fused with the
+    standing pose's gyro biases, or None; its calibrator, for ``status`` and ``standing_s``)."""
     axes = {k: [parse_axis(a) if a else None for a in v] for k, v in VIRTUAL_AXES.items()}
-    inputs = [SensorInput(None, "", FUSION_BY_CHANNEL[c], STREAM_RESTART_S) for c in range(4)]
+    back = restart_threshold(StreamGuard.max_gap_s)  # the node's default max_gap_s
+    inputs = [SensorInput(None, "", FUSION_BY_CHANNEL[c], back) for c in range(4)]
     pairer, calibrator = ImuPairer(), ImuCalibrator(axes["imu_lateral_axes"], axes["imu_proximal_axes"], [0.0] * 4)
     gyro = np.radians(gyro_dps).tolist()  # Python floats, as the node reads them
     acc = (acc_g * STANDARD_GRAVITY).tolist()
@@ -56,9 +57,10 @@ def live_angles(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
                     for sensor, b in zip(inputs, calibrator.gyro_biases, strict=True):
                         sensor.set_gyro_bias(b)
                 if learnt is not None:
+                    assert not calibrator.checking, "learnt axes only: the node would check this one"
                     for sensor, m in zip(inputs, learnt.mounts, strict=True):
                         sensor.set_gyro_bias(m.gyro_bias_dps)
-    return out, biased_at, calibrator.status
+    return out, biased_at, calibrator
 
 
 def live_runs(trials: list[dict], quaternions: dict[str, dict[int, np.ndarray]]) -> list[dict]:
@@ -68,20 +70,18 @@ def live_runs(trials: list[dict], quaternions: dict[str, dict[int, np.ndarray]])
     for tr in trials:
         rec, name = tr["rec"], tr["stats"]["trial"]
         t, mocap = rec.time_s, rec.angles_deg
-        out, biased_at, status = live_angles(t, tr["gyro"], tr["acc_g"], quaternions[name])
+        out, biased_at, calibrator = live_angles(t, tr["gyro"], tr["acc_g"], quaternions[name])
         done = np.isfinite(out[:, 0])
-        if not done.any() or biased_at is None:
-            runs.append({"trial": name, "calibrated_at_s": None, "status": status})
+        if not done.any() or biased_at is None or calibrator.standing_s is None:
+            runs.append({"trial": name, "calibrated_at_s": None, "status": calibrator.status})
             continue
-        stand = rec.labels == "stand"
-        j = int(np.flatnonzero(stand[:biased_at + 1])[-1])  # the standing bout whose end gave the biases
-        first = j
-        while first > 0 and stand[first - 1]:
-            first -= 1
-        run = {"trial": name, "calibrated_at_s": float(t[np.argmax(done)]), "standing_s": float(t[biased_at])}
+        first_s, last_s = np.subtract(calibrator.standing_s, BASE_NS * 1e-9)  # the node's stamps -> the data set's time
+        start, stop = int(np.searchsorted(t, first_s - 1e-4)), int(np.searchsorted(t, last_s + 1e-4))
+        run = {"trial": name, "calibrated_at_s": float(t[np.argmax(done)]), "pose_s": float(t[start]),
+               "biases_from_s": float(t[biased_at])}
         for seg, c in RIGHT.items():
-            sel = done & ~stand & ~tr["faults"][c]
-            err = out[sel, c] + mocap[first:j + 1, c].mean() - mocap[sel, c]
+            sel = done & (rec.labels != "stand") & ~tr["faults"][c]
+            err = out[sel, c] + mocap[start:stop, c].mean() - mocap[sel, c]
             run[seg] = float(np.sqrt(np.mean(err ** 2)))
         runs.append(run)
     return runs

@@ -278,6 +278,8 @@ class ImuCalibrator:
         self.gyro_biases: tuple[Vec3, ...] | None = None
         """The raw sensors' gyro biases (deg/s) last measured at a standing pose of this stream;
         kept through ``reset`` (a property of the sensors, not of their mounting)."""
+        self.standing_s: tuple[float, float] | None = None
+        """Stream times (s) of the first and last sample of the standing pose ``add`` learns from."""
         self.missing = "no whole window of stream yet"
         """Why the last check attempt gave no verdict."""
         self.status = "calibrated" if calibration is not None else "waiting for samples"
@@ -415,6 +417,8 @@ class ImuCalibrator:
         except CalibrationError as exc:
             cal, standing, missing = None, self._standing, str(exc)
         self._standing = standing
+        if standing is not None:
+            self.standing_s = (float(time_s[standing.start]), float(time_s[standing.stop - 1]))
         if have_acc and standing is not None and standing.ended and self.gyro_biases is not standing.gyro_bias_dps:
             self.gyro_biases = standing.gyro_bias_dps  # the fusion's from now on, before the strides are in
         if cal is not None and have_acc and standing is not None and not standing.ended:
