@@ -112,13 +112,7 @@ def _step(s, p, g0, g1, g2, ax, ay, az, dt):  # pragma: no cover - compiled
 
 
 class CompiledFusion:
-    """``RawFusion`` (same arguments, same results to rounding) in one compiled call per sample.
-
-    Args:
-        rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given.
-        gyro_bias_dps: Subtracted from every gyro sample (deg/s, sensor frame).
-        params: Gains and the stillness test.
-    """
+    """``RawFusion`` (same arguments, same results to rounding) in one compiled call per sample."""
 
     def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0),
                  params: FusionParams = DEFAULT_FUSION) -> None:
@@ -143,19 +137,14 @@ class CompiledFusion:
     def _set_rate(self, rate_hz: float) -> None:
         p, params = self._p, self.params
         period = 1.0 / rate_hz
-        quasi = params.quasi_gain is not None and params.quasi_gain != params.gain
         timeout = float(int(np.float32(rate_hz) * np.float32(params.rejection_timeout_s)))  # as the library's float32
-        for t, gain in enumerate((params.gain, params.quasi_gain if quasi else params.gain, params.still_gain)):
+        for t, gain in enumerate(params.tier_gains()):
             off = params.acceleration_rejection_deg == 0.0 or gain == 0.0 or params.rejection_timeout_s == 0.0
             rejection = math.inf if off else (0.5 * math.sin(math.radians(params.acceleration_rejection_deg))) ** 2
             p[4 * t:4 * t + 4] = gain, (INITIAL_STARTUP_GAIN - gain) / STARTUP_PERIOD_S * period, rejection, timeout
         p[_OVERRANGE] = 0.98 * GYROSCOPE_RANGE_DPS
-        p[_STILL_RATE2] = params.still_rate_dps * params.still_rate_dps
-        p[_STILL_ACC2] = 2.0 * params.still_acc_g  # |acc|^2 - 1 ~ 2 (|acc| - 1)
-        p[_QUASI_RATE2] = params.quasi_rate_dps * params.quasi_rate_dps if quasi else -1.0
-        p[_QUASI_ACC2] = 2.0 * params.quasi_acc_g
-        p[_CALM_RATE2] = max(p[_STILL_RATE2], p[_QUASI_RATE2])
-        p[_STILL_NEEDED] = max(1, round(params.still_after_s * rate_hz))
+        p[_STILL_RATE2:_CALM_RATE2 + 1] = params.tier_limits()
+        p[_STILL_NEEDED] = params.still_samples(rate_hz)
         self._s[_PERIOD] = period
         self.rate_hz = rate_hz
 

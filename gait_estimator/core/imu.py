@@ -271,6 +271,23 @@ class FusionParams:
     quasi_rate_dps: float = 60.0
     quasi_acc_g: float = 0.1
 
+    def tier_gains(self) -> tuple[float, float, float]:
+        """The gain of each tier: moving, turning slowly, still."""
+        return self.gain, self.gain if self.quasi_gain is None else self.quasi_gain, self.still_gain
+
+    def tier_limits(self) -> tuple[float, float, float, float, float]:
+        """The tier test's thresholds, squared: still rate ((deg/s)^2), still ||acc|^2 - 1|, slow-turn
+        rate (-1 when that tier has the moving gain), its ||acc|^2 - 1|, and the larger rate
+        (above it the sensor is moving). |acc|^2 - 1 ~ 2 (|acc| - 1) near 1 g."""
+        quasi = self.quasi_gain is not None and self.quasi_gain != self.gain
+        still_rate2 = self.still_rate_dps * self.still_rate_dps
+        quasi_rate2 = self.quasi_rate_dps * self.quasi_rate_dps if quasi else -1.0
+        return still_rate2, 2.0 * self.still_acc_g, quasi_rate2, 2.0 * self.quasi_acc_g, max(still_rate2, quasi_rate2)
+
+    def still_samples(self, rate_hz: float) -> int:
+        """Samples of stillness before the still tier, at ``rate_hz`` (>= 1)."""
+        return max(1, round(self.still_after_s * rate_hz))
+
 
 GYROSCOPE_RANGE_DPS = 2000.0
 """The gyroscope range the fusion assumes: rates beyond 98 % of it restart the AHRS (imufusion's
@@ -313,12 +330,7 @@ class RawFusion:
         self._ahrs = _imufusion().Ahrs()
         self._set_rate(rate_hz)
         self._ahrs.set_settings(self._settings[0])
-        self._still_rate2 = params.still_rate_dps * params.still_rate_dps
-        self._still_acc2 = 2.0 * params.still_acc_g  # |acc|^2 - 1 ~ 2 (|acc| - 1)
-        quasi = params.quasi_gain is not None and params.quasi_gain != params.gain
-        self._quasi_rate2 = params.quasi_rate_dps * params.quasi_rate_dps if quasi else -1.0
-        self._quasi_acc2 = 2.0 * params.quasi_acc_g
-        self._calm_rate2 = max(self._still_rate2, self._quasi_rate2)
+        self._still_rate2, self._still_acc2, self._quasi_rate2, self._quasi_acc2, self._calm_rate2 = params.tier_limits()
         self._still = 0
         self._tier = 0  # settings in use: 0 moving, 1 turning slowly, 2 still
         self.gyro_bias_dps = gyro_bias_dps
@@ -334,9 +346,8 @@ class RawFusion:
             acceleration_rejection=params.acceleration_rejection_deg,
             magnetic_rejection=0.0,
             rejection_timeout=params.rejection_timeout_s,
-        ) for gain in (params.gain, params.gain if params.quasi_gain is None else params.quasi_gain,
-                       params.still_gain)]
-        self._still_needed = max(1, round(params.still_after_s * rate_hz))
+        ) for gain in params.tier_gains()]
+        self._still_needed = params.still_samples(rate_hz)
         self._period = 1.0 / rate_hz
         self.rate_hz = rate_hz
 
