@@ -823,5 +823,9 @@ def test_standing_pose_on_request_keeps_the_learnt_axes(angles):
 def test_raw_input_without_numba_or_imufusion_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "imufusion", None)
     monkeypatch.setattr(ahrs, "AVAILABLE", False)
+    monkeypatch.delenv("GAIT_ESTIMATOR_NO_NUMBA", raising=False)
     with pytest.raises(CalibrationError, match=r"needs numba or the imufusion package: pip install 'gait_estimator\[imu\]'"):
+        SensorInput().convert(1, (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+    monkeypatch.setenv("GAIT_ESTIMATOR_NO_NUMBA", "1")  # installed, but turned off: say so
+    with pytest.raises(CalibrationError, match=r"needs numba \(turned off by GAIT_ESTIMATOR_NO_NUMBA\) or the imufusion"):
         SensorInput().convert(1, (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))

@@ -139,22 +139,22 @@ class KernelAdapter:
         the stride passed every guard, else None (the reason is counted)."""
         k = self.kernels[mode]
         if not self._clean:
-            return self._skip("held")
+            return self.skip_stride("held")
         if self._min_conf < self.options.min_confidence:
-            return self._skip("confidence")
+            return self.skip_stride("confidence")
         if abs(samples.shape[0] / expected_samples - 1.0) > self.options.duration_tolerance:
-            return self._skip("duration")
+            return self.skip_stride("duration")
         obs = aligned(resample_stride(samples, k.shape[0]), k, self.options.max_shift)
         dist = float(np.sqrt(np.mean((obs - k) ** 2)))
         history = self._dist[mode]
         history.append(dist)
         if len(history) <= self.options.warmup:
-            return self._skip("warmup")
+            return self.skip_stride("warmup")
         h = np.asarray(history)
         med = float(np.median(h))
         sigma = MAD_TO_SIGMA * float(np.median(np.abs(h - med)))
         if dist > med + max(self.options.shape_sigmas * sigma, med):
-            return self._skip("shape")
+            return self.skip_stride("shape")
         step = np.clip(obs - k, -self.options.max_step_deg, self.options.max_step_deg)
         self.kernels[mode] = k + self.options.rate * step
         self.accepted[mode] += 1
@@ -177,9 +177,6 @@ class KernelAdapter:
 
     def skip_stride(self, reason: str) -> None:
         """Count a stride that ended without being adopted, for ``reason`` (SKIP_REASONS)."""
-        self._skip(reason)
-
-    def _skip(self, reason: str) -> None:
         assert reason in SKIP_REASONS, reason
         self.skipped[reason] += 1
         return None

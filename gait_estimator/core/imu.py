@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -233,8 +234,9 @@ def _imufusion() -> Any:
     try:
         import imufusion
     except ImportError:
+        numba = "numba (turned off by GAIT_ESTIMATOR_NO_NUMBA)" if os.environ.get("GAIT_ESTIMATOR_NO_NUMBA") else "numba"
         raise CalibrationError(
-            "raw IMU input (no orientation) needs numba or the imufusion package: pip install 'gait_estimator[imu]'"
+            f"raw IMU input (no orientation) needs {numba} or the imufusion package: pip install 'gait_estimator[imu]'"
         ) from None
     return imufusion
 
@@ -357,14 +359,14 @@ class RawFusion:
         self._ahrs.set_settings(self._settings[self._tier])
         self._ahrs.set_sample_period(self._period)
 
-    def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> list[float]:
-        """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up`` [x, y, z]."""
+    def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> Vec3:
+        """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up`` (x, y, z)."""
         g0, g1, g2 = gyro_dps
         a0, a1, a2 = acc_g
         return self.update_xyz(g0, g1, g2, a0, a1, a2, dt_s)
 
     def update_xyz(self, g0: float, g1: float, g2: float, ax: float, ay: float, az: float,
-                   dt_s: float | None = None) -> list[float]:
+                   dt_s: float | None = None) -> Vec3:
         """``update`` with the six components as Python floats (deg/s, g): the per-message path,
         where numpy for a 3-vector costs more than the arithmetic."""
         b0, b1, b2 = self.gyro_bias_dps
@@ -394,4 +396,5 @@ class RawFusion:
         if tier != self._tier:
             self._tier = tier
             ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)
-        return ahrs.update_no_magnetometer((gx, gy, gz), (ax, ay, az)).get_gravity().tolist()
+        x, y, z = ahrs.update_no_magnetometer((gx, gy, gz), (ax, ay, az)).get_gravity().tolist()
+        return x, y, z
