@@ -73,8 +73,9 @@ from gait_estimator.core.imu import (  # noqa: E402
     SegmentMount,
     ups_from_quaternions,
 )
+from gait_estimator.io.imu_angles import ImuAngles  # noqa: E402
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag  # noqa: E402
-from gait_estimator.io.imu_stream import ImuPairer, SensorInput, check_stream  # noqa: E402
+from gait_estimator.io.imu_stream import ImuCalibrator, ImuPairer, SensorInput, check_stream  # noqa: E402
 from gait_estimator.io.process import predict  # noqa: E402
 from gait_estimator.io.recording import Recording, read_project_csv  # noqa: E402
 
@@ -426,7 +427,7 @@ def synthetic(seeds: int = 6) -> dict:
 
 def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
     """us per four-sensor sample: convert x4 + pair + angles (median, p99), both inputs, as the
-    node's ImuInput does it (the pairer keeps each message's (up, gyro, acc)), raw input with the
+    node's ImuInput does it (``ImuAngles`` with a calibration in use), raw input with the
     node's fusion (compiled when numba is installed) and with imufusion's; of ``rounds``
     rounds of ``n`` samples, the one with the lowest median (the machine is shared)."""
     rng = np.random.default_rng(0)
@@ -442,7 +443,7 @@ def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
             for sensor in inputs:
                 sensor.fusion = RawFusion(200.0, sensor.gyro_bias_dps, sensor.params)
         converts = [sensor.convert for sensor in inputs]
-        pairer = ImuPairer()
+        pairer, sample = ImuPairer(), ImuAngles(inputs, ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, cal)).sample
         # Python floats, as the node reads them (numpy scalars would make the arithmetic slower)
         rows = [[(tuple(q[k, c].tolist()), tuple(w[k, c].tolist()), tuple(a[k, c].tolist())) for c in range(4)]
                 for k in range(n)]
@@ -452,8 +453,8 @@ def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
             stamp = BASE_NS + k * 5_000_000
             t0 = clock()
             for c, (convert, (qq, ww, aa)) in enumerate(zip(converts, rows[k], strict=True)):
-                for _, (i0, i1, i2, i3) in pairer.push(c, stamp, convert(stamp, qq, cov0, ww, aa)):
-                    cal.angles_deg((i0[0], i1[0], i2[0], i3[0]))  # as the node's ImuInput._sample
+                for sample_ns, items in pairer.push(c, stamp, convert(stamp, qq, cov0, ww, aa)):
+                    sample(sample_ns, items)  # as the node's ImuInput._sample
             times[k] = clock() - t0
         times = times[n // 10:]
         this = {"median_us": float(np.median(times)) / 1e3, "p99_us": float(np.percentile(times, 99)) / 1e3,

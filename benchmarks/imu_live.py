@@ -1,10 +1,10 @@
 """The node's own IMU calibration on camargo_ab06, for ``benchmarks/imu.py``'s table of that name.
 
-``live_angles`` replays the flow of estimator_node's IMU input (``ros/imu_input.py``) with no
-calibration file, with its ROS-free parts: ``SensorInput`` per sensor as the node builds them,
-``ImuPairer``, and ``ImuCalibrator`` learning the mounting from the first standing pose (1 s
-still) and 4 s of walking, the raw sensors fused with the pose's gyro biases from the wearer's
-first move on; the angles the node passes to its estimator, from the sample after the
+``live_angles`` runs estimator_node's IMU input (``ros/imu_input.py``) with no calibration file,
+through its ROS-free parts built as the node builds them: ``SensorInput`` per sensor, ``ImuPairer``,
+and ``ImuAngles`` with an ``ImuCalibrator`` learning the mounting from the first standing pose
+(1 s still) and 4 s of walking, the raw sensors fused with the pose's gyro biases from the
+wearer's first move on; the angles the node passes to its estimator, from the sample after the
 calibration is complete. ``test/test_node_imu.py`` checks them against a real node's. ``live_runs``
 scores them against mocap like ``trial_imu``: the walking without the data set's faults, the
 node's standing angle (0) taken as mocap's mean over the node's standing pose.
@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, parse_axis
+from gait_estimator.io.imu_angles import ImuAngles
 from gait_estimator.io.imu_stream import ImuCalibrator, ImuPairer, SensorInput
 from gait_estimator.io.stream import StreamGuard, restart_threshold
 
@@ -37,7 +38,9 @@ def live_angles(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
     acc = (acc_g * STANDARD_GRAVITY).tolist()
     quat = {c: q.tolist() for c, q in quaternions.items()}
     out = np.full((len(time_s), 4), np.nan)
-    biased_at = None
+    biased_at: list[int] = []
+    k = 0
+    flow = ImuAngles(inputs, calibrator, on_gyro_biases=lambda _: biased_at.append(k))  # k: the sample being paired
     zero, identity = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)
     for k in range(len(time_s)):
         stamp = BASE_NS + round(float(time_s[k]) * 1e9)
@@ -45,22 +48,10 @@ def live_angles(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
             item = (inputs[c].convert(stamp, quat[c][k], 0.0, zero, zero) if c in quat else
                     inputs[c].convert(stamp, identity, -1.0, gyro[c][k], acc[c][k]))
             for sample_ns, items in pairer.push(c, stamp, item):
-                ups = [i[0] for i in items]
-                cal = calibrator.calibration
-                if cal is not None:
-                    out[k] = cal.angles_deg(ups)
-                    continue
-                biases = calibrator.gyro_biases
-                learnt = calibrator.add(sample_ns * 1e-9, ups, [i[1] for i in items], [i[2] for i in items])
-                if calibrator.gyro_biases is not biases:
-                    biased_at = k
-                    for sensor, b in zip(inputs, calibrator.gyro_biases, strict=True):
-                        sensor.set_gyro_bias(b)
-                if learnt is not None:
-                    assert not calibrator.checking, "learnt axes only: the node would check this one"
-                    for sensor, m in zip(inputs, learnt.mounts, strict=True):
-                        sensor.set_gyro_bias(m.gyro_bias_dps)
-    return out, biased_at, calibrator
+                angles = flow.sample(sample_ns, items)
+                if angles is not None:
+                    out[k] = angles
+    return out, (biased_at[-1] if biased_at else None), calibrator
 
 
 def live_runs(trials: list[dict], quaternions: dict[str, dict[int, np.ndarray]]) -> list[dict]:

@@ -8,6 +8,7 @@ import dataclasses
 import math
 import subprocess
 import sys
+from functools import partial
 
 import numpy as np
 import pytest
@@ -40,6 +41,7 @@ from gait_estimator.core.imu_learn import (
     learn_calibration,
     quiet_runs,
 )
+from gait_estimator.io.imu_angles import ImuAngles
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
@@ -379,6 +381,52 @@ def test_live_learning_gives_the_gyro_biases_when_the_standing_ends_before_the_s
     truth = s.gyro_dps[:, :round(2.0 * RATE)].mean(axis=1)
     assert np.abs(np.array(biases) - truth).max() < 0.05
     assert calib.gyro_biases is biases and tuple(m.gyro_bias_dps for m in done.mounts) == biases
+
+
+def _record(events: list, kind: str, value: object, then=None) -> None:
+    events.append((kind, value))
+    if then is not None:
+        then()
+
+
+def test_imu_angles_run_the_nodes_flow_from_learning_to_a_checked_calibration(angles):
+    """ImuAngles (the node's flow after pairing): no angles while learning; the standing pose's
+    gyro biases go to the raw sensors when the wearer moves, before the strides complete the
+    calibration; then the calibration's angles. A calibration being checked gives angles until a
+    misfit verdict makes the hook forget it; then nothing until it is learnt again."""
+    require_raw_fusion()
+    rng = np.random.default_rng(18)
+    s = synthesize(angles, RATE, random_mounts(rng), rng, acc_noise_g=0.01, gyro_noise_dps=0.3, gyro_bias_dps=2.0)
+    truth = s.gyro_dps[:, :round(2.0 * RATE)].mean(axis=1)
+    learnt = learn_calibration(s.time_s, _ups(s))[0]
+    for given in (None, turned(learnt, 2, 60.0)):
+        inputs, events = [SensorInput(None, "", fusion) for fusion in FUSION_BY_CHANNEL], []
+        calibrator = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, given, check=True)
+        flow = ImuAngles(inputs, calibrator, on_gyro_biases=partial(_record, events, "biases"),
+                         on_learnt=partial(_record, events, "learnt"),
+                         on_checked=partial(_record, events, "checked", then=calibrator.reset))
+        out = np.full((len(s.time_s), 4), np.nan)
+        for k, t in enumerate(s.time_s):
+            stamp = BASE_NS + round(t * 1e9)
+            items = [inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, tuple(np.radians(s.gyro_dps[c, k])),
+                                       tuple(s.acc_g[c, k] * G)) for c in range(4)]
+            got = flow.sample(stamp, items)
+            if got is not None:
+                out[k] = got
+                assert got == calibrator.calibration.angles_deg([i[0] for i in items])
+            if events and events[-1][0] == "biases":
+                assert [i.gyro_bias_dps for i in inputs] == list(events[-1][1]), "applied before the hook"
+        kinds = [e[0] for e in events]
+        assert kinds == (["biases", "learnt"] if given is None else ["biases", "checked"]), kinds
+        assert np.abs(np.array(events[0][1]) - truth).max() < 0.1
+        put_out = np.flatnonzero(np.isfinite(out[:, 0]))
+        if given is None:
+            assert put_out[0] > 4.5 * RATE and np.all(np.diff(put_out) == 1), "nothing before the calibration"
+            late = s.time_s > 12.0
+            assert (rms(out[late] - s.angles_deg[late]) < 1.0).all(), rms(out[late] - s.angles_deg[late])
+        else:  # forgotten at the verdict; this stream has no second standing pose to learn from
+            assert not events[1][1].fits and put_out[0] == 0 and 7.9 * RATE <= put_out[-1] < 8.6 * RATE
+            assert calibrator.calibration is None and calibrator.status == "stand still for 1 s"
 
 
 def test_quiet_runs_are_where_a_standing_pose_can_be(angles):

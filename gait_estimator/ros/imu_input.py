@@ -1,18 +1,20 @@
 """``input_type: imu`` for ``estimator_node``: four ``sensor_msgs/Imu`` topics -> segment angles.
 
 Each message becomes its sensor's up direction (``io/imu_stream.py``: from the orientation, or from
-gyro + accelerometer when ``orientation_covariance[0] == -1``); the four streams are paired by
-stamp (``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting
-calibration and goes to the node's estimator like any other sample. Until the calibration is
-complete (saved file, configured axes, or learnt: stand still, then walk a few strides) no sample
-reaches the estimator. A saved or configured calibration is checked on the first walking
+gyro + accelerometer when ``orientation_covariance[0] == -1``); the four streams are paired by stamp
+(``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting calibration
+(``io/imu_angles.ImuAngles``, which learns or checks it on the way; this module saves and logs what
+it finds) and goes to the node's estimator like any other sample. Until the calibration is complete
+(saved file, configured axes, or learnt: stand still, then walk a few strides) no sample reaches the
+estimator. A saved or configured calibration is checked on the first walking
 (``core/imu_learn.check_calibration``): a saved one that does not fit is learnt again (the estimate
 waits); configured axes that do not fit stay, reported (an error line and a diagnostics problem).
 Its gyro biases are replaced by the ones measured at the stream's first standing pose (before the
-check's verdict), as a learnt calibration's are. A sensor silent for ``imu_timeout_s`` is named in
-the diagnostics and the estimate waits, since no sample pairs without it. Bad messages are dropped,
-counted and logged through the node (throttled); raw messages while the fusion (numba or imufusion,
-the ``imu`` extra) is missing are dropped and counted (``no_fusion``), with one error line.
+check's verdict; logged), as a learnt calibration's are. A sensor silent for ``imu_timeout_s`` is
+named in the diagnostics and the estimate waits, since no sample pairs without it. Bad messages are
+dropped, counted and logged through the node (throttled); raw messages while the fusion (numba or
+imufusion, the ``imu`` extra) is missing are dropped and counted (``no_fusion``), with one error
+line.
 
 Services: ``~/calibrate_standing`` takes a new standing pose from the next still second (keeping
 learnt sagittal axes, unless the calibration was still to be checked: then strides too); the
@@ -40,6 +42,7 @@ from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount, Vec3
 from ..core.imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
 from ..io.cdr import CdrError, Stamp, read_imu
+from ..io.imu_angles import ImuAngles
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.imu_stream import (
     DEFAULT_TOLERANCE_S,
@@ -116,8 +119,9 @@ class ImuInput:
         self.calibrator = ImuCalibrator(lateral, proximal, standing, saved, check=True)
         self.check_problem = ""
         """Configured axes that do not fit the walking (they stay in use): the check's line."""
+        self.angles = ImuAngles(self.inputs, self.calibrator, self._biases_measured, self._learnt, self._checked)
         if saved is not None:
-            self._apply_biases(saved)
+            self.angles.set_gyro_biases([m.gyro_bias_dps for m in saved.mounts])
         self.rejected: Counter = Counter()
         self.no_fusion = ""
         """Why raw messages (no orientation) cannot be used: the fusion extra is missing."""
@@ -209,34 +213,17 @@ class ImuInput:
         node = self.node
         node._received += 1
         node._period_received += 1
-        i0, i1, i2, i3 = items  # SensorInput.convert's (up, gyro, acc) per sensor
-        ups = (i0[0], i1[0], i2[0], i3[0])
-        calibrator = self.calibrator
-        if calibrator.calibration is None or calibrator.checking:
-            gyro, acc = (i0[1], i1[1], i2[1], i3[1]), (i0[2], i1[2], i2[2], i3[2])
-            if calibrator.calibration is None:
-                biases = calibrator.gyro_biases
-                learnt = calibrator.add(stamp_ns * 1e-9, ups, gyro, acc)
-                if calibrator.gyro_biases is not biases:  # a standing pose has ended: its biases from now on
-                    self._set_biases(calibrator.gyro_biases)
-                if learnt is not None:
-                    self._learnt(learnt)
-                return
-            before = calibrator.calibration
-            found = calibrator.check(stamp_ns * 1e-9, ups, gyro, acc)
-            if calibrator.calibration is not before:  # this stream's gyro biases, from its standing pose
-                self._apply_biases(calibrator.calibration)
-                self.node.get_logger().info("IMU gyro bias measured at the standing pose (deg/s): " + "; ".join(
-                    f"{c} ({', '.join(f'{v:+.2f}' for v in m.gyro_bias_dps)})"
-                    for c, m in zip(CHANNELS, calibrator.calibration.mounts, strict=True)))
-            if found is not None:
-                self._checked(found)
-                if calibrator.calibration is None:
-                    return
+        angles = self.angles.sample(stamp_ns, items)
+        if angles is None:
+            return
         est = node._estimator
         if est is not None and est.personaliser is not None:  # kernels learn only from angles known to be right
-            est.pause_adaptation(calibrator.checking or bool(self.check_problem))
-        node._process(calibrator.calibration.angles_deg(ups), Stamp(*divmod(stamp_ns, 1_000_000_000)), t0)
+            est.pause_adaptation(self.calibrator.checking or bool(self.check_problem))
+        node._process(angles, Stamp(*divmod(stamp_ns, 1_000_000_000)), t0)
+
+    def _biases_measured(self, biases_dps: Sequence[Vec3]) -> None:
+        self.node.get_logger().info("IMU gyro bias measured at the standing pose (deg/s): " + "; ".join(
+            f"{c} ({', '.join(f'{v:+.2f}' for v in b)})" for c, b in zip(CHANNELS, biases_dps, strict=True)))
 
     def _checked(self, found: CalibrationCheck) -> None:
         """The check of a saved or configured calibration on the first walking: a saved one that
@@ -267,7 +254,6 @@ class ImuInput:
             log.error(self.check_problem + " (the angles are wrong; correct the parameters)")
 
     def _learnt(self, cal: ImuCalibration) -> None:
-        self._apply_biases(cal)
         self.from_file = False  # learnt now, or the configured axes: what a check reports is about them
         log = self.node.get_logger()
         if self.configured:
@@ -298,13 +284,6 @@ class ImuInput:
         for sensor in self.inputs:
             sensor.restart_back_ns = round(seconds * 1e9)
 
-    def _apply_biases(self, cal: ImuCalibration) -> None:
-        self._set_biases([m.gyro_bias_dps for m in cal.mounts])
-
-    def _set_biases(self, biases_dps: Sequence[Vec3]) -> None:
-        for s, b in zip(self.inputs, biases_dps, strict=True):
-            s.set_gyro_bias(b)
-
     # -----------------------------------------------------------------------------------------
 
     def _calibrate_standing(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -324,7 +303,7 @@ class ImuInput:
         self.calibrator.reset()
         self.check_problem = ""
         self.from_file = False
-        self._set_biases(self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS)
+        self.angles.set_gyro_biases(self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS)
 
     def reset_calibration(self) -> str:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""
