@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import importlib.util
 import math
 import subprocess
 import sys
@@ -23,6 +24,7 @@ from gait_estimator.core.errors import RecordingError
 from gait_estimator.core.imu import (
     DEFAULT_FUSION,
     FUSION_BY_CHANNEL,
+    MAX_STEP_S,
     SHANK_FUSION,
     CalibrationError,
     FusionParams,
@@ -46,6 +48,7 @@ from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
     NON_INCREASING_STAMP,
+    OUT_OF_RANGE,
     WRONG_FRAME,
     ZERO_NORM,
     ImuCalibrator,
@@ -159,6 +162,10 @@ def test_live_raw_input_measures_its_rate_as_bag_reading_does(angles):
     live_err = np.abs(np.array(ups[id(live)]) - np.array(ups[id(known)]))[late].max()
     guess_err = np.abs(np.array(ups[id(guess)]) - np.array(ups[id(known)]))[late].max()
     assert live_err < 1e-6 <= guess_err
+    for k in range(40):  # the driver restarted at 50 Hz: measured again (the first message back is taken as stray)
+        with contextlib.suppress(SampleRejected):
+            live.convert(round((1.0 + k * 0.02) * 1e9), (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
+    assert live.restarts == 1 and live.fusion.rate_hz == pytest.approx(50.0, rel=1e-6)
 
 
 @pytest.mark.parametrize("fusion", ["imufusion", "compiled"])
@@ -176,6 +183,26 @@ def test_raw_fusion_integrates_each_step_more_than_a_microsecond_off_its_period(
 
     assert up_after(0.005001) != up_after(0.005)
     assert up_after(0.0050009) == up_after(0.005)
+
+
+@pytest.mark.parametrize("fusion", ["imufusion", "compiled"])
+def test_raw_fusion_integrates_at_most_max_step_across_a_gap(fusion):
+    """Messages lost for 2 s: the rate of the message after the gap is integrated over MAX_STEP_S,
+    not over the whole gap (which would turn the sensor by 400 deg at 200 deg/s)."""
+    if fusion == "imufusion":
+        pytest.importorskip("imufusion")
+    elif not compiled.AVAILABLE:
+        pytest.skip("numba is not installed")
+    cls = RawFusion if fusion == "imufusion" else CompiledFusion
+
+    def turned_deg(step_s: float) -> float:
+        f = cls(200.0, params=FusionParams(gain=0.0, still_gain=0.0))  # the gyro alone
+        f.update((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+        up = f.update((200.0, 0.0, 0.0), (0.0, 0.0, 1.0), step_s)
+        return math.degrees(math.atan2(math.hypot(up[0], up[1]), up[2]))
+
+    assert turned_deg(0.05) == pytest.approx(10.0, rel=0.01)
+    assert turned_deg(2.0) == turned_deg(MAX_STEP_S) == pytest.approx(200.0 * MAX_STEP_S, rel=0.01)
 
 
 def test_compiled_fusion_is_imufusions_filter_to_rounding():
@@ -383,6 +410,10 @@ def test_live_learning_gives_the_gyro_biases_when_the_standing_ends_before_the_s
     assert calib.gyro_biases is biases and tuple(m.gyro_bias_dps for m in done.mounts) == biases
 
 
+def _record_applied(events: list, inputs: list, biases: object) -> None:
+    events.append(("biases", biases, [i.gyro_bias_dps for i in inputs]))
+
+
 def _record(events: list, kind: str, value: object, then=None) -> None:
     events.append((kind, value))
     if then is not None:
@@ -402,7 +433,7 @@ def test_imu_angles_run_the_nodes_flow_from_learning_to_a_checked_calibration(an
     for given in (None, turned(learnt, 2, 60.0)):
         inputs, events = [SensorInput(None, "", fusion) for fusion in FUSION_BY_CHANNEL], []
         calibrator = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, given, check=True)
-        flow = ImuAngles(inputs, calibrator, on_gyro_biases=partial(_record, events, "biases"),
+        flow = ImuAngles(inputs, calibrator, on_gyro_biases=partial(_record_applied, events, inputs),
                          on_learnt=partial(_record, events, "learnt"),
                          on_checked=partial(_record, events, "checked", then=calibrator.reset))
         out = np.full((len(s.time_s), 4), np.nan)
@@ -414,8 +445,7 @@ def test_imu_angles_run_the_nodes_flow_from_learning_to_a_checked_calibration(an
             if got is not None:
                 out[k] = got
                 assert got == calibrator.calibration.angles_deg([i[0] for i in items])
-            if events and events[-1][0] == "biases":
-                assert [i.gyro_bias_dps for i in inputs] == list(events[-1][1]), "applied before the hook"
+        assert all(list(e[1]) == e[2] for e in events if e[0] == "biases"), "applied before the hook"
         kinds = [e[0] for e in events]
         assert kinds == (["biases", "learnt"] if given is None else ["biases", "checked"]), kinds
         assert np.abs(np.array(events[0][1]) - truth).max() < 0.1
@@ -544,10 +574,16 @@ def test_bad_messages_are_rejected_with_a_reason():
             s.convert(stamp, q, cov0, w, a)
         assert err.value.reason == reason
     raw = SensorInput()
-    for w, a, reason in [((math.inf, 0, 0), (0, 0, G), NON_FINITE), ((0, 0, 0), (0, 0, 0), ZERO_NORM)]:
+    for w, a, reason in [((math.inf, 0, 0), (0, 0, G), NON_FINITE), ((0, 0, 0), (0, 0, 0), ZERO_NORM),
+                         ((1e200, 0, 0), (0, 0, G), OUT_OF_RANGE), ((0, 0, 0), (0, -1e200, G), OUT_OF_RANGE),
+                         ((0, 0, math.nan), (0, 1e200, G), NON_FINITE)]:
         with pytest.raises(SampleRejected) as err:
             raw.convert(30, (0.0, 0.0, 0.0, 1.0), -1.0, w, a)
         assert err.value.reason == reason
+    if ahrs.AVAILABLE or importlib.util.find_spec("imufusion") is not None:  # what was dropped left the fusion as it was
+        assert raw.convert(30, (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))[0] == pytest.approx((0, 0, 1))
+    absurd = s.convert(50, (0.0, 0.0, 0.0, 1.0), 0.0, (1e200, 0.0, 0.0), (0.0, 0.0, G))  # an orientation driver's
+    assert absurd[0] == pytest.approx((0.0, 0.0, 1.0)) and all(math.isnan(v) for v in absurd[1]), "used without its rates"
     assert up_from_quaternion(0.0, 0.0, 0.0, 0.0) is None
     framed = SensorInput(frame_id="thigh_r_imu")
     with pytest.raises(SampleRejected) as err:
@@ -866,6 +902,22 @@ def test_standing_pose_on_request_keeps_the_learnt_axes(angles):
     assert again is not None
     for a, b in zip(first.mounts, again.mounts, strict=True):
         assert np.allclose(a.lateral, b.lateral) and np.allclose(a.proximal, b.proximal, atol=1e-6)
+    # every axis configured, raw sensors: the pose asked for is waited for, and gives the new gyro biases
+    raw = synthesize(angles, RATE, random_mounts(rng), rng, gyro_noise_dps=0.3, gyro_bias_dps=2.0)
+    raw_ups = _ups(raw)
+    cal = learn_calibration(raw.time_s, raw_ups)[0]
+    calib = ImuCalibrator([m.lateral for m in cal.mounts], [m.proximal for m in cal.mounts], [0.0] * 4)
+    rows = [([tuple(raw_ups[c, k]) for c in range(4)], [tuple(raw.gyro_dps[c, k]) for c in range(4)],
+             [tuple(raw.acc_g[c, k]) for c in range(4)]) for k in range(len(raw.time_s))]
+    assert calib.add(0.0, *rows[round(10 * RATE)]) is not None, "configured: complete at once"
+    calib.request_standing()
+    walking = range(round(10 * RATE), round(12 * RATE))
+    assert all(calib.add(50.0 + float(raw.time_s[k]), *rows[k]) is None for k in walking), "waits while walking"
+    assert calib.status == "stand still for 1 s"
+    k_done, done = next((k, c) for k in range(len(raw.time_s)) if (c := calib.add(100.0 + float(raw.time_s[k]), *rows[k])))
+    assert 2.0 <= raw.time_s[k_done] < 3.0, "when the wearer moves"
+    truth = raw.gyro_dps[:, :round(2.0 * RATE)].mean(axis=1)
+    assert np.abs(np.array([m.gyro_bias_dps for m in done.mounts]) - truth).max() < 0.1
 
 
 def test_raw_input_without_numba_or_imufusion_names_the_extra(monkeypatch):

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from .compiled import AVAILABLE, njit
-from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, FusionParams, RawFusion, Vec3, tilt_quaternion_wxyz
+from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, MAX_STEP_S, FusionParams, RawFusion, Vec3, tilt_quaternion_wxyz
 
 INITIAL_STARTUP_GAIN = 10.0
 """The library's gain at the start of its startup ramp (after a gyroscope overrange)."""
@@ -38,8 +38,11 @@ _N_PARAMS = 22
 
 @njit(cache=True, nogil=True)
 def _step(s, p, g0, g1, g2, ax, ay, az, dt):  # pragma: no cover - compiled
-    """One sample (deg/s, g, s; dt <= 0: the period in use) -> gravity direction, sensor frame."""
+    """One sample (deg/s, g, s; dt <= 0: the period in use; at most MAX_STEP_S) -> gravity
+    direction, sensor frame."""
     gx, gy, gz = g0 - p[_BIAS], g1 - p[_BIAS + 1], g2 - p[_BIAS + 2]
+    if dt > MAX_STEP_S:
+        dt = MAX_STEP_S
     if dt > 0.0 and not -1e-6 <= dt - s[_PERIOD] <= 1e-6:
         s[_PERIOD] = dt
     r2 = gx * gx + gy * gy + gz * gz

@@ -294,6 +294,10 @@ class FusionParams:
 GYROSCOPE_RANGE_DPS = 2000.0
 """The gyroscope range the fusion assumes: rates beyond 98 % of it restart the AHRS (imufusion's
 overrange recovery)."""
+MAX_STEP_S = 0.1
+"""Longest time step (s) the fusion integrates at once. The rotation during a longer gap is
+unknown; the rate of the sample after it is integrated over this much, not over the whole gap,
+and the accelerometer takes up the rest."""
 DEFAULT_FUSION = FusionParams()
 """The default fusion settings (a default argument value); the thighs' settings."""
 SHANK_FUSION = FusionParams(gain=0.2, quasi_gain=2.0)
@@ -321,7 +325,8 @@ class RawFusion:
     ``core/ahrs.CompiledFusion`` is the same filter in one compiled call per sample.
 
     Args:
-        rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given.
+        rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given
+            (at most ``MAX_STEP_S``).
         gyro_bias_dps: Subtracted from every gyro sample (deg/s, sensor frame).
         params: Gains and the stillness test.
     """
@@ -372,6 +377,8 @@ class RawFusion:
         b0, b1, b2 = self.gyro_bias_dps
         gx, gy, gz = g0 - b0, g1 - b1, g2 - b2
         ahrs = self._ahrs
+        if dt_s is not None and dt_s > MAX_STEP_S:
+            dt_s = MAX_STEP_S
         if dt_s is not None and not -1e-6 <= dt_s - self._period <= 1e-6 and dt_s > 0:
             self._period = dt_s
             ahrs.set_sample_period(dt_s)

@@ -21,7 +21,7 @@ import math
 from collections import Counter, deque
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import yaml
@@ -44,9 +44,17 @@ from .atomic import atomic_write_text
 from .stream import NON_FINITE, NON_INCREASING_STAMP, STREAM_RESTART_S, SampleRejected
 
 ZERO_NORM = "zero_norm"
+OUT_OF_RANGE = "out_of_range"
 UNPAIRED = "unpaired"
 WRONG_FRAME = "wrong_frame"
-IMU_REASONS = (NON_FINITE, ZERO_NORM, NON_INCREASING_STAMP, UNPAIRED, WRONG_FRAME)
+IMU_REASONS = (NON_FINITE, ZERO_NORM, OUT_OF_RANGE, NON_INCREASING_STAMP, UNPAIRED, WRONG_FRAME)
+MAX_RATE_RPS = 350.0
+"""Largest angular rate (rad/s, about 20000 deg/s) taken from a message: beyond any IMU's range,
+so a raw message with more is dropped (``out_of_range``) and an orientation message is used
+without its rates."""
+MAX_ACC_MPS2 = 10_000.0
+"""Largest acceleration (m/s^2, about 1000 g) taken from a raw message; see ``MAX_RATE_RPS``."""
+_MAX_RATE2, _MAX_ACC2 = MAX_RATE_RPS ** 2, MAX_ACC_MPS2 ** 2
 DEFAULT_TOLERANCE_S = 0.004
 """Largest stamp spread (s) of four messages that make one sample (a 200 Hz period is 0.005 s):
 the node's default, for sensors sampled together."""
@@ -69,7 +77,7 @@ class SensorInput:
 
     Args:
         rate_hz: Nominal rate for the raw-input fusion (Hz); None = measured from the first
-            ``rate_steps`` stamp steps (a live stream; until then 200 Hz).
+            ``rate_steps`` stamp steps (a live stream; until then 200 Hz), again after a restart.
         frame_id: The ``header.frame_id`` this sensor's messages must carry ('' = any).
         params: Settings of the raw-input fusion.
         restart_back_s: Two messages in a row stamped more than this (s) before the previous
@@ -82,6 +90,7 @@ class SensorInput:
     def __init__(self, rate_hz: float | None = 200.0, frame_id: str = "", params: FusionParams = DEFAULT_FUSION,
                  restart_back_s: float = STREAM_RESTART_S, rate_steps: int = RATE_STEPS) -> None:
         self._rate_hz = 200.0 if rate_hz is None else rate_hz
+        self._measured = rate_hz is None
         self._steps: list[int] | None = [] if rate_hz is None else None  # stamp steps (ns) while measuring
         self.rate_steps = rate_steps
         self.params = params
@@ -108,6 +117,8 @@ class SensorInput:
                                          f"{(last - stamp_ns) * 1e-9:.3f} s before the previous (a restart?)")
                 self.restarts += 1  # a second message after the first on the earlier stamps: restarted
                 self.fusion = None
+                if self._measured:  # the driver may come back at another rate
+                    self._steps = []
                 last = None
             else:
                 raise SampleRejected(NON_INCREASING_STAMP,
@@ -123,19 +134,13 @@ class SensorInput:
                                      f"unusable orientation quaternion ({x}, {y}, {z}, {w})")
             s = 2.0 / n
             up = (s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y))
-            gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG)
-            if not (-_INF < gyro[0] < _INF and -_INF < gyro[1] < _INF and -_INF < gyro[2] < _INF):
-                gyro = NO_RATES
+            gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG) if gx * gx + gy * gy + gz * gz < _MAX_RATE2 \
+                else NO_RATES
             self.last_ns = stamp_ns
             return up, gyro, NO_RATES  # the accelerometer is the orientation filter's business
         ax, ay, az = acc_mps2
-        if (gx + gy + gz + ax + ay + az) * 0.0 != 0.0:  # nan unless all six are finite (or the sum overflows)
-            inf = _INF
-            if not (-inf < gx < inf and -inf < gy < inf and -inf < gz < inf and -inf < ax < inf
-                    and -inf < ay < inf and -inf < az < inf):
-                raise SampleRejected(NON_FINITE, f"non-finite rate or acceleration ({gx}, {gy}, {gz}; {ax}, {ay}, {az})")
-        if ax * ax + ay * ay + az * az < 1e-6:
-            raise SampleRejected(ZERO_NORM, "zero acceleration (no gravity in the accelerometer)")
+        if not (gx * gx + gy * gy + gz * gz < _MAX_RATE2 and 1e-6 <= ax * ax + ay * ay + az * az < _MAX_ACC2):
+            self._reject_raw(gx, gy, gz, ax, ay, az)  # false for NaN too
         fusion = self.fusion
         if fusion is None:
             fusion = self.fusion = make_fusion(self._rate_hz, self.gyro_bias_dps, self.params)
@@ -145,6 +150,17 @@ class SensorInput:
         if self._steps is not None and last is not None:
             self._measure_rate(stamp_ns - last)
         return up, (gx, gy, gz), (ax, ay, az)
+
+    @staticmethod
+    def _reject_raw(gx: float, gy: float, gz: float, ax: float, ay: float, az: float) -> NoReturn:
+        """Raise ``SampleRejected`` for raw values that are not finite, beyond ``MAX_RATE_RPS`` or
+        ``MAX_ACC_MPS2`` in magnitude, or without gravity."""
+        values = f"({gx}, {gy}, {gz} rad/s; {ax}, {ay}, {az} m/s^2)"
+        if not all(math.isfinite(v) for v in (gx, gy, gz, ax, ay, az)):
+            raise SampleRejected(NON_FINITE, f"non-finite rate or acceleration {values}")
+        if ax * ax + ay * ay + az * az < 1e-6:
+            raise SampleRejected(ZERO_NORM, "zero acceleration (no gravity in the accelerometer)")
+        raise SampleRejected(OUT_OF_RANGE, f"rate or acceleration beyond any IMU's range {values}")
 
     def _measure_rate(self, step_ns: int) -> None:
         """One more stamp step while the rate is measured (``rate_hz`` None): the fusion's rate
@@ -287,6 +303,7 @@ class ImuCalibrator:
             self.status = TO_BE_CHECKED
         self._keep_lateral: list[Vec3 | None] | None = None
         self._standing: Standing | None = None
+        self._requested = False  # a standing pose was asked for: wait for one even with configured axes
         self._clear()
 
     def _clear(self) -> None:
@@ -297,13 +314,15 @@ class ImuCalibrator:
         self._quiet_examined = -math.inf  # end (s) of the last quiet stretch looked at for a standing pose
 
     def request_standing(self) -> None:
-        """Take a new standing pose from the next still stretch, keeping learnt lateral axes; a
-        calibration still to be checked is learnt again in full (its axes are not trusted yet)."""
+        """Take a new standing pose from the next still stretch (the calibration waits for it,
+        also with every axis configured), keeping learnt lateral axes; a calibration still to be
+        checked is learnt again in full (its axes are not trusted yet)."""
         if self.calibration is not None and not self.checking:
             self._keep_lateral = [m.lateral for m in self.calibration.mounts]
         self.checking = False
         self.calibration = None
         self._standing = None
+        self._requested = True
         self.status = "stand still"
         self._clear()
 
@@ -313,6 +332,7 @@ class ImuCalibrator:
         self.checking = False
         self._keep_lateral = None
         self._standing = None
+        self._requested = False
         self.status = "waiting for samples"
         self._clear()
 
@@ -405,7 +425,7 @@ class ImuCalibrator:
         if self._keep_lateral is not None:
             lateral = [a if a is not None else k for a, k in zip(self.lateral, self._keep_lateral, strict=False)]
         need_stand = any(p is None for p in self.proximal)
-        if (self._standing is None or not self._standing.ended) and (need_stand or have_acc):
+        if (self._standing is None or not self._standing.ended) and (need_stand or have_acc or self._requested):
             # until the wearer moves, each try lengthens the still stretch the gyro bias averages
             self._standing = find_standing(time_s, ups_a, gyro_a if have_rates else None, acc_a if have_acc else None,
                                            params=self.params)
@@ -421,6 +441,8 @@ class ImuCalibrator:
             self.standing_s = (float(time_s[standing.start]), float(time_s[standing.stop - 1]))
         if have_acc and standing is not None and standing.ended and self.gyro_biases is not standing.gyro_bias_dps:
             self.gyro_biases = standing.gyro_bias_dps  # the fusion's from now on, before the strides are in
+        if cal is not None and self._requested and standing is None:  # configured axes: the pose asked for
+            cal, missing = None, f"stand still for {STILL_S:g} s"
         if cal is not None and have_acc and standing is not None and not standing.ended:
             cal, missing = None, "standing: the gyro bias is measured until you move"
         if cal is None:
@@ -434,6 +456,7 @@ class ImuCalibrator:
         self.bias_measured = not self.checking
         self.status = TO_BE_CHECKED if self.checking else "calibrated"
         self._keep_lateral = None
+        self._requested = False
         self._clear()
         return cal
 
