@@ -576,13 +576,14 @@ def test_bad_messages_are_rejected_with_a_reason():
     raw = SensorInput()
     for w, a, reason in [((math.inf, 0, 0), (0, 0, G), NON_FINITE), ((0, 0, 0), (0, 0, 0), ZERO_NORM),
                          ((1e200, 0, 0), (0, 0, G), OUT_OF_RANGE), ((0, 0, 0), (0, -1e200, G), OUT_OF_RANGE),
+                         ((0, 400.0, 0), (0, 0, G), OUT_OF_RANGE), ((0, 0, 0), (0, 0, 2e4), OUT_OF_RANGE),
                          ((0, 0, math.nan), (0, 1e200, G), NON_FINITE)]:
         with pytest.raises(SampleRejected) as err:
             raw.convert(30, (0.0, 0.0, 0.0, 1.0), -1.0, w, a)
         assert err.value.reason == reason
     if ahrs.AVAILABLE or importlib.util.find_spec("imufusion") is not None:  # what was dropped left the fusion as it was
         assert raw.convert(30, (0.0, 0.0, 0.0, 1.0), -1.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))[0] == pytest.approx((0, 0, 1))
-    absurd = s.convert(50, (0.0, 0.0, 0.0, 1.0), 0.0, (1e200, 0.0, 0.0), (0.0, 0.0, G))  # an orientation driver's
+    absurd = s.convert(50, (0.0, 0.0, 0.0, 1.0), 0.0, (400.0, 0.0, 0.0), (0.0, 0.0, G))  # an orientation driver's
     assert absurd[0] == pytest.approx((0.0, 0.0, 1.0)) and all(math.isnan(v) for v in absurd[1]), "used without its rates"
     assert up_from_quaternion(0.0, 0.0, 0.0, 0.0) is None
     framed = SensorInput(frame_id="thigh_r_imu")
