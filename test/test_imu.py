@@ -195,14 +195,17 @@ def test_raw_fusion_integrates_at_most_max_step_across_a_gap(fusion):
         pytest.skip("numba is not installed")
     cls = RawFusion if fusion == "imufusion" else CompiledFusion
 
-    def turned_deg(step_s: float) -> float:
-        f = cls(200.0, params=FusionParams(gain=0.0, still_gain=0.0))  # the gyro alone
+    def turned_deg(step_s: float, rate_hz: float = 200.0, dps: float = 200.0) -> float:
+        f = cls(rate_hz, params=FusionParams(gain=0.0, still_gain=0.0))  # the gyro alone
         f.update((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
-        up = f.update((200.0, 0.0, 0.0), (0.0, 0.0, 1.0), step_s)
+        up = f.update((dps, 0.0, 0.0), (0.0, 0.0, 1.0), step_s)
         return math.degrees(math.atan2(math.hypot(up[0], up[1]), up[2]))
 
     assert turned_deg(0.05) == pytest.approx(10.0, rel=0.01)
     assert turned_deg(2.0) == turned_deg(MAX_STEP_S) == pytest.approx(200.0 * MAX_STEP_S, rel=0.01)
+    # a sensor slower than 20 Hz: its whole period is integrated, a gap two of them
+    assert turned_deg(0.125, 8.0, 40.0) == pytest.approx(5.0, rel=0.01)
+    assert turned_deg(2.0, 8.0, 40.0) == pytest.approx(10.0, rel=0.01)
 
 
 def test_compiled_fusion_is_imufusions_filter_to_rounding():
@@ -919,6 +922,18 @@ def test_standing_pose_on_request_keeps_the_learnt_axes(angles):
     assert 2.0 <= raw.time_s[k_done] < 3.0, "when the wearer moves"
     truth = raw.gyro_dps[:, :round(2.0 * RATE)].mean(axis=1)
     assert np.abs(np.array([m.gyro_bias_dps for m in done.mounts]) - truth).max() < 0.1
+    # proximal axes configured, lateral learnt: after a pose asked for, the kept lateral axes are still
+    # learnt ones (not checked again as configured; saved beside a library)
+    half = ImuCalibrator([None] * 4, [m.proximal for m in cal.mounts], [0.0] * 4)
+    first = next(c for k in range(len(raw.time_s)) if (c := half.add(float(raw.time_s[k]), *rows[k][:2], [nan3] * 4)))
+    half.request_standing()
+    again = next(c for k in range(len(raw.time_s)) if (c := half.add(300.0 + float(raw.time_s[k]), *rows[k][:2], [nan3] * 4)))
+    assert [m.source for m in first.mounts] == [m.source for m in again.mounts] == ["learnt"] * 4
+    assert not half.checking and [m.lateral for m in again.mounts] == [m.lateral for m in first.mounts]
+    # orientation sensors (no accelerations): the still second is enough, before any move
+    calib.request_standing()
+    k_done = next(k for k in range(len(raw.time_s)) if calib.add(200.0 + float(raw.time_s[k]), *rows[k][:2], [nan3] * 4))
+    assert 1.0 <= raw.time_s[k_done] < 2.0 and calib.calibration is not None
 
 
 def test_raw_input_without_numba_or_imufusion_names_the_extra(monkeypatch):

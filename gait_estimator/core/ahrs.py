@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from .compiled import AVAILABLE, njit
-from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, MAX_STEP_S, FusionParams, RawFusion, Vec3, tilt_quaternion_wxyz
+from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, FusionParams, RawFusion, Vec3, tilt_quaternion_wxyz
 
 INITIAL_STARTUP_GAIN = 10.0
 """The library's gain at the start of its startup ramp (after a gyroscope overrange)."""
@@ -31,18 +31,18 @@ _Q, _PERIOD, _TIER, _STILL, _TRIGGER, _THRESHOLD, _STARTUP, _STARTUP_GAIN = 0, 4
 _N_STATE = 11
 # params: per tier t (0 moving, 1 turning slowly, 2 still) at 4 t: gain, startup gain step,
 # rejection threshold, rejection timeout (samples); then the rest
-_BIAS, _OVERRANGE, _STILL_RATE2, _STILL_ACC2, _QUASI_RATE2, _QUASI_ACC2, _CALM_RATE2, _STILL_NEEDED = \
-    12, 15, 16, 17, 18, 19, 20, 21
-_N_PARAMS = 22
+_BIAS, _OVERRANGE, _STILL_RATE2, _STILL_ACC2, _QUASI_RATE2, _QUASI_ACC2, _CALM_RATE2, _STILL_NEEDED, _MAX_STEP = \
+    12, 15, 16, 17, 18, 19, 20, 21, 22
+_N_PARAMS = 23
 
 
 @njit(cache=True, nogil=True)
 def _step(s, p, g0, g1, g2, ax, ay, az, dt):  # pragma: no cover - compiled
-    """One sample (deg/s, g, s; dt <= 0: the period in use; at most MAX_STEP_S) -> gravity
+    """One sample (deg/s, g, s; dt <= 0: the period in use; at most the longest step) -> gravity
     direction, sensor frame."""
     gx, gy, gz = g0 - p[_BIAS], g1 - p[_BIAS + 1], g2 - p[_BIAS + 2]
-    if dt > MAX_STEP_S:
-        dt = MAX_STEP_S
+    if dt > p[_MAX_STEP]:
+        dt = p[_MAX_STEP]
     if dt > 0.0 and not -1e-6 <= dt - s[_PERIOD] <= 1e-6:
         s[_PERIOD] = dt
     r2 = gx * gx + gy * gy + gz * gz
@@ -148,6 +148,7 @@ class CompiledFusion:
         p[_OVERRANGE] = 0.98 * GYROSCOPE_RANGE_DPS
         p[_STILL_RATE2:_CALM_RATE2 + 1] = params.tier_limits()
         p[_STILL_NEEDED] = params.still_samples(rate_hz)
+        p[_MAX_STEP] = params.max_step_s(rate_hz)
         self._s[_PERIOD] = period
         self.rate_hz = rate_hz
 

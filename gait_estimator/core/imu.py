@@ -290,14 +290,21 @@ class FusionParams:
         """Samples of stillness before the still tier, at ``rate_hz`` (>= 1)."""
         return max(1, round(self.still_after_s * rate_hz))
 
+    @staticmethod
+    def max_step_s(rate_hz: float) -> float:
+        """Longest time step (s) integrated at once at ``rate_hz``: ``MAX_STEP_S``, or two nominal
+        periods of a slower sensor."""
+        return max(MAX_STEP_S, 2.0 / rate_hz)
+
 
 GYROSCOPE_RANGE_DPS = 2000.0
 """The gyroscope range the fusion assumes: rates beyond 98 % of it restart the AHRS (imufusion's
 overrange recovery)."""
 MAX_STEP_S = 0.1
-"""Longest time step (s) the fusion integrates at once. The rotation during a longer gap is
-unknown; the rate of the sample after it is integrated over this much, not over the whole gap,
-and the accelerometer takes up the rest."""
+"""Longest time step (s) the fusion integrates at once (``FusionParams.max_step_s``: longer for
+sensors slower than 20 Hz). The rotation during a longer gap is unknown; the rate of the sample
+after it is integrated over this much, not over the whole gap, and the accelerometer takes up the
+rest."""
 DEFAULT_FUSION = FusionParams()
 """The default fusion settings (a default argument value); the thighs' settings."""
 SHANK_FUSION = FusionParams(gain=0.2, quasi_gain=2.0)
@@ -326,7 +333,7 @@ class RawFusion:
 
     Args:
         rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given
-            (at most ``MAX_STEP_S``).
+            (at most ``FusionParams.max_step_s``).
         gyro_bias_dps: Subtracted from every gyro sample (deg/s, sensor frame).
         params: Gains and the stillness test.
     """
@@ -355,6 +362,7 @@ class RawFusion:
             rejection_timeout=params.rejection_timeout_s,
         ) for gain in params.tier_gains()]
         self._still_needed = params.still_samples(rate_hz)
+        self._max_step = params.max_step_s(rate_hz)
         self._period = 1.0 / rate_hz
         self.rate_hz = rate_hz
 
@@ -377,8 +385,8 @@ class RawFusion:
         b0, b1, b2 = self.gyro_bias_dps
         gx, gy, gz = g0 - b0, g1 - b1, g2 - b2
         ahrs = self._ahrs
-        if dt_s is not None and dt_s > MAX_STEP_S:
-            dt_s = MAX_STEP_S
+        if dt_s is not None and dt_s > self._max_step:
+            dt_s = self._max_step
         if dt_s is not None and not -1e-6 <= dt_s - self._period <= 1e-6 and dt_s > 0:
             self._period = dt_s
             ahrs.set_sample_period(dt_s)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -41,10 +42,9 @@ from ..core.imu_learn import (
     quiet_runs,
 )
 from .atomic import atomic_write_text
-from .stream import NON_FINITE, NON_INCREASING_STAMP, STREAM_RESTART_S, SampleRejected
+from .stream import NON_FINITE, NON_INCREASING_STAMP, OUT_OF_RANGE, STREAM_RESTART_S, SampleRejected
 
 ZERO_NORM = "zero_norm"
-OUT_OF_RANGE = "out_of_range"
 UNPAIRED = "unpaired"
 WRONG_FRAME = "wrong_frame"
 IMU_REASONS = (NON_FINITE, ZERO_NORM, OUT_OF_RANGE, NON_INCREASING_STAMP, UNPAIRED, WRONG_FRAME)
@@ -451,6 +451,9 @@ class ImuCalibrator:
         if not (have_acc and standing is not None) and self.gyro_biases is not None:
             # configured axes and no standing pose yet: the last measured
             cal = cal.with_gyro_biases(self.gyro_biases)
+        if self._keep_lateral is not None:  # kept lateral axes were learnt, whatever else is configured
+            cal = ImuCalibration(tuple(replace(m, source="learnt") if a is None else m  # type: ignore[arg-type]
+                                       for m, a in zip(cal.mounts, self.lateral, strict=True)))
         self.calibration = cal
         self.checking = all(m.source == "configured" for m in cal.mounts)
         self.bias_measured = not self.checking
