@@ -41,6 +41,10 @@ def live_angles(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
     biased_at: list[int] = []
     k = 0
     flow = ImuAngles(inputs, calibrator, on_gyro_biases=lambda _: biased_at.append(k))  # k: the sample being paired
+
+    def emit(angles: tuple[float, ...], _: int) -> None:
+        out[k] = angles
+
     zero, identity = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)
     for k in range(len(time_s)):
         stamp = BASE_NS + round(float(time_s[k]) * 1e9)
@@ -48,9 +52,7 @@ def live_angles(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
             item = (inputs[c].convert(stamp, quat[c][k], 0.0, zero, zero) if c in quat else
                     inputs[c].convert(stamp, identity, -1.0, gyro[c][k], acc[c][k]))
             for sample_ns, items in pairer.push(c, stamp, item):
-                angles = flow.sample(sample_ns, items)
-                if angles is not None:
-                    out[k] = angles
+                flow.sample(sample_ns, items, emit)
     return out, (biased_at[-1] if biased_at else None), calibrator
 
 

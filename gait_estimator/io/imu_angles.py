@@ -4,7 +4,7 @@
 that benchmarks and tests run exactly what the node runs: while no calibration is complete, each
 sample goes to ``ImuCalibrator.add`` and no angles come out; the raw sensors are fused with the
 standing pose's gyro biases from the wearer's first move on. A calibration in use but not checked
-yet (a file, configured axes) gives angles while ``ImuCalibrator.check`` looks at the walking.
+yet (a file, configured axes) gives angles, then ``ImuCalibrator.check`` looks at the walking.
 What the node does about a learnt calibration or a check's verdict (save, log, forget) is its own,
 through the hooks.
 """
@@ -25,7 +25,7 @@ def _ignore(_: Any) -> None:
 
 
 class ImuAngles:
-    """The four sensors' paired samples -> their segments' angles (deg), or None while learning.
+    """The four sensors' paired samples -> their segments' angles (deg), none while learning.
 
     Args:
         inputs: The four ``SensorInput`` (CHANNELS order) whose gyro biases the flow sets.
@@ -33,8 +33,8 @@ class ImuAngles:
         on_gyro_biases: Called with the four sensors' gyro biases (deg/s) once a standing pose of
             the stream has ended, after they are applied.
         on_learnt: Called with a calibration ``calibrator`` has just completed (its biases applied).
-        on_checked: Called with the verdict on a calibration that was being checked; it may
-            ``calibrator.reset()`` (the sample then gives no angles).
+        on_checked: Called with the verdict on a calibration that was being checked (after the
+            sample's angles); it may ``calibrator.reset()``.
     """
 
     def __init__(self, inputs: Sequence[SensorInput], calibrator: ImuCalibrator,
@@ -52,33 +52,36 @@ class ImuAngles:
         for sensor, bias in zip(self.inputs, biases_dps, strict=True):
             sensor.set_gyro_bias(bias)
 
-    def sample(self, stamp_ns: int, items: Sequence[Any]) -> tuple[float, ...] | None:
-        """One paired sample (stamp in ns; ``SensorInput.convert``'s (up, gyro, acc) per sensor) ->
-        the four segment angles (deg, CHANNELS order), or None while the calibration is learnt."""
+    def sample(self, stamp_ns: int, items: Sequence[Any], emit: Callable[[tuple[float, ...], int], None]) -> None:
+        """One paired sample (stamp in ns; ``SensorInput.convert``'s (up, gyro, acc) per sensor):
+        ``emit(angles, stamp_ns)`` with the four segment angles (deg, CHANNELS order) once a
+        calibration is in use; nothing while it is learnt. A calibration being checked gives its
+        angles before the check attempt runs on the sample, so that the attempt's cost does not
+        delay them."""
         i0, i1, i2, i3 = items
         ups = (i0[0], i1[0], i2[0], i3[0])
         calibrator = self.calibrator
-        if calibrator.calibration is None or calibrator.checking:
-            t = stamp_ns * 1e-9
-            gyro, acc = (i0[1], i1[1], i2[1], i3[1]), (i0[2], i1[2], i2[2], i3[2])
-            if calibrator.calibration is None:
-                biases = calibrator.gyro_biases
-                learnt = calibrator.add(t, ups, gyro, acc)
-                if calibrator.gyro_biases is not biases:  # a standing pose has ended: its biases from now on
-                    self.set_gyro_biases(calibrator.gyro_biases)
-                    self.on_gyro_biases(calibrator.gyro_biases)
-                if learnt is not None:
-                    self.set_gyro_biases([m.gyro_bias_dps for m in learnt.mounts])
-                    self.on_learnt(learnt)
-                return None
-            before = calibrator.calibration
-            found = calibrator.check(t, ups, gyro, acc)
-            if calibrator.calibration is not before:  # this stream's gyro biases, from its standing pose
-                biases = [m.gyro_bias_dps for m in calibrator.calibration.mounts]
-                self.set_gyro_biases(biases)
-                self.on_gyro_biases(biases)
-            if found is not None:
-                self.on_checked(found)
-                if calibrator.calibration is None:
-                    return None
-        return calibrator.calibration.angles_deg(ups)
+        cal = calibrator.calibration
+        if cal is not None and not calibrator.checking:
+            emit(cal.angles_deg(ups), stamp_ns)
+            return
+        t = stamp_ns * 1e-9
+        gyro, acc = (i0[1], i1[1], i2[1], i3[1]), (i0[2], i1[2], i2[2], i3[2])
+        if cal is None:
+            biases = calibrator.gyro_biases
+            learnt = calibrator.add(t, ups, gyro, acc)
+            if calibrator.gyro_biases is not biases:  # a standing pose has ended: its biases from now on
+                self.set_gyro_biases(calibrator.gyro_biases)
+                self.on_gyro_biases(calibrator.gyro_biases)
+            if learnt is not None:
+                self.set_gyro_biases([m.gyro_bias_dps for m in learnt.mounts])
+                self.on_learnt(learnt)
+            return
+        emit(cal.angles_deg(ups), stamp_ns)
+        found = calibrator.check(t, ups, gyro, acc)
+        if calibrator.calibration is not cal:  # this stream's gyro biases, from its standing pose
+            biases = [m.gyro_bias_dps for m in calibrator.calibration.mounts]
+            self.set_gyro_biases(biases)
+            self.on_gyro_biases(biases)
+        if found is not None:
+            self.on_checked(found)

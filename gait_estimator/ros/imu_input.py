@@ -120,6 +120,7 @@ class ImuInput:
         self.check_problem = ""
         """Configured axes that do not fit the walking (they stay in use): the check's line."""
         self.angles = ImuAngles(self.inputs, self.calibrator, self._biases_measured, self._learnt, self._checked)
+        self._t0 = 0.0  # perf_counter at the callback of the sample being emitted
         if saved is not None:
             self.angles.set_gyro_biases([m.gyro_bias_dps for m in saved.mounts])
         self.rejected: Counter = Counter()
@@ -213,13 +214,16 @@ class ImuInput:
         node = self.node
         node._received += 1
         node._period_received += 1
-        angles = self.angles.sample(stamp_ns, items)
-        if angles is None:
-            return
+        self._t0 = t0
+        self.angles.sample(stamp_ns, items, self._emit)
+
+    def _emit(self, angles: tuple[float, ...], stamp_ns: int) -> None:
+        """The angles of a sample, to the node's estimator."""
+        node = self.node
         est = node._estimator
         if est is not None and est.personaliser is not None:  # kernels learn only from angles known to be right
             est.pause_adaptation(self.calibrator.checking or bool(self.check_problem))
-        node._process(angles, Stamp(*divmod(stamp_ns, 1_000_000_000)), t0)
+        node._process(angles, Stamp(*divmod(stamp_ns, 1_000_000_000)), self._t0)
 
     def _biases_measured(self, biases_dps: Sequence[Vec3]) -> None:
         self.node.get_logger().info("IMU gyro bias measured at the standing pose (deg/s): " + "; ".join(
