@@ -47,7 +47,6 @@ from .stream import NON_FINITE, NON_INCREASING_STAMP, OUT_OF_RANGE, STREAM_RESTA
 ZERO_NORM = "zero_norm"
 UNPAIRED = "unpaired"
 WRONG_FRAME = "wrong_frame"
-IMU_REASONS = (NON_FINITE, ZERO_NORM, OUT_OF_RANGE, NON_INCREASING_STAMP, UNPAIRED, WRONG_FRAME)
 MAX_RATE_RPS = 350.0
 """Largest angular rate (rad/s, about 20000 deg/s) taken from a message: beyond any IMU's range,
 so a raw message with more is dropped (``out_of_range``) and an orientation message is used
