@@ -241,14 +241,16 @@ FUSION_GRID = [FusionParams(gain=g) for g in (0.2, 0.3, 0.5, 1.0)] + [
 """Fusion settings tried per segment by ``select_fusion``."""
 
 
-def _fusion_rms(tr: dict, c: int, params: FusionParams) -> float:
-    """RMS (deg) of one right segment's raw-input angle vs mocap, walking, tared as ``trial_imu``
-    without the data set's faults, with ``params`` and the mount learnt from the bag."""
-    rec, m = tr["rec"], tr["mounts"][c]
-    a = m.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], m.gyro_bias_dps, params))
+def _after_rms(tr: dict, c: int, mount: SegmentMount, bias: tuple, params: FusionParams | None = None) -> float:
+    """RMS (deg) of one right segment's raw-input angle vs mocap with ``mount``, gyro ``bias`` and
+    fusion ``params`` (default: the node's), tared as ``trial_imu``, on the walking after the first
+    standing (what the node puts out) without the data set's faults."""
+    rec = tr["rec"]
+    params = FUSION_BY_CHANNEL[c] if params is None else params
+    a = mount.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], bias, params))
     stand, mocap = first_stand(rec), rec.angles_deg[:, c]
     a -= (a[stand] - mocap[stand]).mean()
-    sel = (rec.labels != "stand") & ~tr["faults"][c]
+    sel = (rec.labels != "stand") & ~tr["faults"][c] & (rec.time_s > rec.time_s[stand][-1])
     return float(np.sqrt(np.mean((a[sel] - mocap[sel]) ** 2)))
 
 
@@ -261,7 +263,8 @@ def select_fusion(trials: list[dict]) -> dict:
 
     out = {}
     for seg, c in RIGHT.items():
-        rms = np.array([[_fusion_rms(tr, c, p) for tr in trials] for p in FUSION_GRID])  # (settings, trials)
+        rms = np.array([[_after_rms(tr, c, tr["mounts"][c], tr["mounts"][c].gyro_bias_dps, p) for tr in trials]
+                        for p in FUSION_GRID])  # (settings, trials)
         held = {}
         for k, tr in enumerate(trials):
             best = int(np.argmin(np.delete(rms, k, axis=1).mean(axis=1)))
@@ -269,7 +272,28 @@ def select_fusion(trials: list[dict]) -> dict:
         best = int(np.argmin(rms.mean(axis=1)))
         out[seg] = {"held_out": held, "held_out_mean_deg": float(np.mean([h["rms_deg"] for h in held.values()])),
                     "in_sample": name(FUSION_GRID[best]), "in_sample_mean_deg": float(rms[best].mean()),
-                    "shipped": name(FUSION_BY_CHANNEL[c])}
+                    "in_sample_index": best, "shipped": name(FUSION_BY_CHANNEL[c])}
+    return out
+
+
+def in_sample_estimator(trials: list[dict], selection: dict) -> dict:
+    """``estimator_runs`` (all samples, without the shank faults) for each segment whose in-sample
+    best settings (``select_fusion``) are not the shipped ones, its raw angles fused with them."""
+    out = {}
+    for seg, c in RIGHT.items():
+        v = selection[seg]
+        if v["in_sample"] == v["shipped"]:
+            continue
+        params, changed = FUSION_GRID[v["in_sample_index"]], []
+        for tr in trials:
+            rec, m = tr["rec"], tr["mounts"][c]
+            a = tr["angles"]["raw"].copy()
+            a[:, c] = m.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], m.gyro_bias_dps, params))
+            stand = first_stand(rec)
+            a[:, c] -= (a[stand, c] - rec.angles_deg[stand, c]).mean()
+            changed.append({**tr, "angles": {**tr["angles"], "raw": a}})
+        out[seg] = {"settings": v["in_sample"], "all": estimator_runs(changed),
+                    "without_faults": estimator_runs(changed, skip_faults=True)}
     return out
 
 
@@ -317,17 +341,6 @@ def estimator_runs(trials: list[dict], skip_faults: bool = False) -> dict:
         out[f"{train_on}->{test_on}"] = {"accuracy": correct / n, "phase_error_mean": err_sum / err_n, "samples": n,
                                          "modes": lib.mode_names}
     return out
-
-
-def _after_rms(tr: dict, c: int, mount: SegmentMount, bias: tuple) -> float:
-    """RMS (deg) of one right segment's raw-input angle vs mocap with ``mount`` and gyro ``bias``,
-    tared as ``trial_imu``, on the walking after the first standing without the data set's faults."""
-    rec = tr["rec"]
-    a = mount.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], bias, FUSION_BY_CHANNEL[c]))
-    stand, mocap = first_stand(rec), rec.angles_deg[:, c]
-    a -= (a[stand] - mocap[stand]).mean()
-    sel = (rec.labels != "stand") & ~tr["faults"][c] & (rec.time_s > rec.time_s[stand][-1])
-    return float(np.sqrt(np.mean((a[sel] - mocap[sel]) ** 2)))
 
 
 def bias_sources(trials: list[dict]) -> dict:
@@ -532,7 +545,8 @@ def main(argv: list[str] | None = None) -> int:
         "trials": [tr["stats"] for tr in trials],
         "estimator": estimator_runs(trials),
         "estimator_without_faults": estimator_runs(trials, skip_faults=True),
-        "fusion_selection": select_fusion(trials),
+        "fusion_selection": (selection := select_fusion(trials)),
+        "estimator_in_sample_fusion": in_sample_estimator(trials, selection),
         "calibration_check": calibration_checks(trials),
         "bias_sources": bias_sources(trials),
         "live": live_runs(trials, {tr["stats"]["trial"]: {c: virtual_quaternions(tr["rec"].angles_deg[:, c]) for c in (1, 3)}
@@ -666,6 +680,12 @@ def estimator_table(r: dict) -> str:
         a, b = key.split("->")
         cells = [f"{100 * v[key]['accuracy']:.1f} %, {100 * v[key]['phase_error_mean']:.2f}" for v in (every, sound)]
         rows.append(f"| {names[a]} → {names[b]} | {cells[0]} | {cells[1]} |")
+    for seg, v in r.get("estimator_in_sample_fusion", {}).items():
+        for key in ("imu_raw->imu_raw", "mocap->imu_raw"):
+            a, b = key.split("->")
+            cells = [f"{100 * w[key]['accuracy']:.1f} %, {100 * w[key]['phase_error_mean']:.2f}"
+                     for w in (v["all"], v["without_faults"])]
+            rows.append(f"| {names[a]} → {names[b]}; {seg}: {v['settings']} | {cells[0]} | {cells[1]} |")
     return "\n".join(rows)
 
 

@@ -26,6 +26,7 @@ from gait_estimator.core.imu import (
     FUSION_BY_CHANNEL,
     MAX_STEP_S,
     SHANK_FUSION,
+    THIGH_FUSION,
     CalibrationError,
     FusionParams,
     ImuCalibration,
@@ -229,7 +230,7 @@ def test_compiled_fusion_is_imufusions_filter_to_rounding():
         acc[k0:k0 + 25] = off.apply(tilted / np.linalg.norm(tilted))
     steps = 0.005 * (1.0 + 0.01 * np.sin(np.arange(n)))
     rejecting = [FusionParams(acceleration_rejection_deg=5.0, rejection_timeout_s=s, quasi_gain=2.0) for s in (0.2, 0.29)]
-    for params in (DEFAULT_FUSION, SHANK_FUSION, *rejecting):
+    for params in (THIGH_FUSION, SHANK_FUSION, *rejecting):
         ref, ours = RawFusion(200.0, (1.0, -2.0, 0.5), params), CompiledFusion(200.0, (1.0, -2.0, 0.5), params)
         worst, tiers = 0.0, set()
         for k in range(n):
@@ -276,12 +277,12 @@ def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):
     assert not np.array_equal(base, quasi)
 
 
-def test_shanks_fuse_with_their_own_settings_in_the_node_and_offline():
-    """FUSION_BY_CHANNEL: thighs DEFAULT_FUSION, shanks SHANK_FUSION, in read_imu_bag as in the node."""
+def test_thighs_and_shanks_fuse_with_their_own_settings_in_the_node_and_offline():
+    """FUSION_BY_CHANNEL: thighs THIGH_FUSION, shanks SHANK_FUSION, in read_imu_bag as in the node."""
     import inspect
 
-    assert FUSION_BY_CHANNEL == (DEFAULT_FUSION, DEFAULT_FUSION, SHANK_FUSION, SHANK_FUSION)
-    assert SHANK_FUSION.quasi_gain is not None and SHANK_FUSION.gain < DEFAULT_FUSION.gain
+    assert FUSION_BY_CHANNEL == (THIGH_FUSION, THIGH_FUSION, SHANK_FUSION, SHANK_FUSION)
+    assert SHANK_FUSION.quasi_gain is not None and SHANK_FUSION.gain < THIGH_FUSION.gain < DEFAULT_FUSION.gain
     assert inspect.signature(read_imu_bag).parameters["fusion_params"].default is FUSION_BY_CHANNEL
     # the node's inputs: test_node_imu.py::test_configured_axes_need_no_calibration_file
 

@@ -306,11 +306,14 @@ sensors slower than 20 Hz). The rotation during a longer gap is unknown; the rat
 after it is integrated over this much, not over the whole gap, and the accelerometer takes up the
 rest."""
 DEFAULT_FUSION = FusionParams()
-"""The default fusion settings (a default argument value); the thighs' settings."""
+"""The default fusion settings (a default argument value): imufusion's gain."""
+THIGH_FUSION = FusionParams(gain=0.3)
+"""The thighs' fusion settings: imufusion's with a lower gain, so that the accelerations of a
+swinging thigh pull its tilt less (docs/imu.md, "Measured")."""
 SHANK_FUSION = FusionParams(gain=0.2, quasi_gain=2.0)
 """The shanks' fusion settings: swing accelerations of the shank are larger, its mid-stance
 quieter than the thigh's, so the accelerometer weighs little except while it turns slowly."""
-FUSION_BY_CHANNEL = (DEFAULT_FUSION, DEFAULT_FUSION, SHANK_FUSION, SHANK_FUSION)
+FUSION_BY_CHANNEL = (THIGH_FUSION, THIGH_FUSION, SHANK_FUSION, SHANK_FUSION)
 """Fusion settings per sensor, CHANNELS order (right_thigh, left_thigh, right_shank, left_shank)."""
 
 
