@@ -21,7 +21,9 @@ synthetic checks and the per-sample conversion cost. One command:
   raw-input IMU angles or with the mocap angles.
 * Synthetic (test/imu_synth.py): random mountings, exact quaternions; raw input with noise and
   gyro bias.
-* Fusion settings: per segment, chosen leave-one-trial-out from FUSION_GRID (``select_fusion``).
+* Fusion settings: per segment, scored on the walking after the first standing (what the node puts
+  out), chosen leave-one-trial-out from FUSION_GRID (``select_fusion``); where the best on all
+  five is not the shipped one, the estimator fed with it (``in_sample_estimator``).
 * Calibration check (``calibration_checks``): the node's check of a saved calibration on the
   first walking (``check_stream``), for the raw-input calibration learnt on each trial
   checked on every trial (the same sensors, no false alarm wanted), and on each trial with its
@@ -281,10 +283,9 @@ def in_sample_estimator(trials: list[dict], selection: dict) -> dict:
     best settings (``select_fusion``) are not the shipped ones, its raw angles fused with them."""
     out = {}
     for seg, c in RIGHT.items():
-        v = selection[seg]
-        if v["in_sample"] == v["shipped"]:
+        params, changed = FUSION_GRID[selection[seg]["in_sample_index"]], []
+        if params == FUSION_BY_CHANNEL[c]:
             continue
-        params, changed = FUSION_GRID[v["in_sample_index"]], []
         for tr in trials:
             rec, m = tr["rec"], tr["mounts"][c]
             a = tr["angles"]["raw"].copy()
@@ -292,7 +293,7 @@ def in_sample_estimator(trials: list[dict], selection: dict) -> dict:
             stand = first_stand(rec)
             a[:, c] -= (a[stand, c] - rec.angles_deg[stand, c]).mean()
             changed.append({**tr, "angles": {**tr["angles"], "raw": a}})
-        out[seg] = {"settings": v["in_sample"], "all": estimator_runs(changed),
+        out[seg] = {"settings": selection[seg]["in_sample"], "all": estimator_runs(changed),
                     "without_faults": estimator_runs(changed, skip_faults=True)}
     return out
 

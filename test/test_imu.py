@@ -230,7 +230,7 @@ def test_compiled_fusion_is_imufusions_filter_to_rounding():
         acc[k0:k0 + 25] = off.apply(tilted / np.linalg.norm(tilted))
     steps = 0.005 * (1.0 + 0.01 * np.sin(np.arange(n)))
     rejecting = [FusionParams(acceleration_rejection_deg=5.0, rejection_timeout_s=s, quasi_gain=2.0) for s in (0.2, 0.29)]
-    for params in (THIGH_FUSION, SHANK_FUSION, *rejecting):
+    for params in (DEFAULT_FUSION, THIGH_FUSION, SHANK_FUSION, *rejecting):
         ref, ours = RawFusion(200.0, (1.0, -2.0, 0.5), params), CompiledFusion(200.0, (1.0, -2.0, 0.5), params)
         worst, tiers = 0.0, set()
         for k in range(n):
