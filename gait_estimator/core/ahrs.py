@@ -198,3 +198,14 @@ def fuse_raw(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
         out[i] = fusion.update(gyro_dps[i], acc_g[i], dt)
         prev = t[i]
     return out
+
+
+def fuse_raw_backwards(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
+                       gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0), params: FusionParams = DEFAULT_FUSION) -> np.ndarray:
+    """``fuse_raw`` run from the last sample to the first (time reversed: the rotation rates
+    negated), started from the last sample's accelerometer; up (T, 3) in time order."""
+    back = slice(None, None, -1)
+    t, gyro, acc = (np.asarray(x, dtype=np.float64)[back] for x in (time_s, gyro_dps, acc_g))
+    bias = (-gyro_bias_dps[0], -gyro_bias_dps[1], -gyro_bias_dps[2])
+    return fuse_raw(-t, -gyro, acc, bias, params)[back]
+

@@ -6,7 +6,7 @@ learnt from the first still second and the strides after it) turns them into ang
 node, the whole file is known: a learnt calibration applies from the first sample, and with raw
 input (no orientation) the fusion is run again with the gyro bias measured while standing (for a
 given or configured calibration: as the node measures it, at a standing pose before the check's
-verdict).
+verdict), and backwards in time from the first standing pose for the samples before it.
 
 Topics: ``imu_topics`` (four names, CHANNELS order), else ``/imu/right_thigh``, ... if present,
 else the four Imu topics whose names end in the channel names.
@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.ahrs import fuse_raw_backwards
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
 from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, FusionParams, ImuCalibration
@@ -34,6 +35,7 @@ from ..core.imu_learn import (
     STILL_S,
     ImuLearnParams,
     check_configured,
+    find_standing,
     learn_calibration,
 )
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
@@ -184,6 +186,9 @@ def read_imu_bag(
             cal = checked
             paired, rejected = fused(cal)  # (only raw sensors get measured biases), from the first sample
             note += "; gyro biases from the standing pose"
+    paired, pose_s = _fused_backwards(paired, cal, fusion_params, learn_params)
+    if pose_s is not None:
+        note += f"; raw sensors before the first still stretch ({pose_s:.1f} s) fused backwards from it"
     stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
     angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)
     return ImuBagRecording(
@@ -262,6 +267,35 @@ def _arrays(paired: list) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np
     acc = np.asarray([s[4] for s in paired], dtype=np.float64).transpose(1, 0, 2)
     return ((t - t[0]) * 1e-9, ups, gyro if np.isfinite(gyro).any() else None,
             acc if np.isfinite(acc).any() else None)
+
+
+def _fused_backwards(paired: list, cal: ImuCalibration, fusion: FusionParams | Sequence[FusionParams],
+                     params: ImuLearnParams) -> tuple[list, float | None]:
+    """``paired`` with the raw sensors' up directions before the first still stretch (standing pose
+    of ``params.short_still_s``) fused backwards in time from it (the forward fusion starts at the
+    first sample, from the accelerometer of a sensor that may be moving), and the stretch's start
+    (s); ``paired`` and None without raw sensors or such a stretch after the first sample."""
+    time_s, ups, gyro, acc = _arrays(paired)
+    if acc is None or gyro is None:
+        return paired, None
+    pose = find_standing(time_s, ups, gyro, acc, still_s=params.short_still_s, params=params)
+    if pose is None or pose.start == 0:
+        return paired, None
+    per_sensor = [fusion] * N_CHANNELS if isinstance(fusion, FusionParams) else list(fusion)
+    upto = slice(0, pose.stop)
+    ups_back = {c: fuse_raw_backwards(time_s[upto], gyro[c, upto], acc[c, upto], cal.mounts[c].gyro_bias_dps,
+                                      per_sensor[c])
+                for c in range(N_CHANNELS) if np.isfinite(acc[c, upto]).all()}
+    if not ups_back:
+        return paired, None
+    out = list(paired)
+    for k in range(pose.start):
+        stamp, log_ns, u, g, a = paired[k]
+        u = list(u)
+        for c, up in ups_back.items():
+            u[c] = tuple(up[k])
+        out[k] = (stamp, log_ns, u, g, a)
+    return out, float(time_s[pose.start])
 
 
 def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list,
