@@ -22,8 +22,9 @@ synthetic checks and the per-sample conversion cost. One command:
 * Synthetic (test/imu_synth.py): random mountings, exact quaternions; raw input with noise and
   gyro bias.
 * Fusion settings: per segment, scored on the walking after the first standing (what the node puts
-  out), chosen leave-one-trial-out from FUSION_GRID (``select_fusion``); where the best on all
-  five is not the shipped one, the estimator fed with it (``in_sample_estimator``).
+  out; angles as read offline, ``offline_ups``), chosen leave-one-trial-out from FUSION_GRID
+  (``select_fusion``); where the best on all five is not the shipped one, the estimator fed with
+  it (``in_sample_estimator``).
 * Calibration check (``calibration_checks``): the node's check of a saved calibration on the
   first walking (``check_stream``), for the raw-input calibration learnt on each trial
   checked on every trial (the same sensors, no false alarm wanted), and on each trial with its
@@ -65,7 +66,7 @@ from imu_live import live_runs  # noqa: E402
 from gait_estimator.analysis.evaluate import PredictionTable, evaluate  # noqa: E402
 from gait_estimator.analysis.strides import heel_strikes  # noqa: E402
 from gait_estimator.analysis.train import TrainOptions, train_library  # noqa: E402
-from gait_estimator.core.ahrs import fuse_raw  # noqa: E402
+from gait_estimator.core.ahrs import fuse_raw, fuse_raw_backwards  # noqa: E402
 from gait_estimator.core.imu import (  # noqa: E402
     FUSION_BY_CHANNEL,
     STANDARD_GRAVITY,
@@ -124,7 +125,9 @@ def first_stand(rec: Recording) -> np.ndarray:
 def shank_faults(rec: Recording, trial: str) -> np.ndarray:
     """Samples whose right-shank IMU data the data set's README lists as faulty ("Known issues":
     gyro sign flips, motion-capture-like patches, the first-row spike of ccw_fast), from each
-    fault to the next standing bout, where the fusion settles on the accelerometer again."""
+    fault to the next standing bout, where the fusion settles on the accelerometer again; for a
+    fault before the first standing bout also the samples before it, which offline reading fuses
+    backwards from that bout."""
     stats = json.loads((DATA / "stats.json").read_text())["trials"][trial + ".csv"]
     starts = [f[0] for f in stats["gyro_sign_flips"]["shank_Gyro_Y"]]
     starts += [iv[0] for iv in stats["shank_gyro_y_ik_like"]["intervals"]]
@@ -132,10 +135,11 @@ def shank_faults(rec: Recording, trial: str) -> np.ndarray:
         starts.append(14.425)
     stand = rec.labels == "stand"
     bad = np.zeros(len(rec), dtype=bool)
+    first = rec.time_s[np.argmax(stand)]
     for s in starts:
         after = (rec.time_s >= s) & stand
         end = rec.time_s[np.argmax(after)] if after.any() else np.inf
-        bad |= (rec.time_s >= s) & (rec.time_s < end)
+        bad |= ((rec.time_s >= s) | (s < first)) & (rec.time_s < end)
     return bad
 
 
@@ -232,9 +236,10 @@ def trial_imu(path: Path, tmp: Path) -> dict:
         angles[kind] = a
         if kind == "raw":
             mounts = {c: got.calibration.mounts[c] for c in RIGHT.values()}
+            backwards_until = got.fused_backwards_until
     virtual_ups = {c: ups_from_quaternions(left[c]) for c in left}
     return {"stats": out, "angles": angles, "rec": rec, "gyro": gyro, "acc_g": acc / STANDARD_GRAVITY, "mounts": mounts,
-            "faults": faults, "virtual_ups": virtual_ups}
+            "faults": faults, "virtual_ups": virtual_ups, "backwards_until": backwards_until}
 
 
 FUSION_GRID = [FusionParams(gain=g) for g in (0.2, 0.3, 0.5, 1.0)] + [
@@ -243,13 +248,23 @@ FUSION_GRID = [FusionParams(gain=g) for g in (0.2, 0.3, 0.5, 1.0)] + [
 """Fusion settings tried per segment by ``select_fusion``."""
 
 
+def offline_ups(tr: dict, c: int, bias: tuple, params: FusionParams) -> np.ndarray:
+    """One right sensor's up directions (T, 3) as ``read_imu_bag`` fuses them, with gyro ``bias``
+    and fusion ``params``: forwards, and backwards up to the end of the first still stretch."""
+    t, gyro, acc, k = tr["rec"].time_s, tr["gyro"][c], tr["acc_g"][c], tr["backwards_until"]
+    ups = fuse_raw(t, gyro, acc, bias, params)
+    if k:
+        ups[:k] = fuse_raw_backwards(t[:k], gyro[:k], acc[:k], bias, params)
+    return ups
+
+
 def _after_rms(tr: dict, c: int, mount: SegmentMount, bias: tuple, params: FusionParams | None = None) -> float:
-    """RMS (deg) of one right segment's raw-input angle vs mocap with ``mount``, gyro ``bias`` and
-    fusion ``params`` (default: the node's), tared as ``trial_imu``, on the walking after the first
-    standing (what the node puts out) without the data set's faults."""
+    """RMS (deg) of one right segment's raw-input angle (``offline_ups``) vs mocap with ``mount``,
+    gyro ``bias`` and fusion ``params`` (default: the node's), tared as ``trial_imu``, on the walking
+    after the first standing (what the node puts out) without the data set's faults."""
     rec = tr["rec"]
     params = FUSION_BY_CHANNEL[c] if params is None else params
-    a = mount.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], bias, params))
+    a = mount.angles_deg(offline_ups(tr, c, bias, params))
     stand, mocap = first_stand(rec), rec.angles_deg[:, c]
     a -= (a[stand] - mocap[stand]).mean()
     sel = (rec.labels != "stand") & ~tr["faults"][c] & (rec.time_s > rec.time_s[stand][-1])
@@ -289,7 +304,7 @@ def in_sample_estimator(trials: list[dict], selection: dict) -> dict:
         for tr in trials:
             rec, m = tr["rec"], tr["mounts"][c]
             a = tr["angles"]["raw"].copy()
-            a[:, c] = m.angles_deg(fuse_raw(rec.time_s, tr["gyro"][c], tr["acc_g"][c], m.gyro_bias_dps, params))
+            a[:, c] = m.angles_deg(offline_ups(tr, c, m.gyro_bias_dps, params))
             stand = first_stand(rec)
             a[:, c] -= (a[stand, c] - rec.angles_deg[stand, c]).mean()
             changed.append({**tr, "angles": {**tr["angles"], "raw": a}})

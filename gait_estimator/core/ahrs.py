@@ -208,4 +208,3 @@ def fuse_raw_backwards(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarr
     t, gyro, acc = (np.asarray(x, dtype=np.float64)[back] for x in (time_s, gyro_dps, acc_g))
     bias = (-gyro_bias_dps[0], -gyro_bias_dps[1], -gyro_bias_dps[2])
     return fuse_raw(-t, -gyro, acc, bias, params)[back]
-

@@ -6,7 +6,7 @@ learnt from the first still second and the strides after it) turns them into ang
 node, the whole file is known: a learnt calibration applies from the first sample, and with raw
 input (no orientation) the fusion is run again with the gyro bias measured while standing (for a
 given or configured calibration: as the node measures it, at a standing pose before the check's
-verdict), and backwards in time from the first standing pose for the samples before it.
+verdict), and backwards in time from the end of the first still stretch for the samples up to it.
 
 Topics: ``imu_topics`` (four names, CHANNELS order), else ``/imu/right_thigh``, ... if present,
 else the four Imu topics whose names end in the channel names.
@@ -49,10 +49,12 @@ DEFAULT_IMU_TOPICS = tuple(f"imu/{c}" for c in CHANNELS)
 
 @dataclass
 class ImuBagRecording(BagRecording):
-    """A BagRecording made from four Imu topics; ``calibration`` is the one used."""
+    """A BagRecording made from four Imu topics; ``calibration`` is the one used; the raw sensors'
+    samples before ``fused_backwards_until`` were fused backwards in time from it."""
 
     calibration: ImuCalibration | None = None
     calibration_note: str = ""
+    fused_backwards_until: int = 0
 
     @property
     def notes(self) -> list[str]:
@@ -186,9 +188,7 @@ def read_imu_bag(
             cal = checked
             paired, rejected = fused(cal)  # (only raw sensors get measured biases), from the first sample
             note += "; gyro biases from the standing pose"
-    paired, pose_s = _fused_backwards(paired, cal, fusion_params, learn_params)
-    if pose_s is not None:
-        note += f"; raw sensors before the first still stretch ({pose_s:.1f} s) fused backwards from it"
+    paired, backwards_until, backwards = _fused_backwards(paired, cal, fusion_params, learn_params)
     stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
     angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)
     return ImuBagRecording(
@@ -204,7 +204,8 @@ def read_imu_bag(
         messages=len(messages) + undecodable,
         max_gap_s=max_gap_s,
         calibration=cal,
-        calibration_note=note,
+        calibration_note=note + backwards,
+        fused_backwards_until=backwards_until,
     )
 
 
@@ -270,32 +271,35 @@ def _arrays(paired: list) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np
 
 
 def _fused_backwards(paired: list, cal: ImuCalibration, fusion: FusionParams | Sequence[FusionParams],
-                     params: ImuLearnParams) -> tuple[list, float | None]:
-    """``paired`` with the raw sensors' up directions before the first still stretch (standing pose
-    of ``params.short_still_s``) fused backwards in time from it (the forward fusion starts at the
-    first sample, from the accelerometer of a sensor that may be moving), and the stretch's start
-    (s); ``paired`` and None without raw sensors or such a stretch after the first sample."""
+                     params: ImuLearnParams) -> tuple[list, int, str]:
+    """``paired`` with the raw sensors' up directions up to the end of the first still stretch
+    (a standing pose of ``params.short_still_s``, and as long as it stays still) fused backwards in
+    time from that end: the forward fusion starts at the first sample, from the accelerometer of
+    a sensor that may be moving, and is still settling when the stretch begins. Also that end
+    (sample index) and the calibration note's ending; ``paired``, 0 and '' without raw sensors or
+    such a stretch after the first sample."""
     time_s, ups, gyro, acc = _arrays(paired)
     if acc is None or gyro is None:
-        return paired, None
+        return paired, 0, ""
     pose = find_standing(time_s, ups, gyro, acc, still_s=params.short_still_s, params=params)
     if pose is None or pose.start == 0:
-        return paired, None
+        return paired, 0, ""
     per_sensor = [fusion] * N_CHANNELS if isinstance(fusion, FusionParams) else list(fusion)
-    upto = slice(0, pose.stop)
+    upto = slice(0, pose.still_until)
     ups_back = {c: fuse_raw_backwards(time_s[upto], gyro[c, upto], acc[c, upto], cal.mounts[c].gyro_bias_dps,
                                       per_sensor[c])
                 for c in range(N_CHANNELS) if np.isfinite(acc[c, upto]).all()}
     if not ups_back:
-        return paired, None
+        return paired, 0, ""
     out = list(paired)
-    for k in range(pose.start):
+    for k in range(pose.still_until):
         stamp, log_ns, u, g, a = paired[k]
         u = list(u)
         for c, up in ups_back.items():
             u[c] = tuple(up[k])
         out[k] = (stamp, log_ns, u, g, a)
-    return out, float(time_s[pose.start])
+    note = f"; raw sensors up to the end of the first still stretch ({time_s[pose.start]:.1f} s on) fused backwards"
+    return out, pose.still_until, note
 
 
 def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list,
