@@ -270,36 +270,44 @@ def _arrays(paired: list) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np
             acc if np.isfinite(acc).any() else None)
 
 
+BACKWARDS_MARGIN_S = 0.2
+"""The backward fusion starts this long before the end of the still stretch that ``find_standing``
+reports, which can follow the first move by as much as its 0.2 s tilt comparison."""
+
+
 def _fused_backwards(paired: list, cal: ImuCalibration, fusion: FusionParams | Sequence[FusionParams],
                      params: ImuLearnParams) -> tuple[list, int, str]:
     """``paired`` with the raw sensors' up directions up to the end of the first still stretch
-    (a standing pose of ``params.short_still_s``, and as long as it stays still) fused backwards in
-    time from that end: the forward fusion starts at the first sample, from the accelerometer of
-    a sensor that may be moving, and is still settling when the stretch begins. Also that end
-    (sample index) and the calibration note's ending; ``paired``, 0 and '' without raw sensors or
-    such a stretch after the first sample."""
+    (a standing pose of ``params.short_still_s``, and as long as it stays still, less
+    BACKWARDS_MARGIN_S) fused backwards in time from that end: the forward fusion starts at the
+    first sample, from the accelerometer of a sensor that may be moving, and is still settling
+    when the stretch begins. Also that end (sample index) and the calibration note's ending;
+    ``paired``, 0 and '' without raw sensors or such a stretch after the first sample."""
     time_s, ups, gyro, acc = _arrays(paired)
     if acc is None or gyro is None:
         return paired, 0, ""
     pose = find_standing(time_s, ups, gyro, acc, still_s=params.short_still_s, params=params)
     if pose is None or pose.start == 0:
         return paired, 0, ""
+    end = int(np.searchsorted(time_s, time_s[pose.still_until - 1] - BACKWARDS_MARGIN_S, side="right"))
+    end = max(end, pose.stop)
     per_sensor = [fusion] * N_CHANNELS if isinstance(fusion, FusionParams) else list(fusion)
-    upto = slice(0, pose.still_until)
+    upto = slice(0, end)
     ups_back = {c: fuse_raw_backwards(time_s[upto], gyro[c, upto], acc[c, upto], cal.mounts[c].gyro_bias_dps,
                                       per_sensor[c])
                 for c in range(N_CHANNELS) if np.isfinite(acc[c, upto]).all()}
     if not ups_back:
         return paired, 0, ""
     out = list(paired)
-    for k in range(pose.still_until):
+    for k in range(end):
         stamp, log_ns, u, g, a = paired[k]
         u = list(u)
         for c, up in ups_back.items():
             u[c] = tuple(up[k])
         out[k] = (stamp, log_ns, u, g, a)
-    note = f"; raw sensors up to the end of the first still stretch ({time_s[pose.start]:.1f} s on) fused backwards"
-    return out, pose.still_until, note
+    note = (f"; raw sensors fused backwards in time from {time_s[end - 1]:.1f} s, in the first still stretch "
+            f"({time_s[pose.start]:.1f}-{time_s[pose.still_until - 1]:.1f} s)")
+    return out, end, note
 
 
 def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: list,
