@@ -258,15 +258,21 @@ def offline_ups(tr: dict, c: int, bias: tuple, params: FusionParams) -> np.ndarr
     return ups
 
 
-def _after_rms(tr: dict, c: int, mount: SegmentMount, bias: tuple, params: FusionParams | None = None) -> float:
-    """RMS (deg) of one right segment's raw-input angle (``offline_ups``) vs mocap with ``mount``,
-    gyro ``bias`` and fusion ``params`` (default: the node's), tared as ``trial_imu``, on the walking
-    after the first standing (what the node puts out) without the data set's faults."""
+def _tared_angles(tr: dict, c: int, mount: SegmentMount, bias: tuple, params: FusionParams) -> np.ndarray:
+    """One right segment's raw-input angles (deg, T) from ``offline_ups`` with ``mount``, gyro
+    ``bias`` and fusion ``params``, tared as ``trial_imu``."""
     rec = tr["rec"]
-    params = FUSION_BY_CHANNEL[c] if params is None else params
     a = mount.angles_deg(offline_ups(tr, c, bias, params))
+    stand = first_stand(rec)
+    return a - (a[stand] - rec.angles_deg[stand, c]).mean()
+
+
+def _after_rms(tr: dict, c: int, mount: SegmentMount, bias: tuple, params: FusionParams | None = None) -> float:
+    """RMS (deg) of ``_tared_angles`` (fusion ``params``, default: the node's) vs mocap, on the
+    walking after the first standing (what the node puts out) without the data set's faults."""
+    rec = tr["rec"]
+    a = _tared_angles(tr, c, mount, bias, FUSION_BY_CHANNEL[c] if params is None else params)
     stand, mocap = first_stand(rec), rec.angles_deg[:, c]
-    a -= (a[stand] - mocap[stand]).mean()
     sel = (rec.labels != "stand") & ~tr["faults"][c] & (rec.time_s > rec.time_s[stand][-1])
     return float(np.sqrt(np.mean((a[sel] - mocap[sel]) ** 2)))
 
@@ -302,11 +308,8 @@ def in_sample_estimator(trials: list[dict], selection: dict) -> dict:
         if params == FUSION_BY_CHANNEL[c]:
             continue
         for tr in trials:
-            rec, m = tr["rec"], tr["mounts"][c]
-            a = tr["angles"]["raw"].copy()
-            a[:, c] = m.angles_deg(offline_ups(tr, c, m.gyro_bias_dps, params))
-            stand = first_stand(rec)
-            a[:, c] -= (a[stand, c] - rec.angles_deg[stand, c]).mean()
+            m, a = tr["mounts"][c], tr["angles"]["raw"].copy()
+            a[:, c] = _tared_angles(tr, c, m, m.gyro_bias_dps, params)
             changed.append({**tr, "angles": {**tr["angles"], "raw": a}})
         out[seg] = {"settings": selection[seg]["in_sample"], "all": estimator_runs(changed),
                     "without_faults": estimator_runs(changed, skip_faults=True)}

@@ -92,10 +92,10 @@ def is_imu_bag(p: Path) -> bool:
 
 
 def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list | None, tolerance_s: float,
-               fusion: FusionParams | Sequence[FusionParams]):
-    """Messages (sensor, log_ns, msg) -> paired (stamp_ns, log_ns, ups, gyro, acc) and rejections."""
-    per_sensor = [fusion] * N_CHANNELS if isinstance(fusion, FusionParams) else list(fusion)
-    inputs = [SensorInput(rate_hz, params=f, restart_back_s=0.0) for f in per_sensor]  # one recording
+               fusion: Sequence[FusionParams]):
+    """Messages (sensor, log_ns, msg) -> paired (stamp_ns, log_ns, ups, gyro, acc) and rejections;
+    ``fusion``: per sensor."""
+    inputs = [SensorInput(rate_hz, params=f, restart_back_s=0.0) for f in fusion]  # one recording
     if bias is not None:
         for s, b in zip(inputs, bias, strict=False):
             s.set_gyro_bias(b)
@@ -160,11 +160,12 @@ def read_imu_bag(
     names, messages, undecodable = _read_messages(p, imu_topics)
     rate = _rate_hz(messages)
     tolerance_s = imu_tolerance_s if imu_tolerance_s is not None else _measured_tolerance(messages)
+    fusion = [fusion_params] * N_CHANNELS if isinstance(fusion_params, FusionParams) else list(fusion_params)
 
     def fused(c: ImuCalibration | None) -> tuple[list, Counter]:
         """The messages paired, raw ones fused with ``c``'s gyro biases (None: none)."""
         paired, rejected = _front_end(messages, rate, None if c is None else [m.gyro_bias_dps for m in c.mounts],
-                                      tolerance_s, fusion_params)
+                                      tolerance_s, fusion)
         if undecodable:
             rejected["undecodable"] += undecodable
         return paired, rejected
@@ -188,7 +189,7 @@ def read_imu_bag(
             cal = checked
             paired, rejected = fused(cal)  # (only raw sensors get measured biases), from the first sample
             note += "; gyro biases from the standing pose"
-    paired, backwards_until, backwards = _fused_backwards(paired, cal, fusion_params, learn_params)
+    paired, backwards_until, backwards = _fused_backwards(paired, cal, fusion, learn_params)
     stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
     angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)
     return ImuBagRecording(
@@ -275,14 +276,15 @@ BACKWARDS_MARGIN_S = 0.2
 reports, which can follow the first move by as much as its 0.2 s tilt comparison."""
 
 
-def _fused_backwards(paired: list, cal: ImuCalibration, fusion: FusionParams | Sequence[FusionParams],
+def _fused_backwards(paired: list, cal: ImuCalibration, fusion: Sequence[FusionParams],
                      params: ImuLearnParams) -> tuple[list, int, str]:
     """``paired`` with the raw sensors' up directions up to the end of the first still stretch
     (a standing pose of ``params.short_still_s``, and as long as it stays still, less
     BACKWARDS_MARGIN_S) fused backwards in time from that end: the forward fusion starts at the
     first sample, from the accelerometer of a sensor that may be moving, and is still settling
-    when the stretch begins. Also that end (sample index) and the calibration note's ending;
-    ``paired``, 0 and '' without raw sensors or such a stretch after the first sample."""
+    when the stretch begins (``fusion``: per sensor). Also that end (sample index) and the
+    calibration note's ending; ``paired``, 0 and '' without raw sensors or such a stretch after the
+    first sample."""
     time_s, ups, gyro, acc = _arrays(paired)
     if acc is None or gyro is None:
         return paired, 0, ""
@@ -291,10 +293,9 @@ def _fused_backwards(paired: list, cal: ImuCalibration, fusion: FusionParams | S
         return paired, 0, ""
     end = int(np.searchsorted(time_s, time_s[pose.still_until - 1] - BACKWARDS_MARGIN_S, side="right"))
     end = max(end, pose.stop)
-    per_sensor = [fusion] * N_CHANNELS if isinstance(fusion, FusionParams) else list(fusion)
     upto = slice(0, end)
     ups_back = {c: fuse_raw_backwards(time_s[upto], gyro[c, upto], acc[c, upto], cal.mounts[c].gyro_bias_dps,
-                                      per_sensor[c])
+                                      fusion[c])
                 for c in range(N_CHANNELS) if np.isfinite(acc[c, upto]).all()}
     if not ups_back:
         return paired, 0, ""
