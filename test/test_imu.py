@@ -45,7 +45,7 @@ from gait_estimator.core.imu_learn import (
     quiet_runs,
 )
 from gait_estimator.io.imu_angles import ImuAngles
-from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
+from gait_estimator.io.imu_bag import ImuBagRecording, read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
     NON_INCREASING_STAMP,
@@ -358,6 +358,16 @@ def test_a_calibration_made_earlier_is_checked_on_the_walking(angles):
     still = synthesize(np.zeros((1600, 4)), RATE, s.mounts, rng)
     found, missing = check_calibration(still.time_s, _ups(still), cal, still.gyro_dps)
     assert found is None and missing.endswith("walk a few more strides")
+    # a sensor upside down (its long axis reversed): a verdict from the knee alone, standing or walking,
+    # also where the axes cannot be learnt with the wrong long axis
+    mounts = list(cal.mounts)
+    mounts[3] = dataclasses.replace(mounts[3], proximal=tuple(-x for x in mounts[3].proximal))
+    flipped = ImuCalibration(tuple(mounts))
+    for ts, us, gs in ((still.time_s, _ups(still), still.gyro_dps), (t, u, g)):
+        found, missing = check_calibration(ts, us, flipped, gs)
+        assert found is not None and not found.fits and missing == ""
+        assert f"left knee {found.knee_extension_deg[1]:.0f} deg past straight" in found.problems
+        assert found.knee_extension_deg[1] > 150.0 and found.knee_extension_deg[0] < 10.0
 
 
 def test_configured_proximal_axes_need_no_standing_before_the_strides(angles):
@@ -767,6 +777,7 @@ def test_raw_imu_bag_walking_before_the_standing_pose_is_fused_backwards_from_it
     assert (np.abs(err[(s.time_s > 4.0) & (s.time_s < 5.5)]) < 1.0).all()  # standing, either side of k
     assert (rms(err[s.time_s < 5.5]) < 2.0).all(), rms(err[s.time_s < 5.5])
     assert (rms(err[s.time_s > 8.0]) < 2.0).all()
+    assert rec.slice(100).fused_backwards_until == k - 100 and rec.slice(k + 5).fused_backwards_until == 0
 
 
 def test_imu_bag_reads_as_a_recording_of_the_four_angles(synthetic_bags):
@@ -843,6 +854,11 @@ def test_convert_imu_bag_to_csv_and_process_it(synthetic_bags, tmp_path):
     r = subprocess.run([sys.executable, "-m", "gait_estimator.cli", "process", str(d / "orientation")],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
+    assert "IMU calibration learnt" in r.stdout + r.stderr  # process says how the angles were made, as convert does
+    whole = read_imu_bag(d / "raw.db3dir")
+    part = whole.slice(100, 2000)
+    assert isinstance(part, ImuBagRecording) and part.calibration == whole.calibration and len(part) == 1900
+    assert part.notes == whole.notes and part.stamp_ns.tolist() == whole.stamp_ns[100:2000].tolist()
 
 
 DRIVER_TOPICS = ["/thigh_r/imu/data", "/thigh_l/imu/data", "/shank_r/imu/data", "/shank_l/imu/data"]

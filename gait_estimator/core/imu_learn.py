@@ -15,7 +15,8 @@ A calibration made earlier (a saved file, configured axes) is **checked** agains
 walking (``check_calibration``): its lateral axes against the ones learnt there with its proximal
 axes, and its knee angles against the knee rule. A sensor turned about its segment or a wrong sign
 shows in the first; an angle offset (a sensor tilted within the sagittal plane) only when it
-bends the knee past straight.
+bends the knee past straight. A knee bent past ``max_knee_extension_deg`` (a sensor upside down)
+is a verdict on any stretch, walking or not; the axes need the walking.
 
 Every function takes whole arrays (a file, or the live node's buffer); ``learn_calibration``
 returns the calibration or what is still missing.
@@ -24,6 +25,7 @@ returns the calibration or what is still missing.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -329,7 +331,8 @@ class CalibrationCheck:
 
     Attributes:
         axis_change_deg: Per segment (CHANNELS order), the angle (deg) between the calibration's
-            lateral axis and the one learnt on the stretch (180 = opposite sign).
+            lateral axis and the one learnt on the stretch (180 = opposite sign; NaN when the
+            knee rule alone rejected the calibration, before there was walking to learn from).
         knee_extension_deg: Per leg (right, left), the knee's 98th percentile (deg, + = extended
             past straight) with the calibration.
         problems: What does not fit, one phrase each; empty when the calibration fits.
@@ -360,22 +363,25 @@ def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, 
     t = np.asarray(time_s, dtype=np.float64)
     ups = np.asarray(ups, dtype=np.float64)
     mounts = cal.mounts
+    knee = []
+    for thigh, shank in LEGS:
+        k = mounts[shank].angles_deg(ups[shank]) - mounts[thigh].angles_deg(ups[thigh])
+        k = k[np.isfinite(k)]
+        knee.append(float(np.percentile(k, 98)) if len(k) else math.nan)
+    bent = [f"{leg} knee {k:.0f} deg past straight" for leg, k in zip(("right", "left"), knee, strict=True)
+            if round(k) > params.max_knee_extension_deg]  # rounded as printed
     fresh, _, missing = learn_calibration(
         t, ups, proximal=[m.proximal for m in mounts], standing_deg=[m.standing_deg for m in mounts],
         gyro_dps=gyro_dps, params=params, search=False)  # the axes only: no bias wanted
     if fresh is None:
+        if bent:  # no walking needed: no calibration that fits bends a knee that far (a sensor upside down)
+            return CalibrationCheck((math.nan,) * N_CHANNELS, (knee[0], knee[1]), tuple(bent)), ""
         return None, missing
     change = tuple(float(np.degrees(np.arccos(np.clip(np.dot(f.lateral, m.lateral), -1.0, 1.0))))
                    for f, m in zip(fresh.mounts, mounts, strict=True))
-    knee = []
-    for thigh, shank in LEGS:
-        k = mounts[shank].angles_deg(ups[shank]) - mounts[thigh].angles_deg(ups[thigh])
-        knee.append(float(np.percentile(k[np.isfinite(k)], 98)))
     problems = [f"{CHANNELS[i]}: lateral axis {d:.0f} deg from the swing axis" for i, d in enumerate(change)
-                if round(d) > params.max_axis_change_deg]  # rounded as printed
-    problems += [f"{leg} knee {k:.0f} deg past straight" for leg, k in zip(("right", "left"), knee, strict=True)
-                 if round(k) > params.max_knee_extension_deg]
-    return CalibrationCheck(change, (knee[0], knee[1]), tuple(problems)), ""
+                if round(d) > params.max_axis_change_deg]
+    return CalibrationCheck(change, (knee[0], knee[1]), tuple(problems + bent)), ""
 
 
 def check_configured(lateral: Sequence[str], proximal: Sequence[str]) -> tuple[list[Vec3 | None], list[Vec3 | None]]:
