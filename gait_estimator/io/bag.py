@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -133,20 +133,14 @@ class BagRecording(Recording):
         return out
 
     def select(self, keep: np.ndarray, skipped: dict[str, int] | None = None) -> BagRecording:
-        """The samples where ``keep`` is true, with their stamps (``slice`` uses this too)."""
+        """The samples where ``keep`` is true, with their stamps (``slice`` uses this too); the
+        same type, its other fields kept."""
         base = super().select(keep, skipped)
-        return BagRecording(
+        return replace(
+            self,
             **{f: getattr(base, f) for f in Recording.__dataclass_fields__},
             stamp_ns=None if self.stamp_ns is None else self.stamp_ns[keep],
             log_time_ns=None if self.log_time_ns is None else self.log_time_ns[keep],
-            bag=self.bag,
-            topic=self.topic,
-            msgtype=self.msgtype,
-            messages=self.messages,
-            stamp_fallbacks=self.stamp_fallbacks,
-            resets=self.resets,
-            max_gap_s=self.max_gap_s,
-            recovered=self.recovered,
         )
 
 

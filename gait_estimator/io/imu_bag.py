@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +62,10 @@ class ImuBagRecording(BagRecording):
         if self.calibration_note:
             out.append(self.calibration_note)
         return out
+
+    def select(self, keep: np.ndarray, skipped: dict[str, int] | None = None) -> ImuBagRecording:
+        got = super().select(keep, skipped)
+        return replace(got, fused_backwards_until=int(np.count_nonzero(keep[:self.fused_backwards_until])))
 
 
 def imu_topics_of(topics: dict[str, tuple[str, int]]) -> list[str] | None:
