@@ -1,9 +1,10 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 85-87):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 85-89):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
 IMUs: of the same messages read from a bag); learning the calibration live (also without a
 library), saving it (also beside a saved library) and forgetting it; checking a saved calibration
-or configured axes on the walking; bad messages, a silent sensor, raw input without a fusion (numba or imufusion);
-the node's reading of serialised Imu messages (io/cdr.py) against rclpy's, and undecodable bytes."""
+or configured axes on the walking, again after a long gap; bad messages, a silent sensor, raw
+input without a fusion (numba or imufusion); the node's reading of serialised Imu messages
+(io/cdr.py) against rclpy's, and undecodable bytes."""
 
 from __future__ import annotations
 
@@ -41,12 +42,12 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, [58, 59, *range(60, 70), 86, 87])
+    yield from in_process_factory(monkeypatch, [58, 59, *range(60, 70), 86, 87, 88])
 
 
 @pytest.fixture
 def ros_cdr(monkeypatch):
-    yield from in_process_factory(monkeypatch, range(85, 90))
+    yield from in_process_factory(monkeypatch, [85, 89])
 
 
 def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray, frame: str = "") -> Imu:
@@ -176,6 +177,36 @@ def test_a_saved_calibration_that_does_not_fit_the_sensors_is_learnt_again(ros, 
     relearnt = load_calibration(path)
     assert np.dot(relearnt.mounts[2].lateral, right.mounts[2].lateral) > math.cos(math.radians(3.0))
     assert {"reset_calibration", "reset"} <= set(forgotten), "what the estimator learnt from the wrong angles is forgotten"
+
+
+def test_after_a_long_gap_the_calibration_is_checked_again(ros, tmp_path, capfd):
+    """The calibration fitted; then the stream stops for longer than calibration_reset_gap_s (the
+    sensors taken off) and comes back with the right shank's sensor put on another way: the first
+    walking after the gap shows it, and the node learns the calibration again."""
+    rng = np.random.default_rng(17)
+    angles = gait_angles(RATE, walk_s=7.0)
+    mounts = random_mounts(rng)
+    s = synthesize(angles, RATE, mounts, rng)
+    path = learnt_calibration(s, tmp_path / "user.imu.yaml")
+    gap_s = float(s.time_s[-1]) + 6.0  # > calibration_reset_gap_s (5 s)
+    moved = synthesize(angles, RATE, [*mounts[:2], random_mounts(rng, 1)[0], mounts[3]], rng)
+    h = ros(88)
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path))
+    client = h.client(node)
+    pubs = publishers(client)
+    stream(client, pubs, make_messages(s, len(s.time_s)), rate_hz=RATE / 2)
+    client.spin_for(0.5)
+    assert node._imu.calibrator.status.startswith("calibrated, checked: "), node._imu.calibrator.status
+    stream(client, pubs, make_messages(dataclasses.replace(moved, time_s=moved.time_s + gap_s), len(s.time_s)),
+           rate_hz=RATE / 2)
+    client.spin_for(0.5)
+    logs = capfd.readouterr().err
+    assert "learnt sensor offsets and cadence forgotten (the sensors may have been re-donned); the IMU calibration " \
+        "is checked again on the next walking" in logs
+    assert re.search(r"IMU calibration from \S+ does not fit the sensors now \(right_shank: lateral axis", logs), logs
+    assert node._imu.calibrator.calibration is None, "learnt again from the next standing pose and strides"
+    got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
+    assert (got > gap_s).any() and not (got > gap_s + 8.6).any(), "estimates after the gap until the verdict"
 
 
 def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path):

@@ -325,6 +325,17 @@ class ImuCalibrator:
         self.status = "stand still"
         self._clear()
 
+    def recheck(self) -> None:
+        """Check the calibration in use again on the next walking (the sensors may have been
+        taken off and put on again), its gyro biases from the next standing pose; nothing while
+        one is learnt or already being checked."""
+        if self.calibration is None or self.checking:
+            return
+        self.checking = True
+        self.bias_measured = False
+        self.status = TO_BE_CHECKED
+        self._clear()
+
     def reset(self) -> None:
         """Forget everything learnt (but ``gyro_biases``): back to the configured axes."""
         self.calibration = None

@@ -309,6 +309,17 @@ class ImuInput:
         self.from_file = False
         self.angles.set_gyro_biases(self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS)
 
+    def recheck(self) -> str:
+        """The sensors may have been taken off and put on again (a long gap in the stream): the
+        calibration in use is checked again on the next walking, as a saved one is at start;
+        what happened, for the node's log line ('' when none is in use or it is being checked)."""
+        cal = self.calibrator.calibration
+        if cal is None or self.calibrator.checking:
+            return ""
+        self.from_file = not all(m.source == "configured" for m in cal.mounts)
+        self.calibrator.recheck()
+        return "; the IMU calibration is checked again on the next walking"
+
     def reset_calibration(self) -> str:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""
         self._forget()
