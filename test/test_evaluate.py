@@ -13,6 +13,7 @@ from gait_estimator.analysis.evaluate import (
     PredictionTable,
     circular_error,
     evaluate,
+    format_metrics,
     match_times,
     phase_truth,
     read_predictions_csv,
@@ -146,7 +147,13 @@ def test_time_matching_for_slices_and_other_grids(truth):
     half = len(rec) // 2
     ev = evaluate(_table(rec.time_s[half:], rec.labels[half:], truth.phase[half:]), rec, _hs(truth))
     assert ev.metrics["samples"]["evaluated"] == len(rec) - half
-    assert ev.metrics["accuracy"] == 1.0
+    assert ev.metrics["accuracy"] == 1.0 and ev.metrics["warnings"] == []
+    # predictions counting time from another origin (a bag's output starts at 0 s): said, not silent
+    late = evaluate(_table(rec.time_s + 0.6 * rec.time_s[-1], rec.labels, truth.phase), rec, _hs(truth))
+    assert late.metrics["samples"]["matched"] < 0.5 * len(rec)
+    assert late.metrics["warnings"][0].startswith(f"only {late.metrics['samples']['matched']} of {len(rec)} "
+                                                  "prediction rows fall on the truth's times")
+    assert format_metrics(late.metrics).startswith("warning: only ")
     # irregular truth, predictions on a uniform grid between its samples
     truth_t = np.cumsum(np.r_[0.0, np.tile([0.002, 0.009], 50)])
     grid = np.arange(0.0, truth_t[-1], 1 / 230)

@@ -931,9 +931,30 @@ def test_every_command_that_reads_recordings_takes_the_imu_options(command):
     from gait_estimator.cli.args import imu_reader_options
 
     args = build_parser().parse_args([*command, "--imu-topics", "/a, /b,/c,/d", "--imu-calibration", "c.yaml",
-                                      "--imu-tolerance-s", "0.01"])
+                                      "--imu-tolerance-s", "0.01", "--imu-lateral-axes", "+z,,+z,",
+                                      "--imu-proximal-axes=-x,-x,-x,-x"])
     assert imu_reader_options(args) == {"imu_topics": ["/a", "/b", "/c", "/d"], "imu_calibration": "c.yaml",
-                                        "imu_tolerance_s": 0.01}
+                                        "imu_tolerance_s": 0.01, "imu_lateral_axes": ["+z", "", "+z", ""],
+                                        "imu_proximal_axes": ["-x"] * 4}
+
+
+def test_convert_with_the_nodes_configured_axes(tmp_path):
+    rng = np.random.default_rng(21)
+    s = synthesize(gait_angles(RATE, walk_s=8.0), RATE, [ALONG_SEGMENT] * 4, rng)
+    bag = write_imu_bag(tmp_path / "along", BASE_NS + np.round(s.time_s * 1e9).astype(np.int64), np.radians(s.gyro_dps),
+                        s.acc_g * G, s.quat_xyzw)
+    cli = [sys.executable, "-m", "gait_estimator.cli", "convert", str(bag), "--out", str(tmp_path / "o.csv")]
+    r = subprocess.run([*cli, "--imu-lateral-axes", "+z,+z,+z,+z", "--imu-proximal-axes=-x,-x,-x,-x"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "[configured]" in r.stdout and "[learnt]" not in r.stdout and "checked on the walking" in r.stdout
+    assert (rms(read_project_csv(tmp_path / "o.csv").angles_deg - s.angles_deg) < 0.5).all()
+    r = subprocess.run([*cli, "--imu-lateral-axes", "+z,+z,+y,+z", "--imu-proximal-axes=-x,-x,-x,-x"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and "right_shank: lateral axis 90 deg from the swing axis" in r.stdout, r.stdout + r.stderr
+    r = subprocess.run([*cli, "--imu-lateral-axes", "+z,+z,+z", "--imu-proximal-axes=-x,-x,-x,-x"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "IMU axes: need 4 entries each" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
 def test_imu_options_on_a_csv_are_reported(capsys):

@@ -417,7 +417,7 @@ def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_
     assert_same_trace(client.received.trace(lib.mode_names), offline(rec.angles_deg, lib, rec.stamp_ns))
 
 
-def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_input(ros, tmp_path):
+def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_input(ros, tmp_path, capfd):
     rng = np.random.default_rng(4)
     s = synthesize(gait_angles(RATE, walk_s=7.0), RATE, random_mounts(rng), rng, acc_noise_g=0.01,
                    gyro_noise_dps=0.3, gyro_bias_dps=1.0)
@@ -445,9 +445,10 @@ def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_inp
     assert diag["imu_calibration_status"] == "calibrated" and "[learnt]" in diag["imu_calibration"]
     assert int(diag["rejected_non_finite"]) >= 1 and int(diag["imu_rejected_zero_norm"]) >= 1
     assert int(diag["rejected_non_increasing_stamp"]) >= 1 and int(diag["imu_rejected_unpaired"]) >= 1
-    assert int(diag["imu_rejected_wrong_frame"]) >= 1
+    assert int(diag["imu_rejected_wrong_frame"]) >= 1 and "rejected_missing_joint" not in diag  # JointState's only
     assert any(d.get("imu_silent", "").startswith("right_shank (") and "thigh" not in d["imu_silent"]
                for d in client.received.diagnostics), "the silent sensor is named in the diagnostics"
+    assert "dropped IMU input: unpaired: nothing from right_shank within the pairing tolerance" in capfd.readouterr().err
     assert client.received.estimate_stamp_ns, "estimates once calibrated"
     got = np.array(client.received.estimate_stamp_ns)
     shank_silent = (got >= BASE_NS + silent[0] * 5_000_000) & (got < BASE_NS + silent[1] * 5_000_000)

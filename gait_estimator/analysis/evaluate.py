@@ -269,9 +269,24 @@ def evaluate(
             "match_tolerance_s": tol,
         },
         "phase_truth": _phase_truth_counts(heel_strikes, options),
+        "warnings": _time_base_warnings(t, truth.time_s, matched),
         "units": "phase errors are fractions of a stride (0.01 = 1 % of the gait cycle); delays in seconds",
     }
     return Evaluation(metrics, al)
+
+
+MIN_MATCHED_SHARE = 0.9
+"""Below this share of prediction rows matched to truth times, ``evaluate`` warns."""
+
+
+def _time_base_warnings(pred_s: np.ndarray, truth_s: np.ndarray, matched: np.ndarray) -> list[str]:
+    """A warning when few prediction rows fall on the truth's times: most likely the two count
+    time from different origins (a bag's ``convert``/``process`` output starts at 0 s)."""
+    if not len(pred_s) or matched.mean() >= MIN_MATCHED_SHARE:
+        return []
+    return [f"only {int(matched.sum())} of {len(pred_s)} prediction rows fall on the truth's times (predictions "
+            f"{pred_s[0]:.2f}-{pred_s[-1]:.2f} s, truth {truth_s[0]:.2f}-{truth_s[-1]:.2f} s): do both count "
+            "time from the same origin? (outputs of bags start at 0 s)"]
 
 
 def _per_mode(al: Aligned, names: list[str], accepted: Mapping[str, tuple[str, ...]], err: np.ndarray,
@@ -399,7 +414,7 @@ def format_metrics(m: Mapping[str, Any]) -> str:
         return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:.2f} %"
 
     s = m["samples"]
-    lines = [
+    lines = [f"warning: {w}" for w in m.get("warnings", [])] + [
         f"evaluated {s['evaluated']} of {s['predictions']} prediction rows (ready, labelled, matched); "
         f"{s['with_phase_truth']} with phase truth ({m['phase_truth']['heel_strikes']})",
         f"accuracy {pct(m['accuracy'])}; phase error (correct rows) mean {pct(m['phase_error_mean'])} "

@@ -228,7 +228,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     )
 
     t = sub.add_parser("train", help="build a kernel library from labelled recordings (average of strides per mode)")
-    t.add_argument("recordings", nargs="+", metavar="REC", help="recording(s): project CSV or reference Dimension CSV")
+    t.add_argument("recordings", nargs="+", metavar="REC",
+                   help="recording(s): project CSV, reference Dimension CSV or rosbag2 bag")
     t.add_argument("--out", "-o", required=True, help="library file to write (.yaml or .npz)")
     _label_args(t)
     t.add_argument("--heel-strikes", choices=HEEL_STRIKE_SOURCES, default="auto", help=hs_help)
@@ -260,7 +261,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     e.set_defaults(func=cmd_evaluate)
 
     r = sub.add_parser("resample", help="resample a recording to a uniform rate (with labels and heel strikes)")
-    r.add_argument("recording", help="recording: project CSV or reference Dimension CSV")
+    r.add_argument("recording", help="recording: project CSV, reference Dimension CSV or rosbag2 bag")
     r.add_argument("--out", "-o", required=True, help="project CSV to write")
     r.add_argument("--rate", type=positive_float, metavar="HZ", help="target rate (default: the recording's median rate)")
     _label_args(r)
@@ -272,7 +273,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=cmd_resample)
 
     ls = sub.add_parser("label-strides", help="label steady strides by the nearest kernel stride duration (cadence)")
-    ls.add_argument("recording", help="recording: project CSV or reference Dimension CSV")
+    ls.add_argument("recording", help="recording: project CSV, reference Dimension CSV or rosbag2 bag")
     ls.add_argument("--kernels", "-k", default="able_bodied", metavar="LIB", help="library giving N_m / rate per mode")
     ls.add_argument("--modes", metavar="A,B,...", help="modes to choose from (default: all of the library)")
     ls.add_argument("--heel-strikes", choices=HEEL_STRIKE_SOURCES, default="auto", help=hs_help)

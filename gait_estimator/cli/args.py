@@ -77,12 +77,12 @@ def int_list(text: str) -> list[int]:
     return values
 
 
-IMU_READING_OPTIONS = ("imu_topics", "imu_calibration", "imu_tolerance_s")
+IMU_READING_OPTIONS = ("imu_topics", "imu_calibration", "imu_lateral_axes", "imu_proximal_axes", "imu_tolerance_s")
 """``read_recording`` keywords set by ``add_imu_reading_options`` (read_imu_bag's arguments)."""
 
 
 def _topic_list(text: str) -> list[str]:
-    """Comma-separated topic names; their number is checked by the reader (one line)."""
+    """Comma-separated names (topics, axes); their number is checked by the reader (one line)."""
     return [t.strip() for t in text.split(",")]
 
 
@@ -97,6 +97,16 @@ def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store
     p.add_argument(
         "--imu-calibration", dest="imu_calibration", action=action, metavar="YAML",
         help="bag of sensor_msgs/Imu topics: the IMU mounting to use (default: learnt from the bag; docs/imu.md)",
+    )
+    p.add_argument(
+        "--imu-lateral-axes", dest="imu_lateral_axes", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        help="bag of sensor_msgs/Imu topics: per segment, the sensor axis pointing to the wearer's right (+x, -y, "
+        "...; empty = learn), as the node's imu_lateral_axes; a list starting with - needs '=': --imu-lateral-axes=-z,...",
+    )
+    p.add_argument(
+        "--imu-proximal-axes", dest="imu_proximal_axes", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        help="bag of sensor_msgs/Imu topics: per segment, the sensor axis along it towards the hip or knee "
+        "(empty = learn), as the node's imu_proximal_axes (--imu-proximal-axes=-x,... when it starts with -)",
     )
     p.add_argument(
         "--imu-tolerance-s", dest="imu_tolerance_s", type=seconds, action=action, metavar="SECONDS",

@@ -32,7 +32,7 @@ from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
 from ..io.resources import DEFAULT_LIBRARY
 from ..io.stream import UNITS
-from .args import add_imu_reading_options, imu_reader_options, positive_float, seconds
+from .args import IMU_READING_OPTIONS, add_imu_reading_options, imu_reader_options, positive_float, seconds
 
 STORAGES = ("mcap", "sqlite3")
 
@@ -101,7 +101,7 @@ def finish_process(args: argparse.Namespace, rec: Recording, pred: Predictions) 
         lines += [f"note: {n}" for n in rec.notes]
     else:
         flags = {"topic": "--topic", "input_units": "--input-units", "joint_names": "--joint-names",
-                 "imu_topics": "--imu-topics", "imu_calibration": "--imu-calibration", "imu_tolerance_s": "--imu-tolerance-s"}
+                 **{k: "--" + k.replace("_", "-") for k in IMU_READING_OPTIONS}}
         given = [flags[k] for k in getattr(args, "reader_options", None) or {} if k in flags]
         if given:
             lines.append(f"note: {', '.join(given)} apply to bags only; ignored for {args.recording}")

@@ -34,6 +34,8 @@ NON_INCREASING_STAMP = "non_increasing_stamp"
 OUT_OF_RANGE = "out_of_range"
 MALFORMED = "malformed"  # bytes that do not decode as the input message type (live streams)
 REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP, OUT_OF_RANGE, MALFORMED)
+ANGLE_MESSAGE_ONLY = (MISSING_JOINT, WRONG_LENGTH)
+"""Reasons only a segment-angle message gives (not the IMU input)."""
 
 STREAM_RESTART_S = 1.0
 """Jump back (s) that restarts a live stream when ``max_gap_s`` is 0 (gap check off); see

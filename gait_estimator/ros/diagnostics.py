@@ -114,10 +114,10 @@ class NodeDiagnostics:
     def _problems(self, stamp_rate: float, lib: KernelLibrary, values: dict[str, str]) -> list[str]:
         """What the status warns about this period; adds the IMU input's values to ``values``."""
         problems: list[str] = []
-        if self._period_received == 0:
-            problems.append(f"no input on {self._input_topics}")
+        if self._period_received == 0:  # IMU input: no sample paired, nor message rejected
+            problems.append(f"no input on {self._input_topics}" if self._imu is None else "no IMU sample")
         if self._period_rejected:
-            problems.append(f"{self._period_rejected} sample(s) rejected")
+            problems.append(f"{self._period_rejected} {'sample' if self._imu is None else 'IMU message'}(s) rejected")
         if (
             not math.isnan(stamp_rate)
             and self._estimator.resampler is None

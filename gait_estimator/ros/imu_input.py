@@ -184,10 +184,14 @@ class ImuInput:
         unpaired = pairer.unpaired
         for sample_ns, items in pairer.push(sensor, stamp_ns, item):
             self._sample(sample_ns, items, t0)
+        if pairer.unpaired == unpaired:
+            return
+        waiting = [c for c, q in zip(CHANNELS, pairer.queues, strict=True) if not q]
+        why = (f"nothing from {', '.join(waiting)} within the pairing tolerance" if waiting
+               else "a message without partners within the pairing tolerance")
         for _ in range(pairer.unpaired - unpaired):
             self.rejected[UNPAIRED] += 1
-            node._reject(SampleRejected(UNPAIRED, f"an IMU message without partners within the pairing tolerance "
-                                        f"(dropped so far: {dict(pairer.dropped)})"))
+            node._reject(SampleRejected(UNPAIRED, f"{why} (dropped so far: {dict(pairer.dropped)})"))
 
     def _rejected(self, sensor: int, exc: SampleRejected) -> None:
         """Count and log (throttled) a dropped message of ``sensor``."""

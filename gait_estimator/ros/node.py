@@ -78,7 +78,7 @@ from ..io.outputs import (
     estimate_values,
     sse_label,
 )
-from ..io.stream import MALFORMED, REASONS, AngleExtractor, SampleRejected, StreamGuard, restart_threshold
+from ..io.stream import ANGLE_MESSAGE_ONLY, MALFORMED, REASONS, AngleExtractor, SampleRejected, StreamGuard, restart_threshold
 from .diagnostics import (  # noqa: F401  (PROFILE_COLUMNS: re-exported for the bench-node client)
     DIAGNOSTICS_PERIOD_S,
     DIAGNOSTICS_TOPIC,
@@ -194,7 +194,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             "no kernel library (kernels: ''): diagnostics only until a mode is taught (teach_mode)" if lib is None else
             f"library '{lib.name}' ({len(lib)} modes: {', '.join(lib.mode_names)}; window "
             f"{self._estimator.matcher.max_window} samples at {lib.sample_rate_hz:g} Hz) from {lib.path or '?'}; "
-            f"input {self._input_type} on {self._input_topics} in {self._units}"
+            f"input {self._input_type} on {self._input_topics}" + (f" in {self._units}" if self._imu is None else "")
             + (f", joints {', '.join(self._joint_names)}" if self._input_type == "joint_state" else "")
             + f"; options: {self._options_summary()}"
         )
@@ -446,7 +446,8 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         self._warned_at[exc.reason] = now
         more = self._suppressed.pop(exc.reason, 0)
         self.get_logger().warn(
-            f"dropped sample on {self._input_topics}: {exc.reason}: {exc}"
+            (f"dropped sample on {self._input_topics}: " if self._imu is None else "dropped IMU input: ")
+            + f"{exc.reason}: {exc}"
             + (f" ({more} more {exc.reason} dropped since the last warning)" if more else "")
         )
 
@@ -481,8 +482,9 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
 
     @property
     def rejected(self) -> dict[str, int]:
-        """Dropped samples so far, by reason (every reason listed)."""
-        return {r: int(self._guard.rejected.get(r, 0)) for r in REASONS}
+        """Dropped samples so far, by reason (every reason the input type can give listed)."""
+        reasons = REASONS if self._imu is None else [r for r in REASONS if r not in ANGLE_MESSAGE_ONLY]
+        return {r: int(self._guard.rejected.get(r, 0)) for r in reasons}
 
     @property
     def window_resets(self) -> int:
