@@ -3,6 +3,7 @@ synthetic checks and the per-sample conversion cost. One command:
 
     python benchmarks/imu.py                # writes benchmarks/results/imu/imu.json and tables.md
     python benchmarks/imu.py --tables-only  # only tables.md, from the saved imu.json (make docs)
+    python benchmarks/imu.py --bags DIR     # only the trials as bags of four Imu topics, to try them
 
 * camargo_ab06 (data/camargo_ab06, 5 level-walking trials, raw right thigh/shank IMUs at 200 Hz):
   each trial is written as a rosbag2 bag of four sensor_msgs/Imu topics and read back with
@@ -193,18 +194,45 @@ def thigh_fault_evidence(rec: Recording) -> dict | None:
     }
 
 
-def trial_imu(path: Path, tmp: Path) -> dict:
-    """Per trial: angles from the orientation and the raw bags, tared; RMS vs mocap; the samples of
-    the data set's IMU faults per right segment (``faults``)."""
-    rec = read_project_csv(path)
-    t, ex, mocap = rec.time_s, rec.extra, rec.angles_deg
-    stamps = BASE_NS + np.round(t * 1e9).astype(np.int64)
+def trial_sensors(rec: Recording) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, np.ndarray]]:
+    """A trial's sensors as ``write_imu_bag`` takes them: stamps (ns), gyro (4, T, 3) deg/s and
+    accelerometer (4, T, 3) m/s^2 of the right thigh and shank (zeros elsewhere), and the left
+    channels' virtual orientations (x, y, z, w) from the mocap angles."""
+    t, ex = rec.time_s, rec.extra
     gyro = np.zeros((4, len(t), 3))
     acc = np.zeros((4, len(t), 3))
     for seg, c in RIGHT.items():
         gyro[c] = np.stack([ex[f"right_{seg}_gyro_{k}_dps"] for k in "xyz"], axis=1)
         acc[c] = np.stack([ex[f"right_{seg}_acc_{k}_mps2"] for k in "xyz"], axis=1)
-    left = {c: virtual_quaternions(mocap[:, c]) for c in (1, 3)}
+    left = {c: virtual_quaternions(rec.angles_deg[:, c]) for c in (1, 3)}
+    return BASE_NS + np.round(t * 1e9).astype(np.int64), gyro, acc, left
+
+
+def write_bags(out: Path) -> list[Path]:
+    """Each trial as a bag of four Imu topics, raw (``<trial>``, time from its first message), and
+    its recording with the same time origin (``<trial>_truth.csv``: labels, heel strikes, mocap
+    angles) for ``evaluate``: to try the IMU path without sensors."""
+    from dataclasses import replace
+
+    from gait_estimator.io.recording import write_project_csv
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for path in sorted(DATA.glob("levelground_*.csv")):
+        rec = read_project_csv(path)
+        stamps, gyro, acc, left = trial_sensors(rec)
+        written.append(write_imu_bag(out / path.stem, stamps, np.radians(gyro), acc, [None, left[1], None, left[3]]))
+        truth = replace(rec, time_s=rec.time_s - rec.time_s[0], extra={})
+        written.append(write_project_csv(truth, out / f"{path.stem}_truth.csv"))
+    return written
+
+
+def trial_imu(path: Path, tmp: Path) -> dict:
+    """Per trial: angles from the orientation and the raw bags, tared; RMS vs mocap; the samples of
+    the data set's IMU faults per right segment (``faults``)."""
+    rec = read_project_csv(path)
+    t, mocap = rec.time_s, rec.angles_deg
+    stamps, gyro, acc, left = trial_sensors(rec)
     configured = {"imu_lateral_axes": ["", "+z", "", "+z"], "imu_proximal_axes": ["", "+y", "", "+y"]}
     out: dict = {"trial": path.stem, "samples": len(t), "thigh_fault": thigh_fault_evidence(rec)}
     faults = {RIGHT["thigh"]: thigh_faults(rec), RIGHT["shank"]: shank_faults(rec, path.stem)}
@@ -415,7 +443,8 @@ def first_check(tr: dict, cal: ImuCalibration, turn: tuple[int, float] | None = 
     if found is None:
         return {"fits": None}
     walking = (rec.labels != "stand")[:k + 1]
-    return {"fits": found.fits, "axis_change_deg": max(found.axis_change_deg[c] for c in RIGHT.values()),
+    change = max(found.axis_change_deg[c] for c in RIGHT.values())  # NaN: the knee alone decided
+    return {"fits": found.fits, "axis_change_deg": None if np.isnan(change) else change,
             "knee_extension_deg": found.knee_extension_deg[0], "at_s": float(t[k]),
             "walking_s": float(np.diff(t[:k + 1])[walking[1:]].sum())}
 
@@ -550,7 +579,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--tables-only", action="store_true", help="only rewrite tables.md from the saved imu.json")
+    ap.add_argument("--bags", type=Path, metavar="DIR", help="only write the trials as bags of four Imu topics "
+                    "and their recordings from 0 s to DIR (to try the IMU path offline)")
     args = ap.parse_args(argv)
+    if args.bags:
+        print("\n".join(f"wrote {p}" for p in write_bags(args.bags)))
+        return 0
     if args.tables_only:
         print(write_tables(args.out))
         return 0
@@ -660,8 +694,9 @@ def selection_table(r: dict) -> str:
 
 
 def check_table(r: dict) -> str:
-    """``calibration_checks``: verdicts, largest lateral-axis change and knee extension (right
-    leg), and the walking (samples the data set labels as walking) before the verdict."""
+    """``calibration_checks``: verdicts, largest lateral-axis change ('knee': decided by the knee
+    alone, before the axes could be learnt) and knee extension (right leg), and the walking
+    (samples the data set labels as walking) before the verdict."""
     chk = r["calibration_check"]
     rows = ["| saved calibration checked on | checks | fits / does not fit / no verdict | lateral axis change, "
             "deg (largest) | right knee past straight, deg (largest) | walking before the verdict (labelled), s |",
@@ -672,9 +707,10 @@ def check_table(r: dict) -> str:
         if not done:
             return f"| {name} | {len(runs)} | 0 / 0 / {len(runs)} | | | |"
         fits = sum(bool(x["fits"]) for x in done)
-        change = ", ".join(f"{x['axis_change_deg']:.0f}" for x in done)
+        changes = [x["axis_change_deg"] for x in done]
+        change = ", ".join("knee" if c is None else f"{c:.0f}" for c in changes)
         return (f"| {name} | {len(runs)} | {fits} / {len(done) - fits} / {len(runs) - len(done)} | "
-                f"{max(x['axis_change_deg'] for x in done):.0f} ({change}) | "
+                f"{max(c for c in changes if c is not None):.0f} ({change}) | "
                 f"{max(x['knee_extension_deg'] for x in done):.0f} | "
                 f"{min(x['walking_s'] for x in done):.1f}–{max(x['walking_s'] for x in done):.1f} |")
 

@@ -67,3 +67,25 @@ def test_compiled_fusion_gives_imufusions_angles_on_real_imus():
                 ups[0, k], ups[1, k] = ref.update(gyro[k], acc[k], dt), ours.update(gyro[k], acc[k], dt)
             a, b = mounts[seg].angles_deg(ups[0]), mounts[seg].angles_deg(ups[1])
             assert np.abs(a - b).max() < 1e-3, (seg, params, np.abs(a - b).max())
+
+
+def test_benchmark_bags_to_try_the_imu_path_run_on_their_truths_clock(tmp_path):
+    """``python benchmarks/imu.py --bags DIR`` (docs/imu.md): five bags of four Imu topics and their
+    recordings with the time origin of the bags' outputs, so evaluate matches every row."""
+    import subprocess
+    import sys
+
+    from gait_estimator.analysis.evaluate import evaluate, read_predictions_csv
+    from gait_estimator.cli.app import main
+
+    repo = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, str(repo / "benchmarks" / "imu.py"), "--bags", str(tmp_path)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert len(r.stdout.splitlines()) == 10 and len(list(tmp_path.glob("*_truth.csv"))) == 5
+    truth = read_project_csv(tmp_path / "levelground_cw_fast_truth.csv")
+    assert main(["process", str(tmp_path / "levelground_cw_fast"), "--out", str(tmp_path / "pred.csv")]) == 0
+    pred = read_predictions_csv(tmp_path / "pred.csv")
+    assert np.allclose(pred.time_s, truth.time_s, atol=1e-6) and truth.time_s[0] == 0.0
+    ev = evaluate(pred, truth)
+    assert ev.metrics["samples"]["matched"] == len(truth) and ev.metrics["warnings"] == []
