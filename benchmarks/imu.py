@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import sys
@@ -710,7 +711,7 @@ def check_table(r: dict) -> str:
         changes = [x["axis_change_deg"] for x in done]
         change = ", ".join("knee" if c is None else f"{c:.0f}" for c in changes)
         return (f"| {name} | {len(runs)} | {fits} / {len(done) - fits} / {len(runs) - len(done)} | "
-                f"{max(c for c in changes if c is not None):.0f} ({change}) | "
+                f"{max((c for c in changes if c is not None), default=math.nan):.0f} ({change}) | "
                 f"{max(x['knee_extension_deg'] for x in done):.0f} | "
                 f"{min(x['walking_s'] for x in done):.1f}–{max(x['walking_s'] for x in done):.1f} |")
 

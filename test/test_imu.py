@@ -327,6 +327,41 @@ def test_live_calibrator_learns_from_the_stream(angles):
     assert relearnt is not None and relearnt == learnt_at
 
 
+def test_recheck_forgets_the_stream_before_a_gap(angles):
+    """After a gap (sensors perhaps re-donned): a calibration in use, or one being checked, is
+    checked on the walking after the gap alone, its gyro biases from the standing pose after it;
+    one being learnt starts again from the standing pose after the gap."""
+    rng = np.random.default_rng(23)
+    s = synthesize(angles, RATE, random_mounts(rng), rng, gyro_bias_dps=2.0)
+    ups = _ups(s)
+    rows = [([tuple(ups[c, k]) for c in range(4)], [tuple(s.gyro_dps[c, k]) for c in range(4)],
+             [tuple(s.acc_g[c, k]) for c in range(4)]) for k in range(len(s.time_s))]
+    cal, _, _ = learn_calibration(s.time_s, ups)
+    gap_s = 100.0
+    for checking in (False, True):
+        calib = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, cal, check=checking)
+        for k in range(300 if checking else 0):  # being checked: 1.5 s of standing before the gap
+            assert calib.check(float(s.time_s[k]), *rows[k]) is None
+        calib.recheck()
+        assert calib.checking and not calib.bias_measured and calib.status == "calibrated, to be checked on the walking"
+        verdict = None
+        for k in range(len(s.time_s)):  # the stream again after the gap: stand, walk
+            verdict = calib.check(gap_s + float(s.time_s[k]), *rows[k])
+            if verdict is not None:
+                break
+        assert verdict is not None and verdict.fits and s.time_s[k] >= 8.0, "a whole window after the gap"
+        assert np.allclose(calib.calibration.mounts[0].gyro_bias_dps, calib.gyro_biases[0])
+        assert abs(np.linalg.norm(calib.gyro_biases[0]) - 2.0) < 0.3, "the standing pose after the gap"
+    learner = ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4)
+    for k in range(500):  # the standing pose and the first steps, then a gap
+        assert learner.add(float(s.time_s[k]), *rows[k]) is None
+    assert learner.standing_s is not None
+    learner.recheck()
+    walk = int(np.searchsorted(s.time_s, 3.0))  # after the gap: walking only, from the earlier pose's end
+    assert all(learner.add(gap_s + float(s.time_s[k]), *rows[k]) is None for k in range(walk, len(s.time_s)))
+    assert learner.calibration is None and learner.status.startswith("stand still")
+
+
 def test_a_calibration_made_earlier_is_checked_on_the_walking(angles):
     rng = np.random.default_rng(9)
     s = synthesize(angles, RATE, random_mounts(rng), rng)
@@ -358,16 +393,23 @@ def test_a_calibration_made_earlier_is_checked_on_the_walking(angles):
     still = synthesize(np.zeros((1600, 4)), RATE, s.mounts, rng)
     found, missing = check_calibration(still.time_s, _ups(still), cal, still.gyro_dps)
     assert found is None and missing.endswith("walk a few more strides")
-    # a sensor upside down (its long axis reversed): a verdict from the knee alone, standing or walking,
-    # also where the axes cannot be learnt with the wrong long axis
+    # a sensor upside down (its long axis reversed): the knee rule cannot sign the axes learnt with it,
+    # so the walking's knee decides; standing (or sensors lying about, before they are put on) decides nothing
     mounts = list(cal.mounts)
     mounts[3] = dataclasses.replace(mounts[3], proximal=tuple(-x for x in mounts[3].proximal))
     flipped = ImuCalibration(tuple(mounts))
-    for ts, us, gs in ((still.time_s, _ups(still), still.gyro_dps), (t, u, g)):
-        found, missing = check_calibration(ts, us, flipped, gs)
-        assert found is not None and not found.fits and missing == ""
-        assert f"left knee {found.knee_extension_deg[1]:.0f} deg past straight" in found.problems
-        assert found.knee_extension_deg[1] > 150.0 and found.knee_extension_deg[0] < 10.0
+    found, missing = check_calibration(t, u, flipped, g)
+    assert found is not None and missing == ""
+    assert found.problems == (f"left knee {found.knee_extension_deg[1]:.0f} deg past straight",)
+    assert found.knee_extension_deg[1] > 150.0 and found.knee_extension_deg[0] < 10.0
+    assert np.isnan(found.axis_change_deg).all()
+    for lean in (-3.0, 0.0, 3.0):
+        leaning = synthesize(np.full((1600, 4), lean), RATE, s.mounts, rng)
+        assert check_calibration(leaning.time_s, _ups(leaning), flipped, leaning.gyro_dps)[0] is None
+    lying = synthesize(np.zeros((1600, 4)), RATE, random_mounts(rng), rng)  # the right calibration, sensors elsewhere
+    assert check_calibration(lying.time_s, _ups(lying), cal, lying.gyro_dps)[0] is None
+    assert check_calibration(t[:0], u[:, :0], cal, g[:, :0]) == (None, "walk 4 s")
+    assert check_calibration(t, np.full_like(u, np.nan), cal, g)[0] is None
 
 
 def test_configured_proximal_axes_need_no_standing_before_the_strides(angles):

@@ -15,8 +15,9 @@ A calibration made earlier (a saved file, configured axes) is **checked** agains
 walking (``check_calibration``): its lateral axes against the ones learnt there with its proximal
 axes, and its knee angles against the knee rule. A sensor turned about its segment or a wrong sign
 shows in the first; an angle offset (a sensor tilted within the sagittal plane) only when it
-bends the knee past straight. A knee bent past ``max_knee_extension_deg`` (a sensor upside down)
-is a verdict on any stretch, walking or not; the axes need the walking.
+bends the knee past straight. A sensor upside down (its long axis reversed) leaves the signs
+undecidable, so no lateral axes are learnt; on a stretch of walking (every segment swinging in
+its sagittal plane) its knee past ``max_knee_extension_deg`` is the verdict.
 
 Every function takes whole arrays (a file, or the live node's buffer); ``learn_calibration``
 returns the calibration or what is still missing.
@@ -235,6 +236,21 @@ def swing_axis(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3, gyro_dps: np
     return tuple(float(x) for x in a / np.linalg.norm(a)), ""
 
 
+def _sagittal_swing(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3, standing_deg: float, bias_dps: Vec3,
+                    gyro_dps: np.ndarray | None, params: ImuLearnParams) -> tuple[list[SegmentMount] | None, str]:
+    """One sensor walking: the two learnt mounts (lateral axis of either sign) with this proximal
+    axis, standing angle and gyro bias, or None and why not (no clear sagittal swing, or one
+    smaller than ``params.min_swing_deg``)."""
+    axis, why = swing_axis(time_s, ups, proximal, gyro_dps, params)
+    if axis is None:
+        return None, why
+    both = [SegmentMount(a, proximal, standing_deg, bias_dps, "learnt") for a in (axis, tuple(-x for x in axis))]
+    swept = np.percentile(both[0].angles_deg(ups), [2, 98])
+    if not swept[1] - swept[0] >= params.min_swing_deg:  # NaN (no finite angle) too
+        return None, f"swings only {swept[1] - swept[0]:.0f} deg"
+    return both, ""
+
+
 def _leg_signs(cands: dict[int, list[SegmentMount]], ups: np.ndarray, thigh: int,
                shank: int, margin_deg: float) -> tuple[dict[int, SegmentMount], str]:
     """Pick the mounts of one leg's thigh and shank by the knee rule (module docstring)."""
@@ -307,14 +323,10 @@ def learn_calibration(
         if lateral[i] is not None:
             cands[i] = [SegmentMount(lateral[i], prox[i], standing_deg[i], bias[i], tags[i])]  # type: ignore[arg-type]
             continue
-        axis, why = swing_axis(t[walk], ups[i, walk], prox[i], None if gyro_dps is None else gyro_dps[i, walk],
-                               params)
-        if axis is None:
+        both, why = _sagittal_swing(t[walk], ups[i, walk], prox[i], standing_deg[i], bias[i],
+                                    None if gyro_dps is None else gyro_dps[i, walk], params)
+        if both is None:
             return None, standing, f"{CHANNELS[i]}: {why}; walk a few more strides"
-        both = [SegmentMount(s, prox[i], standing_deg[i], bias[i], "learnt") for s in (axis, tuple(-x for x in axis))]
-        swept = np.percentile(both[0].angles_deg(ups[i, walk]), [2, 98])
-        if swept[1] - swept[0] < params.min_swing_deg:
-            return None, standing, f"{CHANNELS[i]}: swings only {swept[1] - swept[0]:.0f} deg; walk a few more strides"
         cands[i] = both
     mounts: dict[int, SegmentMount] = {}
     for thigh, shank in LEGS:
@@ -369,12 +381,16 @@ def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, 
         k = k[np.isfinite(k)]
         knee.append(float(np.percentile(k, 98)) if len(k) else math.nan)
     bent = [f"{leg} knee {k:.0f} deg past straight" for leg, k in zip(("right", "left"), knee, strict=True)
-            if round(k) > params.max_knee_extension_deg]  # rounded as printed
+            if math.isfinite(k) and round(k) > params.max_knee_extension_deg]  # rounded as printed
     fresh, _, missing = learn_calibration(
         t, ups, proximal=[m.proximal for m in mounts], standing_deg=[m.standing_deg for m in mounts],
         gyro_dps=gyro_dps, params=params, search=False)  # the axes only: no bias wanted
     if fresh is None:
-        if bent:  # no walking needed: no calibration that fits bends a knee that far (a sensor upside down)
+        swinging = bent and len(t) > 1 and t[-1] - t[0] >= WALK_S and all(
+            _sagittal_swing(t, ups[i], m.proximal, m.standing_deg, m.gyro_bias_dps, None if gyro_dps is None else gyro_dps[i],
+                            params)[0] is not None
+            for i, m in enumerate(mounts))
+        if swinging:  # walking, and axes the knee rule cannot sign: its own long axes are wrong (a sensor upside down)
             return CalibrationCheck((math.nan,) * N_CHANNELS, (knee[0], knee[1]), tuple(bent)), ""
         return None, missing
     change = tuple(float(np.degrees(np.arccos(np.clip(np.dot(f.lateral, m.lateral), -1.0, 1.0))))

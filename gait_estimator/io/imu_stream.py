@@ -326,14 +326,15 @@ class ImuCalibrator:
         self._clear()
 
     def recheck(self) -> None:
-        """Check the calibration in use again on the next walking (the sensors may have been
-        taken off and put on again), its gyro biases from the next standing pose; nothing while
-        one is learnt or already being checked."""
-        if self.calibration is None or self.checking:
-            return
-        self.checking = True
-        self.bias_measured = False
-        self.status = TO_BE_CHECKED
+        """Forget the stream so far (the sensors may have been taken off and put on again): a
+        calibration in use is checked again on the next walking, its gyro biases from the next
+        standing pose; one being learnt starts again from the next standing pose."""
+        if self.calibration is not None:
+            self.checking = True
+            self.bias_measured = False
+            self.status = TO_BE_CHECKED
+        self._standing = None
+        self._keep_lateral = None
         self._clear()
 
     def reset(self) -> None:

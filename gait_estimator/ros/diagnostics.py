@@ -117,7 +117,7 @@ class NodeDiagnostics:
         if self._period_received == 0:  # IMU input: no sample paired, nor message rejected
             problems.append(f"no input on {self._input_topics}" if self._imu is None else "no IMU sample")
         if self._period_rejected:
-            problems.append(f"{self._period_rejected} {'sample' if self._imu is None else 'IMU message'}(s) rejected")
+            problems.append(f"{self._period_rejected} {'sample' if self._imu is None else 'IMU input'}(s) rejected")
         if (
             not math.isnan(stamp_rate)
             and self._estimator.resampler is None

@@ -121,6 +121,7 @@ class ImuInput:
         """Configured axes that do not fit the walking (they stay in use): the check's line."""
         self.angles = ImuAngles(self.inputs, self.calibrator, self._biases_measured, self._learnt, self._checked)
         self._t0 = 0.0  # perf_counter at the callback of the sample being emitted
+        self._last_ns: int | None = None  # stamp of the last paired sample
         if saved is not None:
             self.angles.set_gyro_biases([m.gyro_bias_dps for m in saved.mounts])
         self.rejected: Counter = Counter()
@@ -187,7 +188,7 @@ class ImuInput:
         if pairer.unpaired == unpaired:
             return
         waiting = [c for c, q in zip(CHANNELS, pairer.queues, strict=True) if not q]
-        why = (f"nothing from {', '.join(waiting)} within the pairing tolerance" if waiting
+        why = (f"no message from {', '.join(waiting)} within the pairing tolerance of the others" if waiting
                else "a message without partners within the pairing tolerance")
         for _ in range(pairer.unpaired - unpaired):
             self.rejected[UNPAIRED] += 1
@@ -219,6 +220,10 @@ class ImuInput:
         node._received += 1
         node._period_received += 1
         self._t0 = t0
+        last, self._last_ns = self._last_ns, stamp_ns
+        gap_s = node._config.calibration_reset_gap_s
+        if last is not None and gap_s > 0 and stamp_ns - last > gap_s * 1e9:
+            self._recheck((stamp_ns - last) * 1e-9, gap_s)
         self.angles.sample(stamp_ns, items, self._emit)
 
     def _emit(self, angles: tuple[float, ...], stamp_ns: int) -> None:
@@ -313,16 +318,19 @@ class ImuInput:
         self.from_file = False
         self.angles.set_gyro_biases(self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS)
 
-    def recheck(self) -> str:
-        """The sensors may have been taken off and put on again (a long gap in the stream): the
-        calibration in use is checked again on the next walking, as a saved one is at start;
-        what happened, for the node's log line ('' when none is in use or it is being checked)."""
-        cal = self.calibrator.calibration
-        if cal is None or self.calibrator.checking:
-            return ""
-        self.from_file = not all(m.source == "configured" for m in cal.mounts)
+    def _recheck(self, gap_s: float, limit_s: float) -> None:
+        """A gap longer than ``calibration_reset_gap_s``: the sensors may have been taken off and
+        put on again. A calibration in use is checked again on the next walking, as a saved one
+        is at start (one that does not fit is learnt again, unless it is the configured axes);
+        one being learnt starts again from the next standing pose."""
+        if self.calibrator.calibration is not None:  # in use: the configured axes' only if configured and no file
+            self.from_file = self.from_file or not self.configured
+            then = "the IMU calibration is checked again on the next walking"
+        else:
+            then = f"the IMU calibration is learnt from the next standing pose ({self.calibrator.status})"
         self.calibrator.recheck()
-        return "; the IMU calibration is checked again on the next walking"
+        self.node.get_logger().info(f"gap of {gap_s:.3f} s in IMU stamps > calibration_reset_gap_s {limit_s:g} s "
+                                    f"(the sensors may have been re-donned): {then}")
 
     def reset_calibration(self) -> str:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""

@@ -370,7 +370,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             self.get_logger().info(
                 f"gap of {t - (prev if prev is not None else t):.3f} s in input stamps > calibration_reset_gap_s "
                 f"{est.config.calibration_reset_gap_s:g} s: learnt sensor offsets and cadence forgotten "
-                "(the sensors may have been re-donned)" + (self._imu.recheck() if self._imu is not None else "")
+                "(the sensors may have been re-donned)"
             )
         t1 = time.perf_counter()
         self._publish(estimate, stamp)
