@@ -209,6 +209,10 @@ def test_after_a_long_gap_the_calibration_is_checked_again(ros, tmp_path, capfd)
     assert node._imu.calibrator.calibration is None, "learnt again from the next standing pose and strides"
     got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
     assert (got > gap_s).any() and not (got > gap_s + 8.6).any(), "estimates after the gap until the verdict"
+    stream(client, pubs, make_messages(s, 400, raw=True), rate_hz=RATE / 2)  # a restarted stream: stamps from 0 again
+    client.spin_for(0.5)
+    assert re.search(r"IMU stamps jumped back by \d+\.\d+ s \(a restarted stream\) \(the sensors may have been "
+                     r"re-donned\): the IMU calibration is learnt again", capfd.readouterr().err)
 
 
 def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path):

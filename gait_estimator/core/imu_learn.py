@@ -16,8 +16,10 @@ walking (``check_calibration``): its lateral axes against the ones learnt there 
 axes, and its knee angles against the knee rule. A sensor turned about its segment or a wrong sign
 shows in the first; an angle offset (a sensor tilted within the sagittal plane) only when it
 bends the knee past straight. A sensor upside down (its long axis reversed) leaves the signs
-undecidable, so no lateral axes are learnt; on a stretch of walking (every segment swinging in
-its sagittal plane) its knee past ``max_knee_extension_deg`` is the verdict.
+undecidable, so no lateral axes are learnt; on a stretch of walking in which every sensor swings
+about its calibrated lateral line, its knee past ``max_knee_extension_deg`` is the verdict. A
+segment whose median angle on the stretch is more than ``max_segment_angle_deg`` from vertical
+does not fit either.
 
 Every function takes whole arrays (a file, or the live node's buffer); ``learn_calibration``
 returns the calibration or what is still missing.
@@ -66,6 +68,9 @@ class ImuLearnParams:
             and the one learnt on the stretch.
         max_knee_extension_deg: Largest knee extension past straight (deg, 98th percentile over
             the stretch) a checked calibration may give.
+        max_segment_angle_deg: Largest median |segment angle| (deg) over a checked stretch of
+            walking (thighs and shanks stay within about 70 deg of vertical; an upside-down
+            sensor reads about 180).
     """
 
     still_max_tilt_deg: float = 3.0
@@ -81,6 +86,7 @@ class ImuLearnParams:
     check_window_s: float = 8.0
     max_axis_change_deg: float = 30.0
     max_knee_extension_deg: float = 30.0
+    max_segment_angle_deg: float = 110.0
 
 
 DEFAULT_LEARN = ImuLearnParams()
@@ -344,7 +350,7 @@ class CalibrationCheck:
     Attributes:
         axis_change_deg: Per segment (CHANNELS order), the angle (deg) between the calibration's
             lateral axis and the one learnt on the stretch (180 = opposite sign; NaN when the
-            knee rule alone rejected the calibration, before there was walking to learn from).
+            knee rule could not sign the axes learnt there, and the knee alone decided).
         knee_extension_deg: Per leg (right, left), the knee's 98th percentile (deg, + = extended
             past straight) with the calibration.
         problems: What does not fit, one phrase each; empty when the calibration fits.
@@ -385,19 +391,38 @@ def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, 
     fresh, _, missing = learn_calibration(
         t, ups, proximal=[m.proximal for m in mounts], standing_deg=[m.standing_deg for m in mounts],
         gyro_dps=gyro_dps, params=params, search=False)  # the axes only: no bias wanted
+    upright = []
+    for i, m in enumerate(mounts):
+        a = m.angles_deg(ups[i])
+        a = a[np.isfinite(a)]
+        if len(a) and abs(float(np.median(a))) > params.max_segment_angle_deg:
+            upright.append(f"{CHANNELS[i]}: {float(np.median(a)):+.0f} deg from vertical (median)")
     if fresh is None:
-        swinging = bent and len(t) > 1 and t[-1] - t[0] >= WALK_S and all(
-            _sagittal_swing(t, ups[i], m.proximal, m.standing_deg, m.gyro_bias_dps, None if gyro_dps is None else gyro_dps[i],
-                            params)[0] is not None
-            for i, m in enumerate(mounts))
-        if swinging:  # walking, and axes the knee rule cannot sign: its own long axes are wrong (a sensor upside down)
-            return CalibrationCheck((math.nan,) * N_CHANNELS, (knee[0], knee[1]), tuple(bent)), ""
+        if bent and _walking_in_its_planes(t, ups, mounts, gyro_dps, params):  # the knee rule could not sign axes
+            return CalibrationCheck((math.nan,) * N_CHANNELS, (knee[0], knee[1]), tuple(bent + upright)), ""
         return None, missing
     change = tuple(float(np.degrees(np.arccos(np.clip(np.dot(f.lateral, m.lateral), -1.0, 1.0))))
                    for f, m in zip(fresh.mounts, mounts, strict=True))
     problems = [f"{CHANNELS[i]}: lateral axis {d:.0f} deg from the swing axis" for i, d in enumerate(change)
                 if round(d) > params.max_axis_change_deg]
-    return CalibrationCheck(change, (knee[0], knee[1]), tuple(problems + bent)), ""
+    return CalibrationCheck(change, (knee[0], knee[1]), tuple(problems + bent + upright)), ""
+
+
+def _walking_in_its_planes(time_s: np.ndarray, ups: np.ndarray, mounts: Sequence[SegmentMount],
+                           gyro_dps: np.ndarray | None, params: ImuLearnParams) -> bool:
+    """A stretch of walking (``WALK_S`` or more) in which every sensor swings about the line of
+    its mount's lateral axis (within ``max_axis_change_deg``, either sign): worn as calibrated
+    but for the signs, which the knee rule could not decide (a sensor upside down); not sensors
+    carried about."""
+    if len(time_s) < 2 or time_s[-1] - time_s[0] < WALK_S:
+        return False
+    cos_max = math.cos(math.radians(params.max_axis_change_deg))
+    for i, m in enumerate(mounts):
+        both, _ = _sagittal_swing(time_s, ups[i], m.proximal, m.standing_deg, m.gyro_bias_dps,
+                                  None if gyro_dps is None else gyro_dps[i], params)
+        if both is None or abs(float(np.dot(both[0].lateral, m.lateral))) < cos_max:
+            return False
+    return True
 
 
 def check_configured(lateral: Sequence[str], proximal: Sequence[str]) -> tuple[list[Vec3 | None], list[Vec3 | None]]:

@@ -10,7 +10,9 @@ estimator. A saved or configured calibration is checked on the first walking
 (``core/imu_learn.check_calibration``): a saved one that does not fit is learnt again (the estimate
 waits); configured axes that do not fit stay, reported (an error line and a diagnostics problem).
 Its gyro biases are replaced by the ones measured at the stream's first standing pose (before the
-check's verdict; logged), as a learnt calibration's are. A sensor silent for ``imu_timeout_s`` is
+check's verdict; logged), as a learnt calibration's are. After a gap in the paired stamps longer
+than ``calibration_reset_gap_s``, or a restarted stream, the calibration in use is checked again
+(a learnt one is then treated as a saved one) and one being learnt starts again. A sensor silent for ``imu_timeout_s`` is
 named in the diagnostics and the estimate waits, since no sample pairs without it. Bad messages are
 dropped, counted and logged through the node (throttled); raw messages while the fusion (numba or
 imufusion, the ``imu`` extra) is missing are dropped and counted (``no_fusion``), with one error
@@ -221,9 +223,12 @@ class ImuInput:
         node._period_received += 1
         self._t0 = t0
         last, self._last_ns = self._last_ns, stamp_ns
-        gap_s = node._config.calibration_reset_gap_s
-        if last is not None and gap_s > 0 and stamp_ns - last > gap_s * 1e9:
-            self._recheck((stamp_ns - last) * 1e-9, gap_s)
+        if last is not None:
+            gap_s = node._config.calibration_reset_gap_s
+            if gap_s > 0 and stamp_ns - last > gap_s * 1e9:
+                self._recheck(f"gap of {(stamp_ns - last) * 1e-9:.3f} s in IMU stamps > calibration_reset_gap_s {gap_s:g} s")
+            elif last - stamp_ns > node._guard.restart_back_s * 1e9:
+                self._recheck(f"IMU stamps jumped back by {(last - stamp_ns) * 1e-9:.3f} s (a restarted stream)")
         self.angles.sample(stamp_ns, items, self._emit)
 
     def _emit(self, angles: tuple[float, ...], stamp_ns: int) -> None:
@@ -318,19 +323,19 @@ class ImuInput:
         self.from_file = False
         self.angles.set_gyro_biases(self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS)
 
-    def _recheck(self, gap_s: float, limit_s: float) -> None:
-        """A gap longer than ``calibration_reset_gap_s``: the sensors may have been taken off and
-        put on again. A calibration in use is checked again on the next walking, as a saved one
-        is at start (one that does not fit is learnt again, unless it is the configured axes);
-        one being learnt starts again from the next standing pose."""
+    def _recheck(self, why: str) -> None:
+        """A gap longer than ``calibration_reset_gap_s`` or a restarted stream (``why``): the
+        sensors may have been taken off and put on again. A calibration in use is checked again on
+        the next walking, as a saved one is at start (one that does not fit is learnt again,
+        unless it is the configured axes); one being learnt starts again from the next standing
+        pose (learnt lateral axes kept by ~/calibrate_standing are forgotten)."""
         if self.calibrator.calibration is not None:  # in use: the configured axes' only if configured and no file
             self.from_file = self.from_file or not self.configured
             then = "the IMU calibration is checked again on the next walking"
         else:
-            then = f"the IMU calibration is learnt from the next standing pose ({self.calibrator.status})"
+            then = f"the IMU calibration is learnt again: stand still {STILL_S:g} s, then walk {WALK_S:g} s"
         self.calibrator.recheck()
-        self.node.get_logger().info(f"gap of {gap_s:.3f} s in IMU stamps > calibration_reset_gap_s {limit_s:g} s "
-                                    f"(the sensors may have been re-donned): {then}")
+        self.node.get_logger().info(f"{why} (the sensors may have been re-donned): {then}")
 
     def reset_calibration(self) -> str:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""
