@@ -12,11 +12,11 @@ waits); configured axes that do not fit stay, reported (an error line and a diag
 Its gyro biases are replaced by the ones measured at the stream's first standing pose (before the
 check's verdict; logged), as a learnt calibration's are. After a gap in the paired stamps longer
 than ``calibration_reset_gap_s``, or a restarted stream, the calibration in use is checked again
-(a learnt one is then treated as a saved one) and one being learnt starts again. A sensor silent for ``imu_timeout_s`` is
-named in the diagnostics and the estimate waits, since no sample pairs without it. Bad messages are
-dropped, counted and logged through the node (throttled); raw messages while the fusion (numba or
-imufusion, the ``imu`` extra) is missing are dropped and counted (``no_fusion``), with one error
-line.
+(a learnt one is then treated as a saved one) and one being learnt starts again. A sensor silent
+for ``imu_timeout_s`` is named in the diagnostics and the estimate waits, since no sample pairs
+without it. Bad messages are dropped, counted and logged through the node (throttled); raw
+messages while the fusion (numba or imufusion, the ``imu`` extra) is missing are dropped and
+counted (``no_fusion``), with one error line.
 
 Services: ``~/calibrate_standing`` takes a new standing pose from the next still second (keeping
 learnt sagittal axes, unless the calibration was still to be checked: then strides too); the

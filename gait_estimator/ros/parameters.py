@@ -3,8 +3,8 @@ how a change is applied (``NodeParameters``, a mixin of ``EstimatorNode``).
 
 Estimator options are parameters of the same name; the expert ones (``OPTIONS`` entries flagged
 advanced) are ``advanced.<name>`` (in a params file: an ``advanced:`` mapping under
-``ros__parameters``). ``config/estimator.yaml`` holds the same defaults (``yaml_defaults``, and the IMU input's
-``imu_input.PARAMETERS``).
+``ros__parameters``). ``config/estimator.yaml`` holds the same defaults (``yaml_defaults``, and
+the IMU input's ``imu_input.PARAMETERS``).
 """
 
 from __future__ import annotations
