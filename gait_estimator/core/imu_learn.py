@@ -381,9 +381,10 @@ def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, 
     t = np.asarray(time_s, dtype=np.float64)
     ups = np.asarray(ups, dtype=np.float64)
     mounts = cal.mounts
+    angles = [m.angles_deg(ups[i]) for i, m in enumerate(mounts)]
     knee = []
     for thigh, shank in LEGS:
-        k = mounts[shank].angles_deg(ups[shank]) - mounts[thigh].angles_deg(ups[thigh])
+        k = angles[shank] - angles[thigh]
         k = k[np.isfinite(k)]
         knee.append(float(np.percentile(k, 98)) if len(k) else math.nan)
     bent = [f"{leg} knee {k:.0f} deg past straight" for leg, k in zip(("right", "left"), knee, strict=True)
@@ -392,8 +393,7 @@ def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, 
         t, ups, proximal=[m.proximal for m in mounts], standing_deg=[m.standing_deg for m in mounts],
         gyro_dps=gyro_dps, params=params, search=False)  # the axes only: no bias wanted
     upright = []
-    for i, m in enumerate(mounts):
-        a = m.angles_deg(ups[i])
+    for i, a in enumerate(angles):
         a = a[np.isfinite(a)]
         if len(a) and abs(float(np.median(a))) > params.max_segment_angle_deg:
             upright.append(f"{CHANNELS[i]}: {float(np.median(a)):+.0f} deg from vertical (median)")

@@ -61,10 +61,11 @@ class ImuAngles:
         i0, i1, i2, i3 = items
         ups = (i0[0], i1[0], i2[0], i3[0])
         calibrator = self.calibrator
-        cal = calibrator.calibration
-        if cal is not None and not calibrator.checking:
+        cal, checking = calibrator.calibration, calibrator.checking
+        if cal is not None:
             emit(cal.angles_deg(ups), stamp_ns)
-            return
+            if not checking:
+                return
         t = stamp_ns * 1e-9
         gyro, acc = (i0[1], i1[1], i2[1], i3[1]), (i0[2], i1[2], i2[2], i3[2])
         if cal is None:
@@ -77,7 +78,6 @@ class ImuAngles:
                 self.set_gyro_biases([m.gyro_bias_dps for m in learnt.mounts])
                 self.on_learnt(learnt)
             return
-        emit(cal.angles_deg(ups), stamp_ns)
         found = calibrator.check(t, ups, gyro, acc)
         if calibrator.calibration is not cal:  # this stream's gyro biases, from its standing pose
             biases = [m.gyro_bias_dps for m in calibrator.calibration.mounts]
