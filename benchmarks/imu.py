@@ -259,6 +259,7 @@ def trial_imu(path: Path, tmp: Path) -> dict:
             out[kind][f"{seg}_clean_share"] = float(clean[c].sum() / walk.sum())
             sel = after & clean[c]
             out[kind][f"{seg}_after"] = float(np.sqrt(np.mean((a[sel, c] - mocap[sel, c]) ** 2)))
+            out[kind][f"{seg}_after_n"] = int(sel.sum())
         out[kind + "_r"] = {seg: float(np.corrcoef(a[walk, c], mocap[walk, c])[0, 1]) for seg, c in RIGHT.items()}
         out[kind + "_calibration"] = got.calibration.summary().split("; left_thigh")[0] + "; " + \
             got.calibration.summary().split("; ")[2]
@@ -612,11 +613,19 @@ def main(argv: list[str] | None = None) -> int:
     for kind in ("orientation", "raw"):
         result[f"mean_rms_{kind}"] = {seg: float(np.mean([tr["stats"][kind][seg] for tr in trials]))
                                       for seg in (*RIGHT, "thigh_clean", "shank_clean", "thigh_after", "shank_after")}
+        result[f"pooled_rms_{kind}"] = {seg: pooled_rms([tr["stats"][kind] for tr in trials], f"{seg}_after")
+                                        for seg in RIGHT}
     result["seconds"] = round(time.time() - started, 1)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "imu.json").write_text(json.dumps(result, indent=1) + "\n")
     print(write_tables(args.out))
     return 0
+
+
+def pooled_rms(stats: list[dict], key: str) -> float:
+    """The RMS over every trial's samples together (each trial's ``key`` RMS weighted by its count)."""
+    n = np.array([s[f"{key}_n"] for s in stats], dtype=float)
+    return float(np.sqrt(np.sum(n * np.array([s[key] for s in stats]) ** 2) / n.sum()))
 
 
 def write_tables(out: Path) -> str:
@@ -652,14 +661,14 @@ def live_table(r: dict) -> str:
 
 
 def angles_table(r: dict) -> str:
-    """Mean of the trials' RMS IMU - mocap (deg), per input."""
-    rows = ["| input | right thigh, shank | without the data set's IMU faults | and after the first standing |",
-            "|---|---|---|---|"]
+    """Mean of the trials' RMS IMU - mocap (deg), per input; after the first standing also pooled."""
+    rows = ["| input | right thigh, shank | without the data set's IMU faults | and after the first standing "
+            "(pooled samples) |", "|---|---|---|---|"]
     for kind, name in (("raw", "raw (the node's fusion)"),
                        ("orientation", "orientation (imufusion's defaults, as a Fusion-based driver)")):
-        m = r[f"mean_rms_{kind}"]
+        m, p = r[f"mean_rms_{kind}"], r[f"pooled_rms_{kind}"]
         rows.append(f"| {name} | {m['thigh']:.1f}°, {m['shank']:.1f}° | {m['thigh_clean']:.1f}°, {m['shank_clean']:.1f}° | "
-                    f"{m['thigh_after']:.1f}°, {m['shank_after']:.1f}° |")
+                    f"{m['thigh_after']:.1f}°, {m['shank_after']:.1f}° ({p['thigh']:.1f}°, {p['shank']:.1f}°) |")
     return "\n".join(rows)
 
 

@@ -1,7 +1,7 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 85-89):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 73, 85-89):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
 IMUs: of the same messages read from a bag); learning the calibration live (also without a
-library), saving it (also beside a saved library) and forgetting it; checking a saved calibration
+library, then teaching a mode), saving it (also beside a saved library) and forgetting it; checking a saved calibration
 or configured axes on the walking, again after a long gap; bad messages, a silent sensor, raw
 input without a fusion (numba or imufusion); the node's reading of serialised Imu messages
 (io/cdr.py) against rclpy's, and undecodable bytes."""
@@ -18,12 +18,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 from imu_synth import ALONG_SEGMENT, gait_angles, random_mounts, require_raw_fusion, synthesize, turned
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.serialization import serialize_message
 from ros_helpers import answered_indices, assert_same_trace, in_process_factory, offline, wait_all_answered
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
 from gait_estimator import load_library
+from gait_estimator.analysis.strides import heel_strikes
+from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.core import ahrs
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, ImuCalibration, SegmentMount
@@ -31,6 +35,7 @@ from gait_estimator.core.imu_learn import learn_calibration
 from gait_estimator.io.cdr import read_imu
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import ImuPairer, SensorInput, load_calibration, save_calibration
+from gait_estimator.io.recording import Recording
 from gait_estimator.ros.imu_input import CALIBRATE_STANDING_SERVICE, NO_FUSION
 from gait_estimator.ros.node import RESET_CALIBRATION_SERVICE, SAVE_LIBRARY_SERVICE, StartupError
 
@@ -42,7 +47,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, [58, 59, *range(60, 70), 86, 87, 88])
+    yield from in_process_factory(monkeypatch, [58, 59, *range(60, 70), 73, 86, 87, 88])
 
 
 @pytest.fixture
@@ -602,3 +607,59 @@ def test_undecodable_imu_bytes_are_dropped_and_counted(ros_cdr, tmp_path):
         client.spin_for(0.05)
     diag = client.received.diagnostics[-1]
     assert CHANNELS[1] in diag["imu_silent"], diag["imu_silent"]
+
+
+def test_a_wearer_with_four_raw_imus_is_taught_live(ros, tmp_path, monkeypatch):
+    """The clinic hour: no library, four raw IMUs put on anyhow. The node learns their mounting
+    from the standing pose and the first strides, a mode is taught on the next strides, then its
+    phase follows the walking. The taught kernel is the one ``train`` builds from the true angles
+    of the same strides, to the fusion's error."""
+    require_raw_fusion()
+    monkeypatch.setenv("HOME", str(tmp_path))
+    rng = np.random.default_rng(11)
+    s = synthesize(gait_angles(RATE, walk_s=22.0), RATE, random_mounts(rng), rng,
+                   acc_noise_g=0.01, gyro_noise_dps=0.3, gyro_bias_dps=1.0)
+    msgs = make_messages(s, len(s.time_s), raw=True)
+    h = ros(73)
+    node = h.estimator(input_type="imu", kernels="", teach_strides=4)
+    client = h.client(node)
+    remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")
+    assert remote.wait_for_services(5.0)
+    pubs = publishers(client)
+    split = round(9.0 * RATE)  # standing 2 s, walking 7 s
+    stream(client, pubs, msgs[:split])
+    diag = client.latest_diagnostics(3.0)
+    assert diag["imu_calibration_status"] == "calibrated", diag["imu_calibration_status"]
+    assert client.estimate_count == 0
+
+    future = remote.set_parameters([Parameter("teach_mode", value="Walk")])
+    assert client.spin_until(future.done, 5.0) and future.result().results[0].successful
+    stream(client, pubs, msgs[split:])
+    client.spin_for(0.3)
+    assert node.library.mode_names == ["Walk"], node._teacher.last_event
+    taught = node._teacher.last_taught
+    kernel = node.library.mode("Walk")
+
+    origin_s = node._epoch_sec - BASE_NS // 1_000_000_000  # node time 0: the whole second of its first sample
+    starts = origin_s + np.array([st.start_s for st in taught.strides])
+    ends = starts + np.array([st.duration_s for st in taught.strides])
+    labels = np.where((s.time_s >= starts.min()) & (s.time_s < ends.max()), "Walk", "")
+    truth = Recording(s.time_s, s.angles_deg, labels=labels, source="synthetic")
+    options = TrainOptions(heel_strikes="right_shank", rate_hz=RATE)
+    expected = train_library([truth], "truth", options).library.mode("Walk")
+    assert starts.min() > split / RATE, "strides from after teach_mode was set"
+    assert abs(kernel.length - expected.length) <= 0.02 * expected.length
+    n = min(kernel.length, expected.length)
+    rms = np.sqrt(np.mean((kernel.samples[:n] - expected.samples[:n]) ** 2, axis=0))
+    assert (rms < 0.5).all(), rms
+    assert client.latest_diagnostics(3.0)["taught_modes"] == "Walk"
+
+    hs = heel_strikes(truth, "right_shank", RATE).times_s
+    t = (np.array(client.received.estimate_stamp_ns) - BASE_NS) / 1e9
+    trace = client.received.trace(["Walk"])
+    inside = (t > ends.max()) & (t < hs[-1]) & trace.ready
+    assert inside.sum() > 4 * RATE
+    k = np.searchsorted(hs, t[inside], side="right") - 1
+    phase_truth = (t[inside] - hs[k]) / (hs[k + 1] - hs[k])
+    err = np.abs((trace.phase[inside] - phase_truth + 0.5) % 1.0 - 0.5)
+    assert err.mean() < 0.02, err.mean()
