@@ -103,6 +103,12 @@ def test_label_map_rename_alternatives_and_drop(truth):
     ev = evaluate(_table(rec.time_s, pred, truth.phase), rec, _hs(truth), parse_label_map("slow=Slow,level="))
     assert set(ev.metrics["per_mode"]) == {"Slow"}
     assert ev.metrics["samples"]["evaluated"] == int((rec.labels == "slow").sum())
+    assert ev.metrics["warnings"] == []
+    # a truth label no mode of the library can match (camargo's stand): said, with the way out
+    ev = evaluate(_table(rec.time_s, pred, truth.phase), rec, _hs(truth), parse_label_map("slow=Slow"))
+    n = int((rec.labels == "level").sum())
+    assert ev.metrics["warnings"] == [f"truth label 'level' ({n} rows) is no mode of the predictions (Slow, Med, Fast): "
+                                      "every row counts as wrong; --label-map level= leaves it out, level=MODE renames it"]
 
 
 def test_unready_unlabelled_and_unmatched_rows_are_not_evaluated(truth):

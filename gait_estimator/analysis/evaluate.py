@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -269,7 +269,8 @@ def evaluate(
             "match_tolerance_s": tol,
         },
         "phase_truth": _phase_truth_counts(heel_strikes, options),
-        "warnings": _time_base_warnings(t, truth.time_s, matched),
+        "warnings": _time_base_warnings(t, truth.time_s, matched) + _label_warnings(labels, evaluated, accepted,
+                                                                                   pred.sse_modes),
         "units": "phase errors are fractions of a stride (0.01 = 1 % of the gait cycle); delays in seconds",
     }
     return Evaluation(metrics, al)
@@ -287,6 +288,21 @@ def _time_base_warnings(pred_s: np.ndarray, truth_s: np.ndarray, matched: np.nda
     return [f"only {int(matched.sum())} of {len(pred_s)} prediction rows fall on the truth's times (predictions "
             f"{pred_s[0]:.2f}-{pred_s[-1]:.2f} s, truth {truth_s[0]:.2f}-{truth_s[-1]:.2f} s): do both count "
             "time from the same origin? (outputs of bags start at 0 s)"]
+
+
+def _label_warnings(labels: np.ndarray, evaluated: np.ndarray, accepted: Mapping[str, tuple[str, ...]],
+                    modes: Sequence[str]) -> list[str]:
+    """A warning per truth label that no mode of the predictions' library can match: its rows
+    all count as wrong (e.g. ``stand`` scored against walking kernels)."""
+    if not modes:  # predictions without the library's mode names
+        return []
+    out = []
+    for name, acc in accepted.items():
+        n = int((evaluated & (labels == name)).sum())
+        if n and not set(acc) & set(modes):
+            out.append(f"truth label {name!r} ({n} rows) is no mode of the predictions ({', '.join(modes)}): "
+                       f"every row counts as wrong; --label-map {name}= leaves it out, {name}=MODE renames it")
+    return out
 
 
 def _per_mode(al: Aligned, names: list[str], accepted: Mapping[str, tuple[str, ...]], err: np.ndarray,

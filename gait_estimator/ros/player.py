@@ -250,7 +250,7 @@ def play(
 
     context = rclpy.Context()
     rclpy.init(args=[], context=context)
-    published = 0
+    published = [0]  # counted by _publish_loop, also when Ctrl-C interrupts it
     node = None
     try:
         node = rclpy.create_node(node_name, context=context, start_parameter_services=False)
@@ -264,23 +264,23 @@ def play(
         clock_pub = node.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(depth=100)) if clock else None
         if wait_for_subscribers_s > 0:
             _wait_for_subscribers(pubs, playlist.source, wait_for_subscribers_s)
-        published = _publish_loop(playlist, pubs, clock_pub, Clock, rate, loop)
+        _publish_loop(playlist, pubs, clock_pub, Clock, rate, loop, published)
         for pub in pubs:  # reliable subscribers: until they have everything
             pub.wait_for_all_acked(Duration(seconds=2))
         time.sleep(LINGER_S)  # best-effort subscribers: the last messages may still be in flight
         log(
-            f"published {published} message(s) from {playlist.source} on "
+            f"published {published[0]} message(s) from {playlist.source} on "
             + ", ".join(p.topic_name for p in pubs)
             + (" and /clock" if clock_pub else "")
         )
     except KeyboardInterrupt:
-        log(f"interrupted after {published} message(s)")
+        log(f"interrupted after {published[0]} message(s)")
         raise
     finally:
         if node is not None:
             node.destroy_node()
         context.try_shutdown()
-    return published
+    return published[0]
 
 
 def _wait_for_subscribers(pubs: list[Any], source: str, timeout_s: float) -> None:
@@ -297,15 +297,16 @@ def _wait_for_subscribers(pubs: list[Any], source: str, timeout_s: float) -> Non
         time.sleep(0.05)
 
 
-def _publish_loop(playlist: Playlist, pubs: list[Any], clock_pub: Any, clock_cls: Any, rate: float, loop: bool) -> int:
-    """Publish every message at wall time start + (t_i - t_0 + k * period) / rate."""
+def _publish_loop(playlist: Playlist, pubs: list[Any], clock_pub: Any, clock_cls: Any, rate: float, loop: bool,
+                  published: list[int]) -> None:
+    """Publish every message at wall time start + (t_i - t_0 + k * period) / rate, counting them in
+    ``published[0]``."""
     times = playlist.time_ns
     t0 = int(times[0])
     offsets = (times - t0).astype(np.float64) / (rate * 1e9)  # seconds after the start, wall clock
     period = playlist.loop_period_ns
     stamp_shift0 = time.time_ns() if playlist.relative else 0
     has_header = [tr.has_header for tr in playlist.tracks]
-    published = 0
     start = time.monotonic()
     k = 0
     clock_msg = clock_cls() if clock_pub is not None else None
@@ -324,8 +325,8 @@ def _publish_loop(playlist: Playlist, pubs: list[Any], clock_pub: Any, clock_cls
             if shift and has_header[tr]:
                 raw = with_stamp(raw, stamp_of(raw) + shift)
             pubs[tr].publish(raw)
-            published += 1
+            published[0] += 1
         if not loop:
-            return published
+            return
         k += 1
 
