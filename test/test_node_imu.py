@@ -1,4 +1,4 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 73, 85-89):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 74, 85-89):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
 IMUs: of the same messages read from a bag); learning the calibration live (also without a
 library, then teaching a mode), saving it (also beside a saved library) and forgetting it; checking a saved calibration
@@ -47,7 +47,7 @@ TOPICS = ("imu/right_thigh", "imu/left_thigh", "imu/right_shank", "imu/left_shan
 
 @pytest.fixture
 def ros(monkeypatch):
-    yield from in_process_factory(monkeypatch, [58, 59, *range(60, 70), 73, 86, 87, 88])
+    yield from in_process_factory(monkeypatch, [58, 59, *range(60, 70), 74, 86, 87, 88])
 
 
 @pytest.fixture
@@ -620,7 +620,7 @@ def test_a_wearer_with_four_raw_imus_is_taught_live(ros, tmp_path, monkeypatch):
     s = synthesize(gait_angles(RATE, walk_s=22.0), RATE, random_mounts(rng), rng,
                    acc_noise_g=0.01, gyro_noise_dps=0.3, gyro_bias_dps=1.0)
     msgs = make_messages(s, len(s.time_s), raw=True)
-    h = ros(73)
+    h = ros(74)
     node = h.estimator(input_type="imu", kernels="", teach_strides=4)
     client = h.client(node)
     remote = AsyncParameterClient(client.node, f"{h.namespace}/{h.node_name}")

@@ -25,6 +25,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.bag_commands",
     "gait_estimator.cli.analysis_commands",
     "gait_estimator.cli.teach_command",
+    "gait_estimator.cli.watch_command",
 )
 """Further modules contributing subcommands (kept ROS-free at import time)."""
 

@@ -55,6 +55,17 @@ def positive_float(text: str) -> float:
     return v
 
 
+def domain_id(text: str) -> int:
+    """A ROS domain ID, 0..232."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer ROS domain ID, got {text!r}") from None
+    if not 0 <= v <= 232:
+        raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
+    return v
+
+
 def seconds(text: str) -> float:
     """A duration in seconds, >= 0 (inf allowed)."""
     try:

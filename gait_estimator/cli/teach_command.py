@@ -12,7 +12,7 @@ from typing import Any
 from ..analysis.teach import TEACH_STRIDES, check_teach_strides
 from ..core.errors import GaitEstimatorError
 from ..ros import require_ros
-from .args import positive_float
+from .args import domain_id, positive_float
 
 
 def _strides(text: str) -> int:
@@ -23,13 +23,6 @@ def _strides(text: str) -> int:
         raise argparse.ArgumentTypeError(str(exc) if isinstance(exc, GaitEstimatorError) else
                                          f"expected an integer, got {text!r}") from None
     return value
-
-
-def _domain_id(text: str) -> int:
-    v = int(text)
-    if not 0 <= v <= 232:
-        raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
-    return v
 
 
 def cmd_teach(args: argparse.Namespace) -> int:
@@ -73,7 +66,7 @@ def add_commands(sub: Any) -> None:
     t.add_argument("--save", metavar="PATH", help="have the node save its library to PATH (.yaml or .npz; a "
                    "relative PATH is taken from this directory) (after teaching, when --mode is given too)")
     t.add_argument("--node", default="/estimator_node", help="the estimator node's name (default %(default)s)")
-    t.add_argument("--domain-id", type=_domain_id, help="ROS_DOMAIN_ID (default: the environment's)")
+    t.add_argument("--domain-id", type=domain_id, help="ROS_DOMAIN_ID (default: the environment's)")
     t.add_argument("--timeout", type=positive_float, default=5.0,
                    help="seconds to wait for the node to answer (default %(default)s)")
     t.add_argument("--max-time", type=positive_float, help="give up (and cancel) after this many seconds "

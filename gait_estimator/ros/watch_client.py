@@ -1,0 +1,109 @@
+"""Watching a running ``estimator_node`` from another process (``gait-estimator watch``): its
+``mode`` and ``phase`` topics and its diagnostics, as ``ros2 topic echo`` would show them, for
+installs without the ros2 CLI (``pip install '.[ros]'``). It uses the ROS environment it runs in
+(``ROS_DOMAIN_ID``, discovery range) unless given a domain ID.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Float64, String
+
+from ..core.errors import GaitEstimatorError
+from .node_client import spin_executor_until
+
+LEVELS = ("OK", "WARN", "ERROR", "STALE")
+"""diagnostic_msgs/DiagnosticStatus levels 0..3."""
+
+
+@dataclass
+class Seen:
+    """The latest of what the node published (None/empty: nothing yet)."""
+
+    mode: str | None = None
+    phase: float | None = None
+    estimates: int = 0
+    """``phase`` messages received (one per estimate once the window is full)."""
+    level: str = ""
+    message: str = ""
+    values: dict[str, str] = field(default_factory=dict)
+    """The node's last diagnostics key/values."""
+
+
+class WatchClient:
+    """A small ROS node subscribed to one ``estimator_node``'s outputs.
+
+    Args:
+        node: Fully qualified name of the estimator node (e.g. ``/estimator_node``); its
+            ``mode`` and ``phase`` topics are taken in its namespace (the node's defaults).
+        domain_id: ROS domain (None: ``ROS_DOMAIN_ID`` of the environment, else 0).
+        timeout_s: How long to wait for the node to appear in the graph.
+
+    Raises:
+        GaitEstimatorError: No node of that name within ``timeout_s`` (one line).
+    """
+
+    def __init__(self, node: str = "/estimator_node", domain_id: int | None = None, timeout_s: float = 5.0) -> None:
+        self.target = node if node.startswith("/") else "/" + node
+        namespace = self.target.rsplit("/", 1)[0]
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = Node("gait_estimator_watch", context=self.context, start_parameter_services=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.seen = Seen()
+        outputs = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)  # as the node publishes them
+        self.node.create_subscription(String, f"{namespace}/mode", self._on_mode, outputs)
+        self.node.create_subscription(Float64, f"{namespace}/phase", self._on_phase, outputs)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        if not spin_executor_until(self.executor, self._node_found, timeout_s, step_s=0.1):
+            domain = self.context.get_domain_id()
+            self.close()
+            raise GaitEstimatorError(
+                f"no estimator node {self.target} within {timeout_s:g} s on ROS_DOMAIN_ID={domain} "
+                "(is it running, on this domain and discovery range? --node NAME, --domain-id ID)"
+            )
+
+    def _node_found(self) -> bool:
+        return self.target in self.node.get_fully_qualified_node_names()
+
+    def _on_mode(self, msg: String) -> None:
+        self.seen.mode = msg.data
+
+    def _on_phase(self, msg: Float64) -> None:
+        self.seen.phase = msg.data
+        self.seen.estimates += 1
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            if st.name.startswith(self.target + ": "):
+                level = st.level if isinstance(st.level, int) else int.from_bytes(st.level, "little")
+                self.seen.level = LEVELS[level] if level < len(LEVELS) else str(level)
+                self.seen.message = st.message
+                self.seen.values = {kv.key: kv.value for kv in st.values}
+
+    def spin_for(self, seconds: float) -> None:
+        """Take the node's messages for ``seconds``."""
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            self.executor.spin_once(timeout_sec=min(left, 0.05))
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+    def __enter__(self) -> WatchClient:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()

@@ -1,0 +1,91 @@
+"""``gait-estimator watch`` against a real estimator_node process over DDS (loopback), and with
+no node at all.
+
+Domain IDs 79 and 80; LOCALHOST discovery.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ros_helpers import BASE_NS
+
+from gait_estimator import load_library
+from gait_estimator.cli.watch_command import watch_line
+from gait_estimator.io.readers import read_recording
+from gait_estimator.ros.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
+
+RATE_HZ = 230.0
+
+
+@pytest.fixture(autouse=True)
+def _local(monkeypatch) -> None:
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
+
+
+def _cli(*args: str, domain_id: int) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "gait_estimator.cli", "watch", *args, "--domain-id", str(domain_id)],
+        env=local_ros_environment(domain_id), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+
+
+def test_the_line_drops_what_the_columns_already_say() -> None:
+    line = watch_line(12.25, "Fast", 0.4321, "OK", "ready: Fast phase 0.43; teaching Slow: 3/10 strides",
+                      {"input_rate_hz": "230.0"}, ["input_rate_hz", "absent"])
+    assert line == "   12.2 s  Fast         0.432  [OK] teaching Slow: 3/10 strides  input_rate_hz=230.0  absent=?"
+    assert watch_line(0.5, None, None, "", "", {}, []) == "    0.5 s  -                -  (no diagnostics yet)"
+
+
+def test_no_node_exit_2_one_line() -> None:
+    proc = _cli("--node", "/nobody", "--timeout", "1", domain_id=79)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 2, (out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "no estimator node /nobody within 1 s on ROS_DOMAIN_ID=79" in lines[0], err
+
+
+def test_watch_a_running_node(multispeed_csv: Path, monkeypatch) -> None:
+    domain = 80
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+    rec = read_recording(multispeed_csv, rate_hz=RATE_HZ)
+    modes = load_library("able_bodied").mode_names
+    with NodeProcess(node_command(["-p", "kernels:=able_bodied"]), local_ros_environment(domain)) as node:
+        client = EstimatorClient(domain, outputs=("mode",))
+        try:
+            deadline = time.monotonic() + 30
+            while not client.wait_for_node(0.5, outputs=False, settle_s=0.5):
+                assert node.poll() is None and time.monotonic() < deadline, node.output()
+            watch = _cli("--duration", "8", "--rate", "4", "--keys", "samples_accepted", domain_id=domain)
+            first = watch.stdout.readline()
+            assert first.startswith(f"watching /estimator_node on ROS_DOMAIN_ID={domain}: "), (first, watch.stderr.read())
+            time.sleep(1.0)
+            stamps = BASE_NS + np.round(rec.time_s * 1e9).astype(np.int64)
+            n = round(5 * RATE_HZ)
+            client.stream(np.radians(rec.angles_deg[:n]), stamps[:n], RATE_HZ)
+            out, err = watch.communicate(timeout=30)
+        finally:
+            client.close()
+        assert node.poll() is None
+    assert watch.returncode == 0, (out, err)
+    lines = [re.split(r"\s{2,}", x.strip()) for x in out.splitlines()]
+    assert 25 <= len(lines) <= 40, out  # 4 lines a second for 8 s
+    estimating = [x for x in lines if x[1] != "-"]
+    assert estimating and all(x[1] in modes and 0.0 <= float(x[2]) < 1.0 for x in estimating), out
+    assert any(x[1] == "-" for x in lines[:4]), "no estimate before the stream: '-'"
+    assert all(x[3].startswith("[OK]") or x[3].startswith("[WARN]") for x in lines if x[3] != "(no diagnostics yet)")
+    accepted = [int(x[-1].removeprefix("samples_accepted=")) for x in lines if x[-1].startswith("samples_accepted=")
+                and x[-1] != "samples_accepted=?"]
+    assert accepted and max(accepted) > RATE_HZ, out
+
+
+def test_environment_is_local() -> None:
+    assert os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") == "LOCALHOST"
