@@ -245,7 +245,8 @@ class StrideCollector:
                     self._reasons.append("")
                     added = True
                 elif h - a <= det.max_stride_s:  # a heel strike confirmed too late: its start is gone
-                    events.append(f"{self.mode}: stride at {a:.2f} s ({h - a:.2f} s) not used: found too late")
+                    events.append(f"{self.mode}: stride at {a:.2f} s ({h - a:.2f} s) not used: its start "
+                                  "was no longer kept (the heel strike ending it was found late)")
                 else:
                     events.append(f"{self.mode}: {h - a:.2f} s from the heel strike at {a:.2f} s to the next at "
                                   f"{h:.2f} s: not a stride (> {det.max_stride_s:g} s: a stop or a turn"

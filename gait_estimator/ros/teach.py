@@ -141,11 +141,16 @@ class NodeTeacher:
                 self.session.set_target(p.value)
                 self._log(self.session.progress())
 
-    def _start(self, mode: str) -> None:
+    def _start(self, mode: str, restarted: str = "") -> None:
+        """Collect ``mode``'s strides from the next sample (``restarted``: why the strides so far
+        were dropped)."""
         lib = self.node._library
         options = TeachOptions(strides=self.node.get_parameter("teach_strides").value,
                                channel=self.node.get_parameter("teach_channel").value)
         self.session = StrideCollector(mode, options, rate_hz=lib.sample_rate_hz if lib else None)
+        if restarted:
+            self._log(f"{mode}: {restarted}: strides so far dropped, collecting {options.strides} again", warn=True)
+            return
         what = "replaces" if lib is not None and mode in lib.mode_names else "is added to"
         self._log(f"{mode}: collecting {options.strides} steady strides (heel strikes from {options.channel}); "
                   f"the kernel {what} the library")
@@ -175,9 +180,7 @@ class NodeTeacher:
         jumped back: a restarted publisher, a bag played again; or ``why``): both start again."""
         self._recent.clear()
         if self.session is not None:
-            mode = self.session.mode
-            self._start(mode)
-            self._log(f"{mode}: {why}: collecting its strides again", warn=True)
+            self._start(self.session.mode, restarted=why)
 
     def replay_s(self) -> float:
         """Seconds of input kept for a new estimator: the longest stride a kernel may have (a
