@@ -623,7 +623,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def pooled_rms(stats: list[dict], key: str) -> float:
-    """The RMS over every trial's samples together (each trial's ``key`` RMS weighted by its count)."""
+    """The RMS (deg) over every trial's samples together: each trial's ``key`` RMS weighted by its count."""
     n = np.array([s[f"{key}_n"] for s in stats], dtype=float)
     return float(np.sqrt(np.sum(n * np.array([s[key] for s in stats]) ** 2) / n.sum()))
 

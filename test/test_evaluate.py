@@ -109,6 +109,9 @@ def test_label_map_rename_alternatives_and_drop(truth):
     n = int((rec.labels == "level").sum())
     assert ev.metrics["warnings"] == [f"truth label 'level' ({n} rows) is no mode of the predictions (Slow, Med, Fast): "
                                       "every row counts as wrong; --label-map level= leaves it out, level=MODE renames it"]
+    ev = evaluate(_table(rec.time_s, pred, truth.phase), rec, _hs(truth), parse_label_map("slow=Slow,level=Walk"))
+    assert ev.metrics["warnings"][0].startswith(f"truth label 'level' (as 'Walk') ({n} rows) is no mode")
+    assert "--label-map level= leaves it out" in ev.metrics["warnings"][0]
 
 
 def test_unready_unlabelled_and_unmatched_rows_are_not_evaluated(truth):

@@ -88,4 +88,6 @@ def test_benchmark_bags_to_try_the_imu_path_run_on_their_truths_clock(tmp_path):
     pred = read_predictions_csv(tmp_path / "pred.csv")
     assert np.allclose(pred.time_s, truth.time_s, atol=1e-6) and truth.time_s[0] == 0.0
     ev = evaluate(pred, truth)
-    assert ev.metrics["samples"]["matched"] == len(truth) and ev.metrics["warnings"] == []
+    assert ev.metrics["samples"]["matched"] == len(truth)
+    # no time-base warning; the bundled kernels' names are not the data set's labels, and it says so
+    assert [w.split(" (")[0] for w in ev.metrics["warnings"]] == ["truth label 'walk_fast'", "truth label 'stand'"]

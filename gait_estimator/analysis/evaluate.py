@@ -269,7 +269,7 @@ def evaluate(
             "match_tolerance_s": tol,
         },
         "phase_truth": _phase_truth_counts(heel_strikes, options),
-        "warnings": _time_base_warnings(t, truth.time_s, matched) + _label_warnings(labels, evaluated, accepted,
+        "warnings": _time_base_warnings(t, truth.time_s, matched) + _label_warnings(raw, labels, evaluated, accepted,
                                                                                    pred.sse_modes),
         "units": "phase errors are fractions of a stride (0.01 = 1 % of the gait cycle); delays in seconds",
     }
@@ -290,18 +290,22 @@ def _time_base_warnings(pred_s: np.ndarray, truth_s: np.ndarray, matched: np.nda
             "time from the same origin? (outputs of bags start at 0 s)"]
 
 
-def _label_warnings(labels: np.ndarray, evaluated: np.ndarray, accepted: Mapping[str, tuple[str, ...]],
-                    modes: Sequence[str]) -> list[str]:
-    """A warning per truth label that no mode of the predictions' library can match: its rows
-    all count as wrong (e.g. ``stand`` scored against walking kernels)."""
+def _label_warnings(raw: np.ndarray, labels: np.ndarray, evaluated: np.ndarray,
+                    accepted: Mapping[str, tuple[str, ...]], modes: Sequence[str]) -> list[str]:
+    """A warning per truth label (``raw``, before ``--label-map``; ``labels`` after) that no mode of
+    the predictions' library can match: its rows all count as wrong (e.g. ``stand`` scored against
+    walking kernels)."""
     if not modes:  # predictions without the library's mode names
         return []
     out = []
     for name, acc in accepted.items():
-        n = int((evaluated & (labels == name)).sum())
-        if n and not set(acc) & set(modes):
-            out.append(f"truth label {name!r} ({n} rows) is no mode of the predictions ({', '.join(modes)}): "
-                       f"every row counts as wrong; --label-map {name}= leaves it out, {name}=MODE renames it")
+        rows = evaluated & (labels == name)
+        if rows.any() and not set(acc) & set(modes):
+            truth = sorted(set(raw[rows].tolist()))
+            shown = ", ".join(repr(x) for x in truth) + (f" (as {name!r})" if truth != [name] else "")
+            out.append(f"truth label {shown} ({int(rows.sum())} rows) is no mode of the predictions "
+                       f"({', '.join(modes)}): every row counts as wrong; --label-map {truth[0]}= leaves it out, "
+                       f"{truth[0]}=MODE renames it")
     return out
 
 

@@ -21,9 +21,9 @@ from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, imu
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import choice_list, positive_float, positive_int, prepare_output
+from .args import choice_list, domain_id, positive_float, positive_int, prepare_output
 from .bench_profile import PROFILE_LABELS, clock_offset_ns, profile_stages
-from .node_commands import domain_id_arg, percentiles, start_node, wait_node
+from .node_commands import percentiles, start_node, wait_node
 
 BENCH_DOMAIN_ID = 78
 DEFAULT_RATES = (500, 1000, 1500, 2000, 3000, 4000, 6000, 8000)
@@ -445,7 +445,7 @@ def add_commands(sub: Any) -> None:
     b.add_argument("--rates", type=_rates, default=list(DEFAULT_RATES),
                    help="input rates to try, Hz (default " + ",".join(str(r) for r in DEFAULT_RATES) + ")")
     b.add_argument("--seconds", type=positive_float, default=2.0, help="duration of each rate step (default 2 s)")
-    b.add_argument("--domain-id", type=domain_id_arg, default=BENCH_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
+    b.add_argument("--domain-id", type=domain_id, default=BENCH_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
     b.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
     b.add_argument("--executor", type=choice_list(EXECUTORS), default=list(EXECUTORS), metavar="LIST",
                    help="node executors to measure, side by side (default " + ",".join(EXECUTORS) + "; the first "

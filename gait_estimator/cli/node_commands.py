@@ -19,16 +19,9 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import add_imu_reading_options, imu_reader_options, positive_float
+from .args import add_imu_reading_options, domain_id, imu_reader_options, positive_float
 
 DEMO_DOMAIN_ID = 77
-
-
-def domain_id_arg(text: str) -> int:
-    v = int(text)
-    if not 0 <= v <= 232:
-        raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
-    return v
 
 
 def start_node(domain_id: int, kernels: str, extra_ros_args: list[str], node_cmd: str | None) -> Any:
@@ -215,7 +208,7 @@ def add_commands(sub: Any) -> None:
     d.add_argument("--echo-every", type=int, default=23, metavar="N",
                    help="print every Nth mode/phase message, and every mode change (default 23, ~10 lines/s; 1 = all)")
     d.add_argument("--reliable", action="store_true", help="publish the input reliably (default best effort)")
-    d.add_argument("--domain-id", type=domain_id_arg, default=DEMO_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
+    d.add_argument("--domain-id", type=domain_id, default=DEMO_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
     d.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the node to connect")
     d.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
     d.set_defaults(func=cmd_demo)

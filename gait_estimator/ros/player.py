@@ -324,8 +324,8 @@ def _publish_loop(playlist: Playlist, pubs: list[Any], clock_pub: Any, clock_cls
                 clock_pub.publish(clock_msg)
             if shift and has_header[tr]:
                 raw = with_stamp(raw, stamp_of(raw) + shift)
+            published[0] += 1  # before: Ctrl-C inside publish() must not leave it out
             pubs[tr].publish(raw)
-            published[0] += 1
         if not loop:
             return
         k += 1

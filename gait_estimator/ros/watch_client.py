@@ -6,12 +6,14 @@ installs without the ros2 CLI (``pip install '.[ros]'``). It uses the ROS enviro
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
+from rclpy.exceptions import NameValidationException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -37,6 +39,8 @@ class Seen:
     message: str = ""
     values: dict[str, str] = field(default_factory=dict)
     """The node's last diagnostics key/values."""
+    diagnostics_at: float = math.nan
+    """``time.monotonic()`` when the last diagnostics came (they come at 1 Hz)."""
 
 
 class WatchClient:
@@ -44,12 +48,14 @@ class WatchClient:
 
     Args:
         node: Fully qualified name of the estimator node (e.g. ``/estimator_node``); its
-            ``mode`` and ``phase`` topics are taken in its namespace (the node's defaults).
+            ``mode`` and ``phase`` topics are taken in its namespace (the node's defaults; a
+            remapping on the node is not followed).
         domain_id: ROS domain (None: ``ROS_DOMAIN_ID`` of the environment, else 0).
         timeout_s: How long to wait for the node to appear in the graph.
 
     Raises:
-        GaitEstimatorError: No node of that name within ``timeout_s`` (one line).
+        GaitEstimatorError: An invalid node name, or no node of that name within ``timeout_s``
+            (one line).
     """
 
     def __init__(self, node: str = "/estimator_node", domain_id: int | None = None, timeout_s: float = 5.0) -> None:
@@ -61,9 +67,13 @@ class WatchClient:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.seen = Seen()
-        outputs = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)  # as the node publishes them
-        self.node.create_subscription(String, f"{namespace}/mode", self._on_mode, outputs)
-        self.node.create_subscription(Float64, f"{namespace}/phase", self._on_phase, outputs)
+        display = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)  # no acks to the leg's computer
+        try:
+            self.node.create_subscription(String, f"{namespace}/mode", self._on_mode, display)
+            self.node.create_subscription(Float64, f"{namespace}/phase", self._on_phase, display)
+        except NameValidationException as exc:
+            self.close()
+            raise GaitEstimatorError(f"--node {node}: not a valid node name ({str(exc).splitlines()[0]})") from None
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         if not spin_executor_until(self.executor, self._node_found, timeout_s, step_s=0.1):
             domain = self.context.get_domain_id()
@@ -90,6 +100,7 @@ class WatchClient:
                 self.seen.level = LEVELS[level] if level < len(LEVELS) else str(level)
                 self.seen.message = st.message
                 self.seen.values = {kv.key: kv.value for kv in st.values}
+                self.seen.diagnostics_at = time.monotonic()
 
     def spin_for(self, seconds: float) -> None:
         """Take the node's messages for ``seconds``."""
