@@ -18,7 +18,6 @@ from .args import domain_id, positive_float
 _READY = re.compile(r"^ready: \S+ phase [0-9.]+(; )?")
 """The diagnostics message's start that repeats the mode and phase columns."""
 
-
 STALE_AFTER_S = 3.0
 """Diagnostics older than this (s; the node sends them every second) are shown as stale."""
 

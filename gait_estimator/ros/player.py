@@ -324,7 +324,7 @@ def _publish_loop(playlist: Playlist, pubs: list[Any], clock_pub: Any, clock_cls
                 clock_pub.publish(clock_msg)
             if shift and has_header[tr]:
                 raw = with_stamp(raw, stamp_of(raw) + shift)
-            published[0] += 1  # before: Ctrl-C inside publish() must not leave it out
+            published[0] += 1  # counted first: a Ctrl-C inside publish() still counts this message
             pubs[tr].publish(raw)
         if not loop:
             return
