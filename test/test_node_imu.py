@@ -499,9 +499,10 @@ def test_configured_axes_need_no_calibration_file(ros, tmp_path):
     assert not path.exists()
 
 
-def test_imu_input_without_a_library_learns_the_calibration_and_waits_for_teaching(ros, tmp_path, monkeypatch):
-    """``kernels: ''``: the node starts, learns the calibration (saved under the taught
-    library's name) and takes the angles for teaching; only diagnostics come out."""
+def test_imu_input_without_a_library_learns_the_calibration_and_waits_for_teaching(ros, tmp_path, monkeypatch,
+                                                                                    capfd):
+    """``kernels: ''``: the node starts (its configuration logged), learns the calibration (saved
+    under the taught library's name) and takes the angles for teaching; only diagnostics come out."""
     monkeypatch.setenv("HOME", str(tmp_path))
     rng = np.random.default_rng(5)
     s = synthesize(gait_angles(RATE, walk_s=5.0), RATE, random_mounts(rng), rng)
@@ -517,6 +518,8 @@ def test_imu_input_without_a_library_learns_the_calibration_and_waits_for_teachi
     assert diag["imu_calibration_status"] == "calibrated" and path.is_file()
     assert int(diag["samples_accepted"]) > RATE, "calibrated angles go to teaching"
     assert client.estimate_count == 0
+    assert "no kernel library (kernels: ''): diagnostics only until a mode is taught (teach_mode); input imu on " \
+        f"{h.namespace}/imu/right_thigh" in capfd.readouterr().err
     answer = call(client, h, RESET_CALIBRATION_SERVICE)
     assert answer.success and "IMU calibration forgotten" in answer.message and not path.exists()
 

@@ -191,10 +191,10 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         )
         lib = self._library
         self.get_logger().info(
-            "no kernel library (kernels: ''): diagnostics only until a mode is taught (teach_mode)" if lib is None else
-            f"library '{lib.name}' ({len(lib)} modes: {', '.join(lib.mode_names)}; window "
-            f"{self._estimator.matcher.max_window} samples at {lib.sample_rate_hz:g} Hz) from {lib.path or '?'}; "
-            f"input {self._input_type} on {self._input_topics}" + (f" in {self._units}" if self._imu is None else "")
+            ("no kernel library (kernels: ''): diagnostics only until a mode is taught (teach_mode)" if lib is None else
+             f"library '{lib.name}' ({len(lib)} modes: {', '.join(lib.mode_names)}; window "
+             f"{self._estimator.matcher.max_window} samples at {lib.sample_rate_hz:g} Hz) from {lib.path or '?'}")
+            + f"; input {self._input_type} on {self._input_topics}" + (f" in {self._units}" if self._imu is None else "")
             + (f", joints {', '.join(self._joint_names)}" if self._input_type == "joint_state" else "")
             + f"; options: {self._options_summary()}"
         )
