@@ -744,13 +744,17 @@ def check_table(r: dict) -> str:
     return "\n".join(rows)
 
 
+INPUT_NAMES = {"mocap": "mocap", "imu_raw": "IMU (raw)"}
+"""Table names of the estimator runs' angle sources."""
+
+
 def estimator_table(r: dict) -> str:
     """Accuracy and mean phase error (% of a stride) per kernel source and input."""
     every, sound = r["estimator"], r["estimator_without_faults"]
     n_all, n_sound = next(iter(every.values()))["samples"], next(iter(sound.values()))["samples"]
     rows = [f"| kernels from → fed with | all samples ({n_all}): accuracy, phase error | without the shank IMU "
             f"faults ({n_sound}) |", "|---|---|---|"]
-    names = {"mocap": "mocap", "imu_raw": "IMU (raw)"}
+    names = INPUT_NAMES
     for key in every:
         a, b = key.split("->")
         cells = [f"{100 * v[key]['accuracy']:.1f} %, {100 * v[key]['phase_error_mean']:.2f}" for v in (every, sound)]
@@ -768,7 +772,7 @@ def standing_table(r: dict) -> str:
     """``fit_rms_deg`` of the estimates while the wearer stands (no mode fits) and walks."""
     rows = ["| kernels from → fed with (all samples) | standing samples | fit_rms_deg standing: 5th percentile, median "
             "| walking (scored rows): median, 95th percentile |", "|---|---|---|---|"]
-    names = {"mocap": "mocap", "imu_raw": "IMU (raw)"}
+    names = INPUT_NAMES
     for key, v in r["estimator"].items():
         a, b = key.split("->")
         s, w = v["fit_rms_standing_p5_p50_deg"], v["fit_rms_walking_p50_p95_deg"]

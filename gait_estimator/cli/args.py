@@ -66,6 +66,15 @@ def domain_id(text: str) -> int:
     return v
 
 
+def add_target_node_options(p: Any, node_note: str = "") -> None:
+    """``--node``, ``--domain-id``, ``--timeout``: the running estimator node a command talks to."""
+    p.add_argument("--node", default="/estimator_node",
+                   help=f"the estimator node's name{node_note} (default %(default)s)")
+    p.add_argument("--domain-id", type=domain_id, help="ROS_DOMAIN_ID (default: the environment's)")
+    p.add_argument("--timeout", type=positive_float, default=5.0,
+                   help="seconds to wait for the node (default %(default)s)")
+
+
 def seconds(text: str) -> float:
     """A duration in seconds, >= 0 (inf allowed)."""
     try:

@@ -12,7 +12,7 @@ from typing import Any
 from ..analysis.teach import TEACH_STRIDES, check_teach_strides
 from ..core.errors import GaitEstimatorError
 from ..ros import require_ros
-from .args import domain_id, positive_float
+from .args import add_target_node_options, positive_float
 
 
 def _strides(text: str) -> int:
@@ -65,10 +65,7 @@ def add_commands(sub: Any) -> None:
                    help="good strides to average (default %(default)s; at least train's --min-strides, 3)")
     t.add_argument("--save", metavar="PATH", help="have the node save its library to PATH (.yaml or .npz; a "
                    "relative PATH is taken from this directory) (after teaching, when --mode is given too)")
-    t.add_argument("--node", default="/estimator_node", help="the estimator node's name (default %(default)s)")
-    t.add_argument("--domain-id", type=domain_id, help="ROS_DOMAIN_ID (default: the environment's)")
-    t.add_argument("--timeout", type=positive_float, default=5.0,
-                   help="seconds to wait for the node to answer (default %(default)s)")
+    add_target_node_options(t)
     t.add_argument("--max-time", type=positive_float, help="give up (and cancel) after this many seconds "
                    "(default: wait until done)")
     t.set_defaults(func=cmd_teach)

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..ros import require_ros
-from .args import domain_id, positive_float
+from .args import add_target_node_options, positive_float
 
 _READY = re.compile(r"^ready: \S+ phase [0-9.]+(; )?")
 """The diagnostics message's start that repeats the mode and phase columns."""
@@ -70,14 +70,9 @@ def add_commands(sub: Any) -> None:
         "Uses the environment's ROS_DOMAIN_ID and discovery range unless --domain-id is given. Exits 2 with "
         "one line when the node is not found, 130 on Ctrl-C.",
     )
-    w.add_argument("--node", default="/estimator_node",
-                   help="the estimator node's name; its mode and phase topics are in its namespace "
-                   "(default %(default)s)")
     w.add_argument("--keys", metavar="KEY,...", help="diagnostics values to print too, e.g. "
                    "imu_calibration_status,sensor_offset_deg,input_rate_hz (docs/node.md, docs/imu.md list them)")
     w.add_argument("--rate", type=positive_float, default=2.0, help="lines per second (default %(default)s)")
     w.add_argument("--duration", type=positive_float, help="stop after this many seconds (default: Ctrl-C)")
-    w.add_argument("--domain-id", type=domain_id, help="ROS_DOMAIN_ID (default: the environment's)")
-    w.add_argument("--timeout", type=positive_float, default=5.0,
-                   help="seconds to wait for the node to appear (default %(default)s)")
+    add_target_node_options(w, node_note="; its mode and phase topics are in its namespace")
     w.set_defaults(func=cmd_watch)

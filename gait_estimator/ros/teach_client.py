@@ -3,8 +3,7 @@
 ``TeachClient`` finds the node by name, sets ``teach_strides`` and ``teach_mode`` through its
 parameter service, follows the teaching in the node's log (``/rosout``, lines starting with
 ``teach:``) and diagnostics (``teach_completed``, ``teach_last_result``), and calls
-``~/save_library``. It uses the ROS environment it runs in (``ROS_DOMAIN_ID``, discovery range),
-as ``ros2 param set`` would, unless given a domain ID.
+``~/save_library``.
 """
 
 from __future__ import annotations
@@ -13,25 +12,21 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Log
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
 
 from ..core.errors import GaitEstimatorError
 from .node_client import spin_executor_until
 from .teach import LOG_PREFIX
+from .tool_node import ToolNode
 
 DEFAULT_NODE = "/estimator_node"
 
 
-class TeachClient:
+class TeachClient(ToolNode):
     """A small ROS node talking to one ``estimator_node``.
 
     Args:
@@ -44,13 +39,7 @@ class TeachClient:
     """
 
     def __init__(self, node: str = DEFAULT_NODE, domain_id: int | None = None, timeout_s: float = 5.0) -> None:
-        self.target = node if node.startswith("/") else "/" + node
-        self.context = Context()
-        # no rclpy signal handlers: Ctrl-C reaches the command, which then cancels the teaching
-        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = Node("gait_estimator_teach", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__init__("gait_estimator_teach", node, domain_id)  # Ctrl-C reaches the command: it cancels
         self.diagnostics: dict[str, str] | None = None
         self.on_log: Callable[[str], None] | None = None
         self._started = self.node.get_clock().now().nanoseconds
@@ -59,12 +48,7 @@ class TeachClient:
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.params = AsyncParameterClient(self.node, self.target)
         if not self.params.wait_for_services(timeout_s):
-            domain = self.context.get_domain_id()
-            self.close()
-            raise GaitEstimatorError(
-                f"no estimator node {self.target} answered within {timeout_s:g} s on ROS_DOMAIN_ID={domain} "
-                "(is it running, on this domain and discovery range? --node NAME, --domain-id ID)"
-            )
+            raise self.not_found(timeout_s, "answered")
 
     # -- callbacks
 
@@ -75,9 +59,9 @@ class TeachClient:
                 self.on_log(msg.msg[len(LOG_PREFIX):])
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
-        for st in msg.status:
-            if st.name.startswith(self.target + ": "):
-                self.diagnostics = {kv.key: kv.value for kv in st.values}
+        st = self.target_status(msg)
+        if st is not None:
+            self.diagnostics = {kv.key: kv.value for kv in st.values}
 
     # -- calls
 
@@ -146,14 +130,3 @@ class TeachClient:
             raise GaitEstimatorError(f"{self.target}/save_library: {answer.message}")
         return str(answer.message)
 
-    def close(self) -> None:
-        self.executor.remove_node(self.node)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-    def __enter__(self) -> TeachClient:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

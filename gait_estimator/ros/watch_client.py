@@ -1,7 +1,6 @@
 """Watching a running ``estimator_node`` from another process (``gait-estimator watch``): its
 ``mode`` and ``phase`` topics and its diagnostics, as ``ros2 topic echo`` would show them, for
-installs without the ros2 CLI (``pip install '.[ros]'``). It uses the ROS environment it runs in
-(``ROS_DOMAIN_ID``, discovery range) unless given a domain ID.
+installs without the ros2 CLI (``pip install '.[ros]'``).
 """
 
 from __future__ import annotations
@@ -10,18 +9,14 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
 from rclpy.exceptions import NameValidationException
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64, String
 
 from ..core.errors import GaitEstimatorError
 from .node_client import spin_executor_until
+from .tool_node import ToolNode
 
 LEVELS = ("OK", "WARN", "ERROR", "STALE")
 """diagnostic_msgs/DiagnosticStatus levels 0..3."""
@@ -43,7 +38,7 @@ class Seen:
     """``time.monotonic()`` when the last diagnostics came (they come at 1 Hz)."""
 
 
-class WatchClient:
+class WatchClient(ToolNode):
     """A small ROS node subscribed to one ``estimator_node``'s outputs.
 
     Args:
@@ -59,13 +54,8 @@ class WatchClient:
     """
 
     def __init__(self, node: str = "/estimator_node", domain_id: int | None = None, timeout_s: float = 5.0) -> None:
-        self.target = node if node.startswith("/") else "/" + node
+        super().__init__("gait_estimator_watch", node, domain_id)
         namespace = self.target.rsplit("/", 1)[0]
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = Node("gait_estimator_watch", context=self.context, start_parameter_services=False)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
         self.seen = Seen()
         display = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)  # no acks to the leg's computer
         try:
@@ -76,12 +66,7 @@ class WatchClient:
             raise GaitEstimatorError(f"--node {node}: not a valid node name ({str(exc).splitlines()[0]})") from None
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         if not spin_executor_until(self.executor, self._node_found, timeout_s, step_s=0.1):
-            domain = self.context.get_domain_id()
-            self.close()
-            raise GaitEstimatorError(
-                f"no estimator node {self.target} within {timeout_s:g} s on ROS_DOMAIN_ID={domain} "
-                "(is it running, on this domain and discovery range? --node NAME, --domain-id ID)"
-            )
+            raise self.not_found(timeout_s)
 
     def _node_found(self) -> bool:
         return self.target in self.node.get_fully_qualified_node_names()
@@ -94,27 +79,17 @@ class WatchClient:
         self.seen.estimates += 1
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
-        for st in msg.status:
-            if st.name.startswith(self.target + ": "):
-                level = st.level if isinstance(st.level, int) else int.from_bytes(st.level, "little")
-                self.seen.level = LEVELS[level] if level < len(LEVELS) else str(level)
-                self.seen.message = st.message
-                self.seen.values = {kv.key: kv.value for kv in st.values}
-                self.seen.diagnostics_at = time.monotonic()
+        st = self.target_status(msg)
+        if st is None:
+            return
+        level = st.level if isinstance(st.level, int) else int.from_bytes(st.level, "little")
+        self.seen.level = LEVELS[level] if level < len(LEVELS) else str(level)
+        self.seen.message = st.message
+        self.seen.values = {kv.key: kv.value for kv in st.values}
+        self.seen.diagnostics_at = time.monotonic()
 
     def spin_for(self, seconds: float) -> None:
         """Take the node's messages for ``seconds``."""
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
             self.executor.spin_once(timeout_sec=min(left, 0.05))
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
-
-    def __enter__(self) -> WatchClient:
-        return self
-
-    def __exit__(self, *_: object) -> None:
-        self.close()

@@ -1,0 +1,63 @@
+"""The small ROS node of a command that talks to one running ``estimator_node`` (``gait-estimator
+teach``, ``watch``): its own context, node and executor, without rclpy's signal handlers (Ctrl-C
+reaches the command). It uses the ROS environment it runs in (``ROS_DOMAIN_ID``, discovery range),
+as the ros2 CLI would, unless given a domain ID.
+"""
+
+from __future__ import annotations
+
+from typing import Any, TypeVar
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from ..core.errors import GaitEstimatorError
+
+T = TypeVar("T", bound="ToolNode")
+
+
+class ToolNode:
+    """A command's ROS node aimed at the estimator node ``target``.
+
+    Args:
+        name: This node's name.
+        target: Name of the estimator node (a leading ``/`` is added if missing).
+        domain_id: ROS domain (None: ``ROS_DOMAIN_ID`` of the environment, else 0).
+    """
+
+    def __init__(self, name: str, target: str, domain_id: int | None) -> None:
+        self.target = target if target.startswith("/") else "/" + target
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = Node(name, context=self.context, start_parameter_services=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def target_status(self, msg: DiagnosticArray) -> Any | None:
+        """The target's ``DiagnosticStatus`` in a ``/diagnostics`` message, or None."""
+        return next((st for st in msg.status if st.name.startswith(self.target + ": ")), None)
+
+    def not_found(self, timeout_s: float, verb: str = "") -> GaitEstimatorError:
+        """Close, and the one-line error for a target that did not show (``verb``, e.g.
+        ``answered``) within ``timeout_s``."""
+        domain = self.context.get_domain_id()
+        self.close()
+        what = " ".join(x for x in (f"no estimator node {self.target}", verb, f"within {timeout_s:g} s") if x)
+        return GaitEstimatorError(f"{what} on ROS_DOMAIN_ID={domain} (is it running, on this domain and discovery "
+                                  "range? --node NAME, --domain-id ID)")
+
+    def close(self) -> None:
+        self.executor.remove_node(self.node)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self: T) -> T:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
