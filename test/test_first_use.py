@@ -3,8 +3,10 @@ LG_2_Ramp labels, error lines, playing an output bag. ROS traffic on domains 100
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 from gait_estimator.ros.node_client import local_ros_environment
 
@@ -23,3 +25,46 @@ def test_demo_uses_the_environments_domain() -> None:
     line = next(line for line in proc.stdout.splitlines() if line.startswith("same mode as offline"))
     same, total = line.rsplit(" ", 1)[1].split("/")
     assert same == total and int(total) >= 390
+
+
+def _one_error_line(proc: subprocess.CompletedProcess) -> str:
+    lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
+    assert proc.returncode == 2 and len(lines) == 1, (proc.returncode, lines)
+    return lines[0]
+
+
+def test_error_lines_say_what_was_found_and_what_is_expected(tmp_path: Path, swge: Path) -> None:
+    csv = tmp_path / "walk.csv"
+    csv.write_text("t,rt,lt,rs,ls\n0,1,2,3,4\n", encoding="utf-8")
+    line = _one_error_line(_gait_estimator("process", str(csv)))
+    assert "columns t, rt, lt, rs, ls; expected time_s, right_thigh_deg" in line, line
+
+    ramp = str(swge / "recordings" / "LG_2_Ramp_AB_Sample.csv")
+    line = _one_error_line(_gait_estimator("process", ramp, "--kernels", "ableBodied"))
+    assert "ableBodied" in line and "able_bodied, prosthesis" in line, line
+
+    line = _one_error_line(_gait_estimator("process", ramp, "--preset", "fast"))
+    assert line.startswith("gait-estimator process: error: argument --preset: invalid choice: 'fast'"), line
+    assert line.endswith("(usage: gait-estimator process -h)"), line
+
+
+def test_node_names_a_parameter_of_the_wrong_type() -> None:
+    node = shutil.which("estimator_node", path=str(Path(sys.executable).parent))
+    assert node is not None
+    proc = subprocess.run([node, "--ros-args", "-p", "teach_strides:=ten"], capture_output=True, text=True,
+                          timeout=60, check=False, env=local_ros_environment(101))
+    line = _one_error_line(proc)
+    assert line.startswith("estimator_node: error: invalid parameter teach_strides: "), line
+    assert "'ten'" in line and "INTEGER" in line, line
+
+
+def test_play_refuses_an_output_bag_unless_topics_are_chosen(tmp_path: Path, swge: Path) -> None:
+    ramp = str(swge / "recordings" / "LG_2_Ramp_AB_Sample.csv")
+    made = _gait_estimator("process", ramp, "--stop", "500", "--out-bag", str(tmp_path / "est"), "-q")
+    assert made.returncode == 0, made.stderr
+    env = local_ros_environment(102)
+    line = _one_error_line(_gait_estimator("play", str(tmp_path / "est"), env=env))
+    assert "holds estimator output (/estimate, /mode, /phase, /sse)" in line and "--topic" in line, line
+    chosen = _gait_estimator("play", str(tmp_path / "est"), "--topic", "/estimate", "--rate", "20", env=env)
+    assert chosen.returncode == 0, chosen.stderr
+    assert "published 500 message(s)" in chosen.stdout and "on /estimate" in chosen.stdout, chosen.stdout
