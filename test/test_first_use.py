@@ -3,12 +3,15 @@ LG_2_Ramp labels, error lines, playing an output bag. ROS traffic on domains 100
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 from gait_estimator.ros.node_client import local_ros_environment
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def _gait_estimator(*args: str, env: dict[str, str] | None = None, timeout: float = 120,
@@ -68,3 +71,37 @@ def test_play_refuses_an_output_bag_unless_topics_are_chosen(tmp_path: Path, swg
     chosen = _gait_estimator("play", str(tmp_path / "est"), "--topic", "/estimate", "--rate", "20", env=env)
     assert chosen.returncode == 0, chosen.stderr
     assert "published 500 message(s)" in chosen.stdout and "on /estimate" in chosen.stdout, chosen.stdout
+
+
+def test_readme_command_reproduces_the_lg2_ramp_row(tmp_path: Path) -> None:
+    """README's command for its LG_2_Ramp row, run as written (from a clone: data/ and .venv/), gives
+    the row's figures; docs/training.md shows the same command."""
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    command = readme.split("The LG_2_Ramp row", 1)[1].split("```bash\n", 1)[1].split("```", 1)[0]
+    training = (REPO / "docs" / "training.md").read_text(encoding="utf-8")
+    assert command.replace(".venv/bin/", "") in training
+    (tmp_path / "data").symlink_to(REPO / "data")
+    (tmp_path / ".venv").symlink_to(Path(sys.executable).parent.parent)
+    proc = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "labels: data/swge/recordings/LG_2_Ramp_AB_Sample.labels.csv (beside the recording" in proc.stdout
+    got = re.search(r"^accuracy ([\d.]+) %; phase error \(correct rows\) mean ([\d.]+) %", proc.stdout, re.M)
+    steady = re.search(r"^steady .*accuracy ([\d.]+) %", proc.stdout, re.M)
+    assert got and steady, proc.stdout
+    row = next(line for line in readme.splitlines() if line.startswith("| mode accuracy on another session: LG_2_Ramp"))
+    want = re.search(r"\| ([\d.]+) % \(steady rows ([\d.]+) %\); phase error ([\d.]+) % of a stride \|", row)
+    assert want, row
+    assert f"{float(got[1]):.1f}" == want[1] and f"{float(steady[1]):.1f}" == want[2], (proc.stdout, row)
+    assert f"{float(got[2]):.2f}" == want[3], (proc.stdout, row)
+
+
+def test_readme_results_keep_three_headline_rows() -> None:
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    block = readme.split("<!-- BEGIN accuracy#Results -->", 1)[1].split("<!-- END accuracy#Results -->", 1)[0]
+    rows = [line.split(" | ", 1)[0] for line in block.strip().splitlines()[2:]]
+    assert len(rows) == 3, rows
+    assert "reference C++ implementation" in rows[0] and "another session" in rows[1] and "time per sample" in rows[2]
+    after = readme.split("<!-- END accuracy#Results -->", 1)[1].split("## ", 1)[0]
+    assert "(docs/results.md)" in after and "(docs/performance.md" in after
+    assert len(readme.encode("utf-8")) <= 15_000
