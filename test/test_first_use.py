@@ -105,3 +105,15 @@ def test_readme_results_keep_three_headline_rows() -> None:
     after = readme.split("<!-- END accuracy#Results -->", 1)[1].split("## ", 1)[0]
     assert "(docs/results.md)" in after and "(docs/performance.md" in after
     assert len(readme.encode("utf-8")) <= 15_000
+
+
+def test_docs_sample_output_is_what_the_command_prints_now() -> None:
+    """docs/bags.md's `process` sample is generated (make docs) and docs-check reruns it."""
+    bags = (REPO / "docs" / "bags.md").read_text(encoding="utf-8")
+    block = bags.split("<!-- BEGIN samples#bags process -->\n", 1)[1].split("<!-- END samples#bags process -->", 1)[0]
+    assert block.startswith("```text\n$ gait-estimator process out/ramp_bag --out-bag out/ramp_est\n"), block
+    check = subprocess.run([sys.executable, "benchmarks/samples.py", "--check"], cwd=REPO, capture_output=True,
+                           text=True, timeout=120, check=False)
+    assert check.returncode == 0, check.stderr
+    tables = (REPO / "benchmarks" / "results" / "samples" / "tables.md").read_text(encoding="utf-8")
+    assert block.strip() in tables
