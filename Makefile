@@ -56,9 +56,9 @@ soak: venv
 
 # The measured tables in README.md and docs/: rebuild every benchmarks/results/*/tables.md from the
 # results there (no benchmark is rerun; the reference agreement runs `process` on 3,000 samples,
-# benchmarks/samples.py the commands whose output docs/ shows), then copy each section into its
-# <!-- BEGIN name --> block. Rerunning the benchmarks themselves: docs/performance.md,
-# "Regenerating the numbers". docs-check also reruns the sample commands.
+# benchmarks/samples.py the commands whose output docs/ shows, in docs-check too), then copy each
+# section into its <!-- BEGIN name --> block. Rerunning the benchmarks themselves:
+# docs/performance.md, "Regenerating the numbers".
 docs: venv
 	$(BIN)/python benchmarks/performance.py
 	$(BIN)/python benchmarks/node.py
@@ -66,11 +66,9 @@ docs: venv
 	$(BIN)/python benchmarks/accuracy.py --tables-only
 	$(BIN)/python benchmarks/teach.py --tables-only
 	$(BIN)/python benchmarks/imu.py --tables-only
-	$(BIN)/python benchmarks/samples.py
 	$(BIN)/python -m benchmarks.common --update-docs
 
 docs-check: venv
-	$(BIN)/python benchmarks/samples.py --check
 	$(BIN)/python -m benchmarks.common --check-docs
 
 clean:

@@ -388,6 +388,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     group.add_argument("--update-docs", action="store_true", help="rewrite the generated blocks (make docs)")
     group.add_argument("--check-docs", action="store_true", help="change nothing; exit 1 if a block is out of date")
     args = ap.parse_args(argv)
+    from benchmarks import samples  # the sample command output docs/ shows: run again now
+
+    if args.check_docs and samples.stale():
+        print(f"{samples.OUT.relative_to(REPO)}: the commands print something else now; run: make docs", file=sys.stderr)
+        return 1
+    if args.update_docs:
+        print(f"wrote {samples.write().relative_to(REPO)}")
     return update_docs(check=args.check_docs)
 
 

@@ -1,17 +1,14 @@
-"""Sample command output shown in docs/, from running the commands (make docs; make docs-check).
-
-    python benchmarks/samples.py [--check]
+"""Sample command output shown in docs/, from running the commands: ``python -m benchmarks.common
+--update-docs`` (make docs) writes it, ``--check-docs`` (make docs-check) reruns and compares it.
 
 Each sample runs its commands as a user would from a clone (in a temporary directory holding a
 link to ``data/``), and keeps what the page shows of the output: ``benchmarks/results/samples/
 tables.md``, one section per sample, copied into the page's ``<!-- BEGIN samples#NAME -->``
-block by ``python -m benchmarks.common --update-docs``. ``--check``: change nothing, exit 1 when
-the output has changed since tables.md was written.
+block.
 """
 
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 import tempfile
@@ -56,21 +53,13 @@ def tables() -> str:
     return "\n\n".join(f"### {name}\n\n{run_sample(*sample)}" for name, sample in SAMPLES.items()) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--check", action="store_true", help="exit 1 if the samples' output changed (write nothing)")
-    args = ap.parse_args(argv)
-    text = tables()
-    if args.check:
-        if not OUT.is_file() or OUT.read_text(encoding="utf-8") != text:
-            print(f"{OUT.relative_to(REPO)} is out of date; run: make docs", file=sys.stderr)
-            return 1
-        return 0
+def write() -> Path:
+    """Run the samples, write tables.md; its path."""
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(text, encoding="utf-8")
-    print(f"wrote {OUT.relative_to(REPO)}")
-    return 0
+    OUT.write_text(tables(), encoding="utf-8")
+    return OUT
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def stale() -> bool:
+    """True when the samples' output is no longer what tables.md holds."""
+    return not OUT.is_file() or OUT.read_text(encoding="utf-8") != tables()

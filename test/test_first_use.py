@@ -112,7 +112,7 @@ def test_docs_sample_output_is_what_the_command_prints_now() -> None:
     bags = (REPO / "docs" / "bags.md").read_text(encoding="utf-8")
     block = bags.split("<!-- BEGIN samples#bags process -->\n", 1)[1].split("<!-- END samples#bags process -->", 1)[0]
     assert block.startswith("```text\n$ gait-estimator process out/ramp_bag --out-bag out/ramp_est\n"), block
-    check = subprocess.run([sys.executable, "benchmarks/samples.py", "--check"], cwd=REPO, capture_output=True,
+    check = subprocess.run([sys.executable, "-m", "benchmarks.common", "--check-docs"], cwd=REPO, capture_output=True,
                            text=True, timeout=120, check=False)
     assert check.returncode == 0, check.stderr
     tables = (REPO / "benchmarks" / "results" / "samples" / "tables.md").read_text(encoding="utf-8")
