@@ -55,8 +55,9 @@ soak: venv
 	ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST GAIT_SOAK_SAMPLES=$(SOAK_SAMPLES) $(BIN)/pytest -q -s test/test_faults.py -k soak
 
 # The measured tables in README.md and docs/: rebuild every benchmarks/results/*/tables.md from the
-# results there (no benchmark is rerun; the reference agreement runs `process` on 3,000 samples),
-# then copy each section into its <!-- BEGIN name --> block. Rerunning the benchmarks themselves:
+# results there (no benchmark is rerun; the reference agreement runs `process` on 3,000 samples,
+# benchmarks/samples.py the commands whose output docs/ shows, in docs-check too), then copy each
+# section into its <!-- BEGIN name --> block. Rerunning the benchmarks themselves:
 # docs/performance.md, "Regenerating the numbers".
 docs: venv
 	$(BIN)/python benchmarks/performance.py

@@ -34,7 +34,7 @@ OUT = RESULTS / "accuracy"
 REC = "data/swge/recordings"
 LG2 = f"{REC}/LG_2_Ramp_AB_Sample.csv"
 MULTISPEED = f"{REC}/Multispeed_Walk_AB.csv"
-LG2_LABELS = "benchmarks/lg2_ramp_labels.csv"
+LG2_LABELS = f"{REC}/LG_2_Ramp_AB_Sample.labels.csv"
 REFERENCE = "data/swge/reference_output/trick_multispeed_4000_7000.csv"
 MODE_IDS = {"Slow": 1, "Med": 2, "Fast": 3, "RA": 4, "RD": 5, "SA": 6, "SD": 7}
 COMMAND = "`python benchmarks/accuracy.py` (deterministic)"
@@ -226,66 +226,33 @@ def step_row(path: Path) -> list[str]:
             f"`python benchmarks/performance.py --run` (`gait-estimator bench --modes 7,70,700`) on {machine(report)}"]
 
 
-def new_wearer_rows(path: Path) -> list[list[str]]:
-    """Rows from benchmarks/cross_session.py's summary.json (default preset vs paper)."""
-    res = read_report(path, "python benchmarks/cross_session.py")["results"]
-    cmd = "`python benchmarks/cross_session.py` (deterministic)"
-    rows = []
-    for key, what in (("SYN-NEW", "synthetic new wearers (offsets ±8°, amplitude ±15 %, cadence ±12 %, 100–500 Hz), 7 modes"),
-                      ("SYN-NEW-L", "the same, Slow/Med/Fast scored as one level-walking class"),
-                      ("LG2-AB", "LG_2_Ramp at its own stamps, bundled kernels of another session")):
-        if key not in res:
-            continue
-        d, p = res[key]["default"], res[key]["paper"]
-        rows.append([f"new wearer: {what}",
-                     f"accuracy {pct(d['accuracy'])} (steady {pct(d['steady_accuracy'])}), phase error "
-                     f"{pct(d['phase_error_mean'], 2)}; paper preset {pct(p['accuracy'])}, {pct(p['phase_error_mean'], 2)}",
-                     "—", cmd])
-    return rows
+def another_session_row(path: Path) -> list[str]:
+    """LG_2_Ramp at its own stamps with the bundled kernels, default preset: from
+    benchmarks/cross_session.py's summary.json; README's command gives the same (test_first_use.py)."""
+    d = read_report(path, "python benchmarks/cross_session.py")["results"]["LG2-AB"]["default"]
+    return ["mode accuracy on another session: LG_2_Ramp (level, ramps) at its own stamps, bundled kernels "
+            "(`level` = Slow, Med or Fast)",
+            f"{pct(d['accuracy'])} (steady rows {pct(d['steady_accuracy'])}); phase error "
+            f"{pct(d['phase_error_mean'], 2)} of a stride", "99.1 % steady state, 7 modes",
+            "the command below; `python benchmarks/cross_session.py`"]
 
 
-def node_row(path: Path) -> list[str]:
-    report = read_report(path, "gait-estimator bench-node --profile --json " + str(path.relative_to(REPO)))
-    lat, tp = report["latency"], report["throughput"]
-    result = f"{lat['p50_ms']:.2f} / {lat['p99_ms']:.2f} ms"
-    if "dds_p50_ms" in lat:
-        result = (f"{lat['dds_p50_ms']:.2f} / {lat['dds_p99_ms']:.2f} ms at the subscriber's DDS reader, "
-                  f"{result} in its rclpy callback")
-    load = report.get("load_average_before")
-    return ["node latency at 230 Hz, input → `estimate` (p50 / p99); highest input rate without drops",
-            f"{result}; {tp['max_sustained_rate_hz']:,.0f} Hz", "—",
-            f"`gait-estimator bench-node --json` on {machine(report)}"
-            + (f", load average {load[0]:.2f} before the run" if load else "")]
-
-
-def results_table(out: Path, ref: dict[str, Any]) -> str:
-    ms, ms_all, lg2 = metrics(out, "multispeed"), metrics(out, "multispeed_all"), metrics(out, "lg2_able_bodied")
+def results_table(ref: dict[str, Any]) -> str:
+    """README's three headline rows; the rest is in docs/results.md and docs/performance.md."""
     rows = [
         ["agreement with the reference C++ implementation (Multispeed samples 4000–6999)",
          f"mode {ref['mode']:,}/{ref['samples']:,}; phase {ref['phase_exact']:,}/{ref['samples']:,} exactly, "
          f"{ref['phase_one_column']:,}/{ref['samples']:,} within one kernel column", "—",
          "`python benchmarks/accuracy.py`; `make test` checks it"],
-        ["mode accuracy, Multispeed treadmill walk, steady strides (3 speeds); possibly in-sample",
-         f"{pct(ms['accuracy'])} of {ms['samples']['evaluated']:,} samples", "99.1 % steady state, 7 modes", COMMAND],
-        ["mode accuracy, Multispeed, every stride (speed changes included); possibly in-sample",
-         f"{pct(ms_all['accuracy'])} of {ms_all['samples']['evaluated']:,}; steady rows {pct(ms_all['steady']['accuracy'])}",
-         "—", COMMAND],
-        ["mode accuracy, LG_2_Ramp level/ramp walk (230 Hz copy), kernels from another session",
-         f"{pct(lg2['accuracy'])} of {lg2['samples']['evaluated']:,}; steady rows {pct(lg2['steady']['accuracy'])}", "—",
-         COMMAND],
-        ["phase error, Multispeed steady strides (% of a stride); possibly in-sample",
-         f"{pct(ms['phase_error_mean'], 2)} mean, {pct(ms['phase_error_max'])} max", "≤ 1.8 % level walking, < 4 % every mode",
-         COMMAND],
-        *new_wearer_rows(RESULTS / "cross_session" / "summary.json"),
+        another_session_row(RESULTS / "cross_session" / "summary.json"),
         step_row(RESULTS / "performance" / "bench.json"),
-        node_row(RESULTS / "node" / "bench_node.json"),
     ]
     return "### Results\n\n" + md_table(["measure", "result", "paper", "measured with"], rows)
 
 
 def write_tables(out: Path) -> Path:
     ref = reference_agreement()
-    text = "\n\n".join([results_table(out, ref), *evaluation_tables(out, ref)]) + "\n"
+    text = "\n\n".join([results_table(ref), *evaluation_tables(out, ref)]) + "\n"
     path = out / "tables.md"
     path.write_text(text, encoding="utf-8")
     return path

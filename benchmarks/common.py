@@ -56,7 +56,7 @@ DET = DetectionOptions()
 TABLE = REPO / "config" / "transitions.yaml"
 LG2_CSV = "data/swge/recordings/LG_2_Ramp_AB_Sample.csv"
 MS_CSV = "data/swge/recordings/Multispeed_Walk_AB.csv"
-LG2_LABELS = REPO / "benchmarks" / "lg2_ramp_labels.csv"
+LG2_LABELS = REPO / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.labels.csv"
 
 ROUTE = [
     ("Slow", 6), ("Med", 6), ("Fast", 6), ("RA", 6), ("SA", 6), ("Med", 6), ("SD", 6),
@@ -288,7 +288,7 @@ def machine() -> dict[str, Any]:
 
 def train_lg2(shared: Path) -> KernelLibrary:
     """level/RA/RD kernels trained on LG_2_Ramp as benchmarks/accuracy.py trains them
-    (``gait-estimator train LG2 --labels benchmarks/lg2_ramp_labels.csv --heel-strikes right_foot``:
+    (``gait-estimator train LG2 --labels data/swge/recordings/LG_2_Ramp_AB_Sample.labels.csv --heel-strikes right_foot``:
     raw stamps, the library at the recording's median rate)."""
     raw, _ = lg2_uniform(shared, None)
     return train_library([raw], "lg2", TrainOptions(heel_strikes="right_foot")).library
@@ -388,6 +388,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     group.add_argument("--update-docs", action="store_true", help="rewrite the generated blocks (make docs)")
     group.add_argument("--check-docs", action="store_true", help="change nothing; exit 1 if a block is out of date")
     args = ap.parse_args(argv)
+    from benchmarks import samples  # the sample command output docs/ shows: run again now
+
+    if args.check_docs and samples.stale():
+        print(f"{samples.OUT.relative_to(REPO)}: the commands print something else now; run: make docs", file=sys.stderr)
+        return 1
+    if args.update_docs:
+        print(f"wrote {samples.write().relative_to(REPO)}")
     return update_docs(check=args.check_docs)
 
 

@@ -208,9 +208,8 @@ def test_cli_train_errors_exit_2_with_one_line(able_bodied, tmp_path, capsys):
 
 def test_lg2_ramp_training_from_documented_labels(swge):
     """The shared overground recording with the experiment's label ranges (README numbers)."""
-    from pathlib import Path
 
-    labels = Path(__file__).resolve().parents[1] / "benchmarks" / "lg2_ramp_labels.csv"
+    labels = swge / "recordings" / "LG_2_Ramp_AB_Sample.labels.csv"
     rec = with_ranges(read_recording(swge / "recordings" / "LG_2_Ramp_AB_Sample.csv"), read_label_ranges(labels))
     res = train_library([rec], "lg2", TrainOptions(heel_strikes="right_foot"))
     lib = res.library

@@ -91,3 +91,27 @@ def test_watch_a_running_node_in_a_namespace(multispeed_csv: Path, monkeypatch) 
     accepted = [int(x[-1].removeprefix("samples_accepted=")) for x in lines if x[-1].startswith("samples_accepted=")
                 and x[-1] != "samples_accepted=?"]
     assert accepted and max(accepted) > RATE_HZ, out
+
+
+def test_watch_says_why_samples_are_rejected(multispeed_csv: Path, monkeypatch) -> None:
+    """A driver naming its joints otherwise: the WARN line names the reason and the names seen
+    (issue 46; domain 103)."""
+    domain = 103
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+    rec = read_recording(multispeed_csv, rate_hz=RATE_HZ)
+    with NodeProcess(node_command([]), local_ros_environment(domain)) as node:
+        client = EstimatorClient(domain, joint_names=("rt", "lt", "rs", "ls"), outputs=())
+        try:
+            deadline = time.monotonic() + 30
+            while not client.wait_for_node(0.5, outputs=False, settle_s=0.5):
+                assert node.poll() is None and time.monotonic() < deadline, node.output()
+            watch = _cli("--duration", "5", "--rate", "2", domain_id=domain)
+            n = round(4 * RATE_HZ)
+            stamps = BASE_NS + np.round(rec.time_s[:n] * 1e9).astype(np.int64)
+            client.stream(np.radians(rec.angles_deg[:n]), stamps, RATE_HZ)
+            out, err = watch.communicate(timeout=30)
+        finally:
+            client.close()
+    assert watch.returncode == 0, (out, err)
+    assert re.search(r"\[WARN\] \d+ sample\(s\) rejected \(missing_joint: missing joint\(s\) right_thigh, left_thigh, "
+                     r"right_shank, left_shank \(got rt, lt, rs, ls\)\)", out), out

@@ -6,7 +6,8 @@ Label range file (CSV, ``#`` starts a comment line)::
     6.722,11.265,RA
 
 A sample at time t gets ``mode`` when ``start_s <= t < end_s``; samples in no range are
-unlabelled (''). Ranges must not overlap.
+unlabelled (''). Ranges must not overlap. A recording's range file may sit beside it as
+``<name>.labels.csv`` (``labels_beside``): the bundled LG_2_Ramp's does.
 """
 
 from __future__ import annotations
@@ -23,6 +24,16 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.atomic import atomic_open
 from ..io.recording import Recording
+
+LABELS_SUFFIX = ".labels.csv"
+
+
+def labels_beside(recording: str | Path) -> Path | None:
+    """The label range file beside ``recording`` (``walk.csv``, ``walk_bag/`` ->
+    ``walk.labels.csv``), or None when there is none."""
+    p = Path(recording)
+    q = p.with_name((p.stem if p.suffix and not p.is_dir() else p.name) + LABELS_SUFFIX)
+    return q if q.is_file() else None
 
 
 @dataclass(frozen=True)

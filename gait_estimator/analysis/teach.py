@@ -31,6 +31,7 @@ Every event is returned as a line of text (``push``) for the node's log.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -153,6 +154,7 @@ class StrideCollector:
         self.candidates: list[tuple[float, float]] = []
         self._pieces: list[Recording] = []  # per candidate: its stretch of the uniform grid
         self._reasons: list[str] = []
+        self._not_strides = 0  # heel-strike intervals too long to be a stride (a stop or a turn)
         self._silence_reported = False
         self.result: TaughtMode | None = None
 
@@ -177,9 +179,34 @@ class StrideCollector:
         med = float(np.median(good))
         return ", or a heel strike between not found" if abs(gap_s - 2.0 * med) <= 0.2 * med else ""
 
+    def not_used(self) -> Counter:
+        """Strides not used, by why: ``duration``, ``shape`` (outliers: turns and changes of pace
+        show as these), ``stop or turn`` (a heel-strike interval too long for a stride)."""
+        why = Counter(r.split()[0].rstrip(":") for r in self._reasons if r)
+        if self._not_strides:
+            why["stop or turn"] = self._not_strides
+        return why
+
+    def not_used_text(self) -> str:
+        """``"4 not used: 2 duration, 2 shape"``, or '' when every stride was used."""
+        why = self.not_used()
+        return f"{why.total()} not used: " + ", ".join(f"{n} {reason}" for reason, n in why.items()) if why else ""
+
     def progress(self) -> str:
-        """``"Slow: 6/10 strides"``."""
-        return f"{self.mode}: {self.good}/{self.target} strides"
+        """``"Slow: 6/10 strides"``, and ``"; 4 not used: 2 duration, 2 shape"`` when some were not."""
+        not_used = self.not_used_text()
+        return f"{self.mode}: {self.good}/{self.target} strides" + (f"; {not_used}" if not_used else "")
+
+    def restart_stream(self) -> None:
+        """The stream restarted (its stamps jumped back: a replayed recording, a restarted
+        driver): the strides found so far stay; heel strikes are looked for afresh from the next
+        sample (``push`` times may start again from any value)."""
+        self._times.clear()
+        self._samples.clear()
+        self._anchor = None
+        self._analysed_at = -math.inf
+        self.heel_strikes = []
+        self._silence_reported = False
 
     def set_target(self, strides: int) -> None:
         """Change the number of good strides to collect (before the kernel is built)."""
@@ -248,6 +275,7 @@ class StrideCollector:
                     events.append(f"{self.mode}: stride at {a:.2f} s ({h - a:.2f} s) not used: its start "
                                   "was no longer kept (the heel strike ending it was found late)")
                 else:
+                    self._not_strides += 1
                     events.append(f"{self.mode}: {h - a:.2f} s from the heel strike at {a:.2f} s to the next at "
                                   f"{h:.2f} s: not a stride (> {det.max_stride_s:g} s: a stop or a turn"
                                   f"{self._missed(h - a)}), not used")
@@ -259,7 +287,8 @@ class StrideCollector:
             self._silence_reported = True
             events.append(
                 f"{self.mode}: no heel strike found in the last {end - since:.1f} s ({self.options.channel} maxima "
-                f"of >= {det.min_prominence_deg:g} deg prominence): not walking, or the channel does not swing"
+                f"of >= {det.min_prominence_deg:g} deg prominence): not walking, or the channel does not swing; "
+                + self.progress().split(": ", 1)[1]
             )
         if added:
             events += self._judge(uni)

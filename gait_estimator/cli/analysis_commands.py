@@ -68,15 +68,21 @@ def _detection(args: argparse.Namespace) -> DetectionOptions:
     return DetectionOptions(args.min_stride_s, args.max_stride_s, args.prominence)
 
 
-def _read_labelled(path: str, args: argparse.Namespace, rate_hz: float | None = None) -> Recording:
-    from ..analysis.labels import read_label_ranges, with_mode, with_ranges
+def _read_labelled(path: str, args: argparse.Namespace, rate_hz: float | None = None) -> tuple[Recording, str]:
+    """A recording and where its labels came from: --mode, --labels, its mode column, else the
+    label file beside it (printed)."""
+    from ..analysis.labels import labels_beside, read_label_ranges, with_mode, with_ranges
 
     rec = read_recording(path, rate_hz=rate_hz if rate_hz is not None else args.time_rate, **imu_reader_options(args))
     if args.mode:
-        rec = with_mode(rec, args.mode)
-    elif args.labels:
-        rec = with_ranges(rec, read_label_ranges(args.labels))
-    return rec
+        return with_mode(rec, args.mode), f"--mode {args.mode}"
+    if args.labels:
+        return with_ranges(rec, read_label_ranges(args.labels)), args.labels
+    beside = labels_beside(path) if rec.labels is None else None
+    if beside is None:
+        return rec, "mode column"
+    print(f"labels: {beside} (beside the recording; --labels or --mode to use others)")
+    return with_ranges(rec, read_label_ranges(beside)), str(beside)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -87,7 +93,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from ..analysis.train import OutlierRule, TrainOptions, format_report, train_library
     from ..io.library_io import save_library
 
-    recs = [_read_labelled(p, args) for p in args.recordings]
+    recs = [_read_labelled(p, args)[0] for p in args.recordings]
     opts = TrainOptions(
         heel_strikes=args.heel_strikes,
         rate_hz=args.rate,
@@ -113,13 +119,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     label_map = parse_label_map(args.label_map)
     pred = read_predictions_csv(args.predictions)
-    truth = _read_labelled(args.truth, args)
+    truth, labels_from = _read_labelled(args.truth, args)
     if truth.labels is None:
         raise GaitEstimatorError(f"{args.truth}: no 'mode' column (give --labels RANGES.csv or --mode NAME)")
     det = _detection(args)
     hs = None if args.heel_strikes == "none" else heel_strikes(truth, args.heel_strikes, None, det)
     ev = evaluate(pred, truth, hs, label_map, det)
-    ev.metrics["labels_from"] = args.labels or (f"--mode {args.mode}" if args.mode else "mode column")
+    ev.metrics["labels_from"] = labels_from
     if truth.time_from_rate:
         ev.metrics["truth_time_base"] = f"sample / {args.time_rate:g} Hz (no time stamps in {args.truth})"
     out = Path(args.out_dir)
@@ -150,7 +156,7 @@ def _finite(value: Any) -> Any:
 
 
 def cmd_resample(args: argparse.Namespace) -> int:
-    rec = _read_labelled(args.recording, args)
+    rec = _read_labelled(args.recording, args)[0]
     rate = args.rate or rec.median_rate_hz
     uni = resample_uniform(rec, rate)
     note = ""

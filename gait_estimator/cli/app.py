@@ -13,6 +13,7 @@ import subprocess
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 from ..core.errors import GaitEstimatorError, missing_extra
 from ..io.library_io import load_library, save_library
@@ -185,8 +186,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------
 
 
+class OneLineErrors(argparse.ArgumentParser):
+    """A usage error is one line, the error and where the usage is, exit 2 (argparse prints the
+    whole usage first: 30 lines for ``process``). Subcommands' parsers are of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (usage: {self.prog} -h)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrors(
         prog=PROG,
         description="Locomotion mode classification and gait phase estimation by kernel matching "
         "(Posh, Li, Wensing). Offline tools; the ROS 2 node is 'estimator_node'.",

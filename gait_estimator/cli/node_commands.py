@@ -8,6 +8,7 @@ imported only when a command runs, so the offline CLI works without ROS.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
@@ -22,6 +23,21 @@ from ..ros import require_ros
 from .args import add_imu_reading_options, domain_id, imu_reader_options, positive_float
 
 DEMO_DOMAIN_ID = 77
+"""``demo``'s ROS domain when neither ``--domain-id`` nor ``ROS_DOMAIN_ID`` is set."""
+
+
+def demo_domain(given: int | None) -> tuple[int, str]:
+    """(domain ID, where it came from): ``--domain-id``, else the environment's ``ROS_DOMAIN_ID``,
+    else DEMO_DOMAIN_ID."""
+    if given is not None:
+        return given, "--domain-id"
+    env = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not env:
+        return DEMO_DOMAIN_ID, "the demo's default; set ROS_DOMAIN_ID or --domain-id to change it"
+    try:
+        return domain_id(env), "from the environment"
+    except argparse.ArgumentTypeError as exc:
+        raise GaitEstimatorError(f"ROS_DOMAIN_ID: {exc}") from None
 
 
 def start_node(domain_id: int, kernels: str, extra_ros_args: list[str], node_cmd: str | None) -> Any:
@@ -137,15 +153,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
     require_ros()
     from ..ros.node_client import EstimatorClient, use_local_ros
 
-    use_local_ros(args.domain_id)
+    domain, source = demo_domain(args.domain_id)
+    use_local_ros(domain)
     print(
-        f"starting estimator_node (library '{lib.name}', {len(lib)} modes; ROS_DOMAIN_ID={args.domain_id}, "
+        f"starting estimator_node (library '{lib.name}', {len(lib)} modes; ROS_DOMAIN_ID={domain} ({source}), "
         "discovery LOCALHOST)",
         flush=True,
     )
-    node = start_node(args.domain_id, lib.path or args.kernels, [], args.node_cmd)
+    node = start_node(domain, lib.path or args.kernels, [], args.node_cmd)
     try:
-        client = EstimatorClient(args.domain_id, reliable=args.reliable)
+        client = EstimatorClient(domain, reliable=args.reliable)
     except BaseException:
         node.close()
         raise
@@ -192,7 +209,7 @@ def add_commands(sub: Any) -> None:
         help="run estimator_node on a recording streamed over ROS 2 and echo mode/phase",
         description="Start estimator_node, stream a recording into segment_angles at its real rate, print the "
         "mode and phase messages as they arrive (like 'ros2 topic echo'), then a summary. Uses "
-        "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and its own ROS_DOMAIN_ID.",
+        f"ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and the environment's ROS_DOMAIN_ID (unset: {DEMO_DOMAIN_ID}).",
     )
     d.add_argument(
         "recording",
@@ -208,7 +225,8 @@ def add_commands(sub: Any) -> None:
     d.add_argument("--echo-every", type=int, default=23, metavar="N",
                    help="print every Nth mode/phase message, and every mode change (default 23, ~10 lines/s; 1 = all)")
     d.add_argument("--reliable", action="store_true", help="publish the input reliably (default best effort)")
-    d.add_argument("--domain-id", type=domain_id, default=DEMO_DOMAIN_ID, help="ROS_DOMAIN_ID (default %(default)s)")
+    d.add_argument("--domain-id", type=domain_id,
+                   help=f"ROS_DOMAIN_ID (default: the environment's, else {DEMO_DOMAIN_ID})")
     d.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the node to connect")
     d.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
     d.set_defaults(func=cmd_demo)

@@ -14,6 +14,9 @@ from ..core.errors import GaitEstimatorError
 from ..ros import require_ros
 from .args import add_target_node_options, positive_float
 
+MAX_TIME_S = 120.0
+"""``teach``'s default time limit: ten strides take under a minute of steady walking."""
+
 
 def _strides(text: str) -> int:
     try:
@@ -66,6 +69,6 @@ def add_commands(sub: Any) -> None:
     t.add_argument("--save", metavar="PATH", help="have the node save its library to PATH (.yaml or .npz; a "
                    "relative PATH is taken from this directory) (after teaching, when --mode is given too)")
     add_target_node_options(t)
-    t.add_argument("--max-time", type=positive_float, help="give up (and cancel) after this many seconds "
-                   "(default: wait until done)")
+    t.add_argument("--max-time", type=positive_float, default=MAX_TIME_S, metavar="SECONDS",
+                   help="give up (and cancel) after this many seconds, saying what to do next (default %(default)g)")
     t.set_defaults(func=cmd_teach)

@@ -74,7 +74,8 @@ def load_library(path: str | Path) -> KernelLibrary:
 
         if str(path) in bundled_library_names():
             return load_library(bundled_library_path(str(path)))
-        raise LibraryError(f"{p}: no such file or directory")
+        raise LibraryError(f"{p}: no such file or directory, nor a bundled library "
+                           f"({', '.join(bundled_library_names())})")
     if p.is_dir():
         return _load_reference_dir(p)
     suffix = p.suffix.lower()

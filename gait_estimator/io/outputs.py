@@ -45,6 +45,8 @@ MODE_TOPIC = "mode"
 PHASE_TOPIC = "phase"
 SSE_TOPIC = "sse"
 ESTIMATE_TOPIC = "estimate"
+OUTPUT_TOPICS = (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
+"""The node's output topics (relative names)."""
 SSE_LABEL_PREFIX = "modes:"
 
 

@@ -9,7 +9,7 @@ from typing import Any
 from ..core.errors import RecordingError
 from .bag import is_bag_path, read_bag
 from .imu_bag import is_imu_bag, read_imu_bag
-from .recording import Recording, is_project_csv, is_reference_csv, read_project_csv, read_reference_csv
+from .recording import Recording, expected_columns, is_project_csv, is_reference_csv, read_project_csv, read_reference_csv
 
 READERS: tuple[tuple[Callable[[Path], bool], Callable[..., Recording]], ...] = (
     (is_imu_bag, read_imu_bag),  # four sensor_msgs/Imu topics -> angles (io/imu_bag.py)
@@ -40,4 +40,6 @@ def read_recording(path: str | Path, **options: Any) -> Recording:
     for detect, read in READERS:
         if detect(p):
             return read(p, **options)
+    if p.is_file() and p.suffix.lower() == ".csv":
+        raise RecordingError(f"{p}: not a recognised recording: {expected_columns(p)}")
     raise RecordingError(f"{p}: not a recognised recording (expected a CSV file or a rosbag2 directory)")

@@ -150,6 +150,14 @@ ANGLE_COLUMNS_DEG = tuple(f"{c}_deg" for c in CHANNELS)
 ANGLE_COLUMNS_RAD = tuple(f"{c}_rad" for c in CHANNELS)
 
 
+def expected_columns(p: Path) -> str:
+    """What a CSV that is no recording holds and what one needs, for a one-line error."""
+    found = [c.strip() for c in _first_line(p).split(",") if c.strip()]
+    shown = ", ".join(found[:12]) + (f" ... ({len(found)} columns)" if len(found) > 12 else "")
+    return (f"columns {shown or '(none)'}; expected time_s, {', '.join(ANGLE_COLUMNS_DEG)} (or _rad), or a "
+            "reference CSV (first line Dimension:4xT)")
+
+
 def is_project_csv(p: Path) -> bool:
     return p.is_file() and p.suffix.lower() == ".csv" and "time_s" in _first_line(p)
 

@@ -180,6 +180,9 @@ class StreamGuard:
     max_gap_s: float = 0.5
     restart_back_s: float = 0.0
     rejected: Counter = field(default_factory=Counter)
+    last_detail: dict[str, str] = field(default_factory=dict)
+    """The latest rejection's text, by reason."""
+    _reported: Counter = field(default_factory=Counter, repr=False)
     accepted: int = 0
     resets: int = 0
     restarts: int = 0
@@ -216,6 +219,17 @@ class StreamGuard:
 
     def reject(self, exc: SampleRejected) -> None:
         self.rejected[exc.reason] += 1
+        self.last_detail[exc.reason] = str(exc)
+
+    def main_rejection(self) -> str:
+        """``reason: its latest detail`` of the most frequent rejection since the previous call
+        ('' when none)."""
+        new = self.rejected - self._reported
+        self._reported = Counter(self.rejected)
+        if not new:
+            return ""
+        reason = new.most_common(1)[0][0]
+        return f"{reason}: {self.last_detail[reason]}"
 
     @property
     def rejected_total(self) -> int:

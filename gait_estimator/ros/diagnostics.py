@@ -116,8 +116,10 @@ class NodeDiagnostics:
         problems: list[str] = []
         if self._period_received == 0:  # IMU input: no sample paired, nor message rejected
             problems.append(f"no input on {self._input_topics}" if self._imu is None else "no IMU sample")
+        values["rejected_main"] = self._guard.main_rejection()
         if self._period_rejected:
-            problems.append(f"{self._period_rejected} {'sample' if self._imu is None else 'IMU input'}(s) rejected")
+            problems.append(f"{self._period_rejected} {'sample' if self._imu is None else 'IMU input'}(s) rejected"
+                            + (f" ({values['rejected_main']})" if values["rejected_main"] else ""))
         if (
             not math.isnan(stamp_rate)
             and self._estimator.resampler is None

@@ -257,7 +257,7 @@ class ImuInput:
             if node._estimator is not None:  # its window and learnt offsets came from wrong angles
                 node._estimator.reset_calibration()
                 node._estimator.reset()
-            node._teacher.stream_restarted("the IMU calibration did not fit")
+            node._teacher.drop_strides("the IMU calibration did not fit")
             if self.configured:  # the configured axes take over; the file would be read again at the next start
                 try:
                     self.path.unlink(missing_ok=True)

@@ -100,6 +100,12 @@ def one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
+def parameter_error(exc: ParameterException) -> str:
+    """``name: what`` of rclpy's parameter exception (its text is ``what: name``)."""
+    what, _, names = one_line(exc).rpartition(": ")
+    return f"{names}: {what}" if what else names
+
+
 def config_value(value: Any) -> Any:
     """A parameter value as EstimatorConfig wants it (lists become tuples)."""
     return tuple(value) if isinstance(value, (list, tuple, array.array)) else value
@@ -180,7 +186,7 @@ class NodeParameters:
                 self._set_estimator(self._new_estimator(self._library, self._config))
             self._teacher = NodeTeacher(self)
         except ParameterException as exc:
-            reason = self._last_rejection or ": " + one_line(exc)
+            reason = self._last_rejection or parameter_error(exc)
             self.destroy_node()
             raise StartupError(f"invalid parameter {reason}") from None
         except (GaitEstimatorError, ValueError) as exc:

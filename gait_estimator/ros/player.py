@@ -33,10 +33,10 @@ from typing import Any
 import numpy as np
 
 from ..core.channels import CHANNELS
-from ..core.errors import GaitEstimatorError
+from ..core.errors import GaitEstimatorError, RecordingError
 from ..io.bag import format_topics, is_bag_path, normalize_topic, open_bag, typestore
 from ..io.bag_write import serialize_inputs
-from ..io.outputs import INPUT_TOPIC
+from ..io.outputs import INPUT_TOPIC, OUTPUT_TOPICS
 from ..io.recording import Recording
 
 HEADER_TYPE = "std_msgs/msg/Header"
@@ -116,6 +116,12 @@ def playlist_from_bag(path: str | Path, topics: Sequence[str] | None = None) -> 
 
                 raise GaitEstimatorError(f"{p}: no topic {', '.join(missing)}; {format_topics(bag_topics(reader))}")
         names = wanted or sorted(infos)
+        outputs = [n for n in names if n.rsplit("/", 1)[-1] in OUTPUT_TOPICS]
+        if outputs and not wanted:  # RecordingError: open_bag passes it on as it is
+            raise RecordingError(
+                f"{p}: holds estimator output ({', '.join(outputs)}): not played unless chosen, as it would "
+                "reach the running graph's controllers; name the topics to play with --topic (repeat it)"
+            )
         for name in names:
             if infos[name] is None:
                 raise GaitEstimatorError(f"{p}: topic {name} has several message types; cannot play it")

@@ -6,7 +6,9 @@ While ``teach_mode`` names a mode, every accepted input sample also goes to an
 "Slow: 6/10 strides") are logged with the prefix ``teach:`` and shown in the diagnostics. When
 enough good strides are in, the kernel is added to the running library (a new name) or replaces
 the mode of that name, and ``teach_mode`` goes back to ''. Setting ``teach_mode`` to '' earlier
-cancels; naming another mode starts over with that one.
+cancels; naming another mode starts over with that one. Log times are seconds since the input
+started; when its stamps jump back (a recording played again) the strides so far are kept and
+times count from the new start.
 
 The other modes keep their state across the library change: the node keeps the input samples of
 the last ``replay_s`` seconds (at least the longest stride at the largest time scale); a new
@@ -74,6 +76,7 @@ class NodeTeacher:
         self.last_taught: TaughtMode | None = None
         self.taught: list[str] = []
         self._recent: deque[tuple[float, Sample]] = deque()
+        self._origin: float | None = None  # node time of the input stream's first sample
         self._replay_for: tuple[Any, Any] = (None, None)  # (library, config) _replay_s was computed for
         self._replay_s = self.replay_s()
         self._clearing = False
@@ -167,18 +170,33 @@ class NodeTeacher:
         keep_from = time_s - self._replay_s
         while recent[0][0] < keep_from:
             recent.popleft()
+        if self._origin is None:
+            self._origin = time_s
         session = self.session
         if session is None:
             return
-        for line in session.push(time_s, sample):
+        for line in session.push(time_s - self._origin, sample):  # log times: s since the input started
             self._log(line)
         if session.result is not None:
             self._finish(session.result)
 
-    def stream_restarted(self, why: str = "input stamps jumped back (a restarted stream)") -> None:
-        """The samples kept and a stride collection in progress no longer hold (the input's stamps
-        jumped back: a restarted publisher, a bag played again; or ``why``): both start again."""
+    def stream_restarted(self) -> None:
+        """The input's stamps jumped back (a restarted publisher, a recording played again): the
+        samples kept for a new estimator no longer hold; a collection in progress keeps its
+        strides, as the wearer walked them, and goes on with the new stream."""
         self._recent.clear()
+        self._origin = None
+        session = self.session
+        if session is not None:
+            session.restart_stream()
+            kept = f"{session.progress()} kept, " if session.candidates else f"{session.mode}: "
+            self._log(f"input stamps jumped back (a restarted stream): {kept}collecting on; log times from its start")
+
+    def drop_strides(self, why: str) -> None:
+        """The strides so far cannot be trusted (``why``, e.g. the IMU calibration did not fit):
+        the kept samples and a collection in progress start again."""
+        self._recent.clear()
+        self._origin = None
         if self.session is not None:
             self._start(self.session.mode, restarted=why)
 
@@ -251,6 +269,7 @@ class NodeTeacher:
         return {
             "teach_mode": s.mode if s else "",
             "teach_progress": f"{s.good}/{s.target}" if s else "",
+            "teach_not_used": s.not_used_text() if s else "",
             "teach_heel_strikes": str(len(s.heel_strikes)) if s else "",
             "teach_last_event": self.last_event,
             "teach_completed": str(self.completed),

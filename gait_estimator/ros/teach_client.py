@@ -18,12 +18,51 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import Trigger
 
+from ..analysis.teach import TeachOptions
 from ..core.errors import GaitEstimatorError
 from .node_client import spin_executor_until
 from .teach import LOG_PREFIX
 from .tool_node import ToolNode
 
 DEFAULT_NODE = "/estimator_node"
+MIN_STRIDES = TeachOptions().min_strides
+
+
+INPUT_STOPPED_S = 5.0
+"""No input sample for this long after some arrived while teaching: said once (a recording ended)."""
+
+
+class InputWatch:
+    """Says when a count of input samples (the node's ``samples_received``) stops growing."""
+
+    def __init__(self) -> None:
+        self._count: str | None = None
+        self._since = 0.0
+        self._grew = False
+        self._said = False
+
+    def stopped(self, count: str | None, now_s: float) -> bool:
+        """True once when ``count`` grew before and has not for INPUT_STOPPED_S (again after it grows)."""
+        if count != self._count:
+            self._grew, self._said = self._count is not None, False
+            self._count, self._since = count, now_s
+            return False
+        if self._grew and not self._said and now_s - self._since > INPUT_STOPPED_S:
+            self._said = True
+            return True
+        return False
+
+
+def progress(diag: dict[str, str]) -> str:
+    """``6/10 strides; 4 not used: 2 duration, 2 shape`` from the node's diagnostics."""
+    not_used = diag.get("teach_not_used", "")
+    return f"{diag.get('teach_progress') or '?'} strides" + (f"; {not_used}" if not_used else "")
+
+
+def fewer(diag: dict[str, str]) -> str:
+    """`` (--strides 6)``: the good strides so far, when teaching could finish with them."""
+    good = diag.get("teach_progress", "").split("/")[0]
+    return f" (--strides {good})" if good.isdigit() and int(good) >= MIN_STRIDES else ""
 
 
 class TeachClient(ToolNode):
@@ -96,10 +135,12 @@ class TeachClient(ToolNode):
     def teach(self, mode: str, strides: int, poll_s: float = 1.0, max_s: float | None = None) -> tuple[bool, str]:
         """Teach ``mode`` from ``strides`` good strides; returns (done, the new kernel's summary or
         why not). Returns False when ``teach_mode`` was cleared by someone else (cancelled) or
-        ``max_s`` passed (then teaching is cancelled)."""
+        ``max_s`` passed (then teaching is cancelled). When the input stops for INPUT_STOPPED_S
+        (a recording ended, sensors off) ``on_log`` gets one line saying so and what to do."""
         before = int(self.latest_diagnostics().get("teach_completed", "0"))
         self.set(teach_strides=strides, teach_mode=mode)
         start = time.monotonic()
+        input_watch = InputWatch()
         while True:
             self.spin_until(lambda: False, poll_s)
             diag = self.diagnostics or {}
@@ -110,9 +151,15 @@ class TeachClient(ToolNode):
                 if int(diag.get("teach_completed", before)) > before:
                     return True, diag.get("teach_last_result", "")
                 return False, f"teach_mode of {self.target} was changed: teaching {mode} cancelled"
+            if input_watch.stopped(diag.get("samples_received"), time.monotonic()) and self.on_log is not None:
+                self.on_log(f"{mode}: no input for {INPUT_STOPPED_S:g} s (the recording ended? sensors off?) at "
+                            f"{progress(diag)}: play or walk on (the strides so far are kept), or Ctrl-C and "
+                            f"teach fewer{fewer(diag)}")
             if max_s is not None and time.monotonic() - start > max_s:
                 self.cancel()
-                return False, f"{mode} not taught within {max_s:g} s: cancelled"
+                return False, (f"{mode} not taught within {max_s:g} s ({progress(diag)}): cancelled; walk steadily "
+                               f"in that mode and run teach again, with a longer --max-time or fewer strides"
+                               f"{fewer(diag)}")
 
     def cancel(self) -> None:
         self.set(teach_mode="")
