@@ -1,5 +1,5 @@
 """The layering of the package (see gait_estimator/__init__.py and docs/architecture.md):
-core -> io -> analysis -> ros -> cli, a subpackage importing only those to its left; only
+core -> io -> analysis -> ros -> dashboard -> cli, a subpackage importing only those to its left; only
 ``ros`` imports rclpy or ROS message packages; no import cycles between modules."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 PKG = Path(__file__).resolve().parents[1] / "gait_estimator"
-LAYERS = ("core", "io", "analysis", "ros", "cli")
+LAYERS = ("core", "io", "analysis", "ros", "dashboard", "cli")
 ROS_MODULES = ("rclpy", "builtin_interfaces", "diagnostic_msgs", "rcl_interfaces", "rosgraph_msgs", "sensor_msgs",
                "std_msgs", "std_srvs", "ament_index_python")
 
@@ -46,7 +46,7 @@ def _layer(module: str) -> str | None:
 
 def test_every_module_lives_in_a_layer() -> None:
     loose = [m for m in _modules() if m.count(".") == 1 and not m.endswith("__init__")]
-    assert loose == [], "modules outside core/io/analysis/ros/cli"
+    assert loose == [], "modules outside core/io/analysis/ros/dashboard/cli"
 
 
 @pytest.mark.parametrize("layer", LAYERS)
