@@ -9,20 +9,17 @@ import asyncio
 import json
 import math
 import os
-import shutil
-import tempfile
 import threading
 import time
 
 import numpy as np
 import pytest
+from browser import chromium, have_browser
 
 from gait_estimator.dashboard.commands import CommandRefused, parse_command
 from gait_estimator.dashboard.state import STATES, estimate_view, gait_state
 from gait_estimator.io.outputs import estimate_names
 
-CHROMEDRIVER = "/usr/bin/chromedriver"
-CHROMIUM = "/usr/bin/chromium"
 DOMAIN = 111
 TOKEN = "test-token-1234"
 
@@ -89,24 +86,11 @@ def test_commands_parse():
 # -- the real thing
 
 
-def _browser():
-    if not (os.path.exists(CHROMEDRIVER) and os.path.exists(CHROMIUM)):
+def _require_browser() -> None:
+    if not have_browser():
         if os.environ.get("GAIT_REQUIRE_BROWSER"):
-            pytest.fail(f"{CHROMEDRIVER} missing: make browser installs Debian's chromium and chromium-driver")
-        pytest.skip(f"{CHROMEDRIVER} missing (make browser installs it)")
-    os.environ["SE_OFFLINE"] = "true"  # Selenium Manager never goes online
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    profile = tempfile.mkdtemp(prefix="gait_dashboard_chromium_")
-    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--disable-dev-shm-usage", "--window-size=1400,1000", f"--user-data-dir={profile}"):
-        opts.add_argument(flag)
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
-    return driver, profile
+            pytest.fail("/usr/bin/chromedriver missing: make browser installs Debian's chromium and chromium-driver")
+        pytest.skip("/usr/bin/chromedriver missing (make browser installs it)")
 
 
 CHART_PIXELS_JS = """
@@ -148,11 +132,16 @@ def _socket_status(url: str, headers: dict[str, str] | None = None) -> int:
 
 
 def test_page_follows_the_node_and_teaches_it(multispeed_csv, tmp_path):
+    _require_browser()
+    with chromium() as driver:
+        _check_page(driver, multispeed_csv, tmp_path)
+
+
+def _check_page(driver, multispeed_csv, tmp_path) -> None:
     from gait_estimator.dashboard.process import start_dashboard
     from gait_estimator.io.readers import read_recording
     from gait_estimator.ros.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command, use_local_ros
 
-    driver, profile = _browser()
     env = local_ros_environment(DOMAIN)
     use_local_ros(DOMAIN)
     dash, url = start_dashboard(["--port", "0", "--domain-id", str(DOMAIN), "--token", TOKEN], env)
@@ -230,8 +219,6 @@ def test_page_follows_the_node_and_teaches_it(multispeed_csv, tmp_path):
         out = dash.output()
         assert "refused" in out and "wrong token" in out and "Traceback" not in out, out
     finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
         if client is not None:
             client.close()
         if node is not None:
