@@ -23,18 +23,24 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from ..core.errors import GaitEstimatorError
 from ..core.kernels import KernelLibrary
+from ..io.cdr import CdrError, read_joint_state
 from ..io.library_io import load_library
 from ..io.outputs import ESTIMATE_TOPIC
 from .angles_output import ANGLES_TOPIC
+from .node_client import drained
 from .teach_client import TeachClient
 from .watch_client import LEVELS
 
-DISPLAY_QOS = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST, depth=50)
+DISPLAY_QOS = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST, depth=100)
+WAKE_PERIOD_S = 0.01
+"""The ROS thread wakes at most this often and then takes everything queued (the page needs no
+more than 30 frames a second; fewer wake-ups leave the leg's computer to the node)."""
 KEPT_ANGLES = 4000
 """``~/angles`` rows kept for the pages (17 s at 230 Hz; a page takes the new ones every frame)."""
 KEPT_LOG = 200
@@ -77,8 +83,7 @@ class _Shared:
     present: bool = False
     ever_seen: bool = False
     estimates: int = 0
-    names: list[str] = field(default_factory=list)
-    values: list[float] = field(default_factory=list)
+    estimate: bytes = b""
     estimate_source_ns: int = 0
     estimate_at: float = math.nan
     diagnostics: dict[str, str] = field(default_factory=dict)
@@ -92,6 +97,17 @@ class _Shared:
     library: KernelLibrary | None = None
     library_version: int = 0
     library_note: str = ""
+
+
+def parse_estimate(data: bytes) -> tuple[list[str], list[float]]:
+    """Keys and values of a serialised ``estimate`` (empty: none yet, or undecodable)."""
+    if not data:
+        return [], []
+    try:
+        _, names, values = read_joint_state(data)
+    except CdrError:
+        return [], []
+    return list(names), list(values)
 
 
 def _tail(rows: deque, total: int, cursor: int) -> list:
@@ -115,12 +131,14 @@ class DashboardLink:
         self._shared = _Shared()
         self._commands: queue.Queue[tuple[Callable[[], str], Future]] = queue.Queue()
         self._stop = threading.Event()
-        self._mode_key: tuple[str, ...] = ()
         self._library_source = ""
         n = self.client.node
         namespace = self.target.rsplit("/", 1)[0]  # the node's relative topics (a remapping is not followed)
-        n.create_subscription(JointState, f"{namespace}/{ESTIMATE_TOPIC}", self._on_estimate, DISPLAY_QOS)
-        n.create_subscription(Float64MultiArray, self.target + ANGLES_TOPIC[1:], self._on_angles, DISPLAY_QOS)
+        for msg_type, topic, callback in ((JointState, f"{namespace}/{ESTIMATE_TOPIC}", self._on_estimate),
+                                          (Float64MultiArray, self.target + ANGLES_TOPIC[1:], self._on_angles)):
+            box: list[Subscription] = []  # serialised estimate: parsed only for a frame (io/cdr.py)
+            box.append(n.create_subscription(msg_type, topic, drained(callback, box), DISPLAY_QOS,
+                                             raw=msg_type is JointState))
         n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.client.on_log = self._on_log
         self._thread = threading.Thread(target=self._run, name="dashboard-ros", daemon=True)
@@ -133,7 +151,9 @@ class DashboardLink:
     def _run(self) -> None:
         looked = -math.inf
         while not self._stop.is_set():
+            woke = time.monotonic()
             self.client.executor.spin_once(timeout_sec=0.02)
+            time.sleep(max(0.0, WAKE_PERIOD_S - (time.monotonic() - woke)))
             now = time.monotonic()
             if now - looked >= LOOK_PERIOD_S:
                 looked = now
@@ -154,7 +174,9 @@ class DashboardLink:
             came = present and not self._shared.present
             self._shared.present = present
             self._shared.ever_seen |= present
-            key = tuple(self._mode_key)
+            data = self._shared.estimate
+        names, _ = parse_estimate(data)
+        key = tuple(k[4:] for k in names if k.startswith("sse/"))
         if came or (present and key and key != self._library_key()):
             self._refresh_library(key)
 
@@ -189,23 +211,22 @@ class DashboardLink:
             self._shared.library_note = note
             self._shared.library_version += 1
 
-    def _on_estimate(self, msg: JointState, info: Any) -> None:
-        names = msg.name
+    def _on_estimate(self, data: bytes, info: Any) -> None:
         with self.lock:
             s = self._shared
-            if len(names) != len(s.names) or names != s.names:
-                s.names = list(names)
-                self._mode_key = tuple(k[4:] for k in names if k.startswith("sse/"))
-            s.values = msg.position.tolist()
+            s.estimate = data
             s.estimates += 1
             s.estimate_source_ns = int(info["source_timestamp"])
             s.estimate_at = time.monotonic()
 
-    def _on_angles(self, msg: Float64MultiArray) -> None:
-        if len(msg.data) == 5:
-            with self.lock:
-                self._shared.angles.append(msg.data.tolist())
-                self._shared.angles_total += 1
+    def _on_angles(self, msg: Float64MultiArray, _info: Any = None) -> None:
+        values = msg.data.tolist()
+        if not values or len(values) % 5:
+            return
+        rows = [values[i:i + 5] for i in range(0, len(values), 5)]
+        with self.lock:
+            self._shared.angles.extend(rows)
+            self._shared.angles_total += len(rows)
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         st = self.client.target_status(msg)
@@ -230,8 +251,11 @@ class DashboardLink:
         """The node's latest state, with the angle rows and log lines after the cursors."""
         with self.lock:
             s = self._shared
+            data = s.estimate
+        names, values = parse_estimate(data)
+        with self.lock:
             return Snapshot(
-                present=s.present, ever_seen=s.ever_seen, estimates=s.estimates, names=s.names, values=s.values,
+                present=s.present, ever_seen=s.ever_seen, estimates=s.estimates, names=names, values=values,
                 estimate_source_ns=s.estimate_source_ns, estimate_at=s.estimate_at, diagnostics=s.diagnostics,
                 level=s.level, message=s.message, diagnostics_at=s.diagnostics_at,
                 angles=_tail(s.angles, s.angles_total, angles_cursor), angles_cursor=s.angles_total,

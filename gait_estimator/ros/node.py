@@ -15,7 +15,7 @@ publishes (reliable, keep last 10):
   estimate, ``header.stamp`` = the input stamp, ``ready`` = 0 while the window fills;
 * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) at 1 Hz;
 * ``~/angles`` (std_msgs/Float64MultiArray), only while something subscribes: each sample as the
-  matcher saw it, for the dashboard (``angles_output.py``);
+  matcher saw it, in blocks ~30 a second, for the dashboard (``angles_output.py``);
 * ``~/profile`` (std_msgs/Float64MultiArray) at 1 Hz, only while something subscribes to it: the
   per-sample timing of the last second (see ``PROFILE_COLUMNS``; ``gait-estimator bench-node
   --profile``).
@@ -378,7 +378,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             )
         t1 = time.perf_counter()
         self._publish(estimate, stamp)
-        self._angles.publish(stamp, angles_deg, est.sensor_offset_deg)
+        self._angles.add(stamp, angles_deg, est.sensor_offset_deg)
         self._teacher.on_sample(t, angles_deg)  # may change the library and the estimator
 
         if self._period_first_stamp is None:

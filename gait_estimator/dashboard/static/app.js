@@ -15,8 +15,8 @@
   CHANNELS.forEach((c, i) => series.push({ label: c, stroke: COLOURS[i], width: 2 }));
   CHANNELS.forEach((c, i) => series.push({ label: c + " kernel", stroke: COLOURS[i], width: 1.5, dash: [6, 4] }));
   const chart = new uPlot({
-    width: Math.min(760, window.innerWidth - 60), height: 300, series: series,
-    scales: { x: { time: false } }, axes: [{ label: "s" }, { label: "deg" }], legend: { live: false },
+    width: Math.max(300, $("chart").clientWidth), height: 300, series: series,
+    scales: { x: { time: false } }, axes: [{ label: "s before the last sample" }, { label: "deg" }], legend: { show: false },
   }, [[], [], [], [], [], [], [], [], []], $("chart"));
 
   function kernelAt(kernel, phase, ch) {
