@@ -1,4 +1,4 @@
-"""Headless Chromium for the dashboard test and its screenshot (benchmarks/dashboard.py): Debian's
+"""Headless Chromium for the dashboard test and its screenshot (benchmarks/node_dashboard.py): Debian's
 chromium and chromium-driver (``make browser``), Selenium told where the driver is so that its
 Selenium Manager never goes online, a fresh profile, no background networking."""
 

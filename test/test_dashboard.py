@@ -213,9 +213,15 @@ def _check_page(driver, multispeed_csv, tmp_path) -> None:
         assert library.exists() and "Clinic" in library.read_text()
         streamer.join(timeout=60)
 
-        # the node goes away: the page says so
+        # the node goes away: the page says so; it comes back (restarted): the page follows it again
         node.stop()
         _until(lambda: "gone" in _text(driver, "link"), 15, "the page reports the node gone")
+        node.close()
+        node = NodeProcess(node_command(["-p", "kernels:=able_bodied"]), env)
+        assert client.wait_for_node(timeout_s=30.0), node.output()
+        client.stream(np.radians(rec.angles_deg[:1500]), stamps[:1500] + 10**12, 2.5 * 230.0)
+        _until(lambda: "live" in driver.find_element("id", "link").get_attribute("class"), 15, "live again")
+        _until(lambda: _text(driver, "mode") in ("Slow", "Med", "Fast"), 10, "a mode after the restart")
         out = dash.output()
         assert "refused" in out and "wrong token" in out and "Traceback" not in out, out
     finally:

@@ -1,8 +1,9 @@
-"""What the dashboard costs the node, and how fresh the page is; the dashboard's screenshot.
+"""What the dashboard costs the node, and how fresh the page is; the dashboard's screenshot. Run by
+benchmarks/node.py:
 
-    python benchmarks/dashboard.py                 # run (about 3 min): results/dashboard/{dashboard.json,tables.md}
-    python benchmarks/dashboard.py --tables-only   # tables.md from dashboard.json
-    python benchmarks/dashboard.py --screenshot docs/img/dashboard.png
+    python benchmarks/node.py --run-dashboard      # about 3 min: results/dashboard/{dashboard.json,tables.md}
+    python benchmarks/node.py                      # tables only (make docs), results/dashboard/tables.md too
+    python benchmarks/node.py --screenshot docs/img/dashboard.png
 
 One estimator_node (ROS_DOMAIN_ID 113, loopback) is fed the bundled Multispeed recording at 230 Hz
 in blocks, alternately without and with ``gait-estimator dashboard`` attached and a page client
@@ -15,7 +16,6 @@ of the newest estimate in each frame when a WebSocket client (aiohttp, this proc
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import sys
@@ -44,16 +44,16 @@ class PageClient:
         self.url = url.replace("http", "ws", 1).split("?")[0] + "ws"
         self.ages_ms: list[float] = []
         self.frames = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=lambda: asyncio.run(self._run()), daemon=True)
-        self._thread.start()
+        self.stop_event = threading.Event()
+        self.thread = threading.Thread(target=lambda: asyncio.run(self.receive()), daemon=True)
+        self.thread.start()
 
-    async def _run(self) -> None:
+    async def receive(self) -> None:
         import aiohttp
 
         last = 0
         async with aiohttp.ClientSession() as s, s.ws_connect(self.url) as ws:
-            while not self._stop.is_set():
+            while not self.stop_event.is_set():
                 try:
                     msg = await ws.receive(timeout=0.5)
                 except asyncio.TimeoutError:
@@ -67,8 +67,8 @@ class PageClient:
                         self.ages_ms.append((now - last) / 1e6)
 
     def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
+        self.stop_event.set()
+        self.thread.join(timeout=5)
 
 
 def pct(values: list[float] | np.ndarray) -> dict[str, float]:
@@ -155,7 +155,7 @@ def tables(res: dict[str, Any]) -> str:
     ]
     m = res["machine"]
     return (md_table(["p50 / p99", "without dashboard", "with dashboard", ""], rows) +
-            f"\n\n`python benchmarks/dashboard.py`: {res['rounds']} rounds of {res['samples_per_block']:,} samples at "
+            f"\n\n`python benchmarks/node.py --run-dashboard`: {res['rounds']} rounds of {res['samples_per_block']:,} samples at "
             f"230 Hz per condition, interleaved; {m['processor']}, {m['cpus']} CPUs, Python {m['python']}, {res['date']}.\n")
 
 
@@ -186,25 +186,15 @@ def screenshot(path: Path) -> None:
     print(f"wrote {path}")
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--tables-only", action="store_true")
-    ap.add_argument("--rounds", type=int, default=4, help="pairs of blocks (default %(default)s)")
-    ap.add_argument("--samples", type=int, default=2300, help="samples per block (default %(default)s, 10 s)")
-    ap.add_argument("--screenshot", type=Path)
-    args = ap.parse_args()
-    if args.screenshot:
-        screenshot(args.screenshot)
-        return 0
+def run_and_write(rounds: int = 4, samples: int = 2300) -> None:
+    """The interleaved run (``rounds`` pairs of blocks of ``samples``), into dashboard.json."""
     OUT.mkdir(parents=True, exist_ok=True)
-    if not args.tables_only:
-        res = run(args.rounds, args.samples)
-        (OUT / "dashboard.json").write_text(json.dumps(res, indent=1) + "\n")
-    res = json.loads((OUT / "dashboard.json").read_text())
-    (OUT / "tables.md").write_text(tables(res))
-    print(tables(res))
-    return 0
+    (OUT / "dashboard.json").write_text(json.dumps(run(rounds, samples), indent=1) + "\n")
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def write_tables() -> bool:
+    """tables.md from dashboard.json (False: no report yet)."""
+    if not (OUT / "dashboard.json").is_file():
+        return False
+    (OUT / "tables.md").write_text(tables(json.loads((OUT / "dashboard.json").read_text())))
+    return True
