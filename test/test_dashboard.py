@@ -1,5 +1,5 @@
 """``gait-estimator dashboard``: the page's state logic and command checks, then the real thing: a
-real estimator_node and the dashboard over loopback DDS (ROS_DOMAIN_ID 111), the bundled
+real estimator_node and the dashboard over loopback DDS (ROS_DOMAIN_IDs 111, 114), the bundled
 Multispeed recording streamed in, the page opened in headless Chromium (Debian's chromium and
 chromium-driver; ``make test`` installs them) and checked for what a person sees."""
 
@@ -21,6 +21,7 @@ from gait_estimator.dashboard.state import STATES, estimate_view, gait_state
 from gait_estimator.io.outputs import estimate_names
 
 DOMAIN = 111
+DOMAIN_REFUSALS = 114
 TOKEN = "test-token-1234"
 
 
@@ -232,27 +233,45 @@ def _check_page(driver, multispeed_csv, tmp_path) -> None:
         dash.close()
 
 
-def test_read_only_refuses_teaching(tmp_path):
-    """--read-only: a teach command from a socket is refused and never reaches a node."""
+def test_socket_refusals_never_reach_a_node_nor_stop_the_dashboard():
+    """--read-only refuses teaching; a flood is refused; an oversized message closes that socket
+    only; the dashboard answers the next page, and logs each refusal."""
     import aiohttp
 
     from gait_estimator.dashboard.process import start_dashboard
     from gait_estimator.ros.node_client import local_ros_environment
 
-    dash, url = start_dashboard(["--port", "0", "--domain-id", str(DOMAIN + 1), "--read-only"],
-                                local_ros_environment(DOMAIN + 1))
+    dash, url = start_dashboard(["--port", "0", "--domain-id", str(DOMAIN_REFUSALS), "--read-only"],
+                                local_ros_environment(DOMAIN_REFUSALS))
+    ws_url = url.replace("http", "ws") + "ws"
 
-    async def go() -> list[dict]:
-        async with aiohttp.ClientSession() as s, s.ws_connect(url.replace("http", "ws") + "ws") as ws:
+    async def replies(messages: list[str]) -> tuple[dict, list[str]]:
+        async with aiohttp.ClientSession() as s, s.ws_connect(ws_url) as ws:
             hello = await ws.receive_json()
-            await ws.send_str(json.dumps({"op": "teach", "mode": "Slow", "strides": 5}))
-            while (m := await ws.receive_json())["type"] != "reply":
-                pass
-            return [hello, m]
+            for m in messages:
+                await ws.send_str(m)
+            texts: list[str] = []
+            while len(texts) < len(messages):
+                msg = await ws.receive(timeout=10)
+                if msg.type != aiohttp.WSMsgType.TEXT:
+                    texts.append(f"closed {msg.type.name}")
+                    break
+                if (m := json.loads(msg.data))["type"] == "reply":
+                    texts.append(m["text"])
+            return hello, texts
 
     try:
-        hello, reply = asyncio.run(go())
+        hello, texts = asyncio.run(replies([json.dumps({"op": "teach", "mode": "Slow", "strides": 5})]))
         assert hello["read_only"] is True
-        assert reply == {"type": "reply", "ok": False, "text": "refused: read-only dashboard"}
+        assert texts == ["refused: read-only dashboard"]
+        _, texts = asyncio.run(replies(['{"op": "cancel"}'] * 12))
+        assert texts.count("refused: too many messages (at most 5 a second)") >= 5
+        _, texts = asyncio.run(replies(["x" * 5000]))
+        assert texts and texts[0].startswith("closed")
+        hello, _ = asyncio.run(replies([]))
+        assert hello["type"] == "hello"
+        out = dash.output()
+        assert "read-only dashboard" in out and "too many messages" in out and "socket closed" in out, out
+        assert "Traceback" not in out
     finally:
         dash.close()

@@ -134,7 +134,10 @@ class Dashboard:
         budget, refill = MAX_COMMANDS_PER_S, time.monotonic()
         try:
             async for msg in ws:
-                if msg.type in (WSMsgType.ERROR, WSMsgType.CLOSE):
+                if msg.type == WSMsgType.ERROR:  # e.g. a message over MAX_MESSAGE_BYTES: aiohttp closes the socket
+                    self.refusals.warn(f"socket closed: {ws.exception()}", peer)
+                    break
+                if msg.type == WSMsgType.CLOSE:
                     break
                 now = time.monotonic()
                 budget, refill = min(MAX_COMMANDS_PER_S, budget + (now - refill) * MAX_COMMANDS_PER_S), now
@@ -208,6 +211,8 @@ class Dashboard:
                 await asyncio.sleep(max(0.0, period - (time.monotonic() - started)))
         except (ConnectionResetError, RuntimeError):
             return  # the page went away
+        except Exception:  # a frame that cannot be built: logged; the server and the other pages go on
+            log.exception("frames to a page stopped")
 
     # -- app
 

@@ -131,7 +131,8 @@ class DashboardLink:
         self._shared = _Shared()
         self._commands: queue.Queue[tuple[Callable[[], str], Future]] = queue.Queue()
         self._stop = threading.Event()
-        self._library_source = ""
+        self._refreshed_for: tuple[str, ...] = ()
+        """The node's modes when its library was last loaded here (a change loads it again)."""
         n = self.client.node
         namespace = self.target.rsplit("/", 1)[0]  # the node's relative topics (a remapping is not followed)
         for msg_type, topic, callback in ((JointState, f"{namespace}/{ESTIMATE_TOPIC}", self._on_estimate),
@@ -177,12 +178,9 @@ class DashboardLink:
             data = self._shared.estimate
         names, _ = parse_estimate(data)
         key = tuple(k[4:] for k in names if k.startswith("sse/"))
-        if came or (present and key and key != self._library_key()):
+        if came or (present and key and key != self._refreshed_for):
+            self._refreshed_for = key
             self._refresh_library(key)
-
-    def _library_key(self) -> tuple[str, ...]:
-        lib = self._shared.library
-        return tuple(lib.mode_names) if lib is not None else ()
 
     def _refresh_library(self, key: tuple[str, ...]) -> None:
         """Load the node's library (its ``kernels`` parameter) for the kernel overlay."""
@@ -194,14 +192,11 @@ class DashboardLink:
         if not source:
             self._set_library(None, "the node started without a library (kernels: ''): no kernel to show")
             return
-        if source == self._library_source and self._shared.library is not None and key == self._library_key():
-            return
         try:
             lib = load_library(source)
         except (GaitEstimatorError, OSError, ValueError) as exc:
             self._set_library(None, f"kernels {source!r} not readable here: {exc}")
             return
-        self._library_source = source
         missing = [m for m in key if m not in lib.mode_names]
         self._set_library(lib, f"no kernel here for {', '.join(missing)} (taught on the node)" if missing else "")
 

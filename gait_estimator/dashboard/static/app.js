@@ -7,7 +7,7 @@
   const KEPT = 3000;
   const $ = (id) => document.getElementById(id);
   const token = new URLSearchParams(location.search).get("token");
-  const live = { frames: 0, points: 0, kernels: {}, library: "", note: "", rows: [], estimate: null, readOnly: false };
+  const live = { frames: 0, points: 0, kernels: {}, library: "", note: "", rows: [], taught: [], estimate: null, readOnly: false };
   window.gaitDashboard = live; // what the browser test reads, with what the page shows
 
   // -- chart: 4 angle series (solid) and the kernel at the estimated phase (dashed)
@@ -28,7 +28,8 @@
   function drawChart() {
     const rows = live.rows, e = live.estimate;
     if (!rows.length) { chart.setData([[], [], [], [], [], [], [], [], []]); live.points = 0; return; }
-    const kernel = e && e.state === "walking" ? live.kernels[e.mode] : undefined;
+    const taught = e && live.taught.includes(e.mode); // the file's kernel is not the node's any more
+    const kernel = e && e.state === "walking" && !taught ? live.kernels[e.mode] : undefined;
     let stride = kernel ? kernel.samples.length / kernel.rate_hz : 1.2;
     if (e && e.phase_rate && e.phase_rate > 0.2) stride = 1 / e.phase_rate;
     const last = rows[rows.length - 1][0];
@@ -40,7 +41,7 @@
     }
     chart.setData(data);
     live.points = shown.length;
-    $("kernel-name").textContent = kernel ? e.mode + " kernel" : "kernel";
+    $("kernel-name").textContent = kernel ? e.mode + " kernel" : taught ? "kernel (" + e.mode + " taught on the node: not shown)" : "kernel";
   }
 
   // -- panels
@@ -86,6 +87,7 @@
       a.textContent = k; b.textContent = v; tr.append(a, b); return tr;
     }));
     const t = d.teach;
+    live.taught = t.taught_modes ? t.taught_modes.split(",") : [];
     $("teach-progress").textContent = t.mode ? t.mode + " " + t.progress : "not teaching";
     $("teach-result").textContent = t.last_result ? "last kernel: " + t.last_result : "";
   }
