@@ -5,9 +5,10 @@ benchmarks/node.py:
     python benchmarks/node.py                      # tables only (make docs), results/dashboard/tables.md too
     python benchmarks/node.py --screenshot docs/img/dashboard.png
 
-One estimator_node (ROS_DOMAIN_ID 113, loopback) is fed the bundled Multispeed recording at 230 Hz
-in blocks, alternately without and with ``gait-estimator dashboard`` attached and a page client
-connected to it (A B B A ...), so that both conditions share the machine's state. Per block: the
+One estimator_node (ROS_DOMAIN_ID 113, loopback; pinned to CPU 0, everything else to CPU 1, so
+that what is measured is the node's own extra work) is fed the bundled Multispeed recording at
+230 Hz in blocks, alternately without and with ``gait-estimator dashboard`` attached and a page
+client connected to it (A B B A ...), so that both conditions share the machine's state. Per block: the
 node's own processing time per sample (its ``~/profile`` topic: estimator update and publishing)
 and input -> ``estimate`` at a reliable subscriber; with the dashboard, estimate -> page: the age
 of the newest estimate in each frame when a WebSocket client (aiohttp, this process) receives it
@@ -18,6 +19,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
+import subprocess
 import sys
 import threading
 import time
@@ -76,6 +79,12 @@ def pct(values: list[float] | np.ndarray) -> dict[str, float]:
     return {"n": int(v.size), "p50_ms": float(np.percentile(v, 50)), "p99_ms": float(np.percentile(v, 99))} if v.size else {}
 
 
+def pin(pid: int, cpu: int) -> None:
+    """Every thread of process ``pid`` onto CPU ``cpu`` (when the machine has two or more)."""
+    if (os.cpu_count() or 1) > 1:
+        subprocess.run(["taskset", "-a", "-p", "-c", str(cpu), str(pid)], check=True, capture_output=True)
+
+
 def block(client: EstimatorClient, angles: np.ndarray, base_ns: int) -> dict[str, Any]:
     client.received.clear()
     client.estimate_count = 0
@@ -99,9 +108,13 @@ def run(rounds: int, samples: int) -> dict[str, Any]:
     env = local_ros_environment(DOMAIN)
     rec = read_recording(REPO / MS_CSV, rate_hz=RATE_HZ)
     angles = np.radians(rec.angles_deg[2000:2000 + samples])
+    pin(os.getpid(), 1)
     node = NodeProcess(node_command(["-p", "kernels:=able_bodied"]), env)
+    time.sleep(2.0)  # its threads started
+    pin(node.pid, 0)
     client = EstimatorClient(DOMAIN, outputs=("estimate",), reliable=True, profile_topic=f"/{NODE_NAME}/profile")
     out: dict[str, Any] = {"machine": machine(), "date": time.strftime("%Y-%m-%d"), "samples_per_block": samples,
+                           "load_average_before": os.getloadavg()[0],
                            "rounds": rounds, "without": {"processing": [], "latency": [], "block_p99": []},
                            "with": {"processing": [], "latency": [], "block_p99": [], "page_age": [], "frames_per_s": []}}
     base = 1_700_000_000 * 10**9
@@ -112,8 +125,9 @@ def run(rounds: int, samples: int) -> dict[str, Any]:
             dash = page = None
             if cond == "with":
                 dash, url = start_dashboard(["--port", "0", "--domain-id", str(DOMAIN)], env)
+                pin(dash.pid, 1)
                 page = PageClient(url)
-                client.spin_for(3.0)  # discovery: the dashboard's subscriptions matched
+            client.spin_for(3.0)  # both conditions: the same pause (with: the dashboard's subscriptions match)
             t0 = time.monotonic()
             res = block(client, angles, base + k * 100 * 10**9)
             print(f"block {k + 1}/{len(order)} {cond}: answered {res['answered']}/{res['sent']}, node p99 "
@@ -140,23 +154,23 @@ def run(rounds: int, samples: int) -> dict[str, Any]:
 def tables(res: dict[str, Any]) -> str:
     s = res["summary"]
     w, d = s["without"], s["with"]
-    ratio = d["processing"]["p99_ms"] / w["processing"]["p99_ms"]
-    block = d["block_p99_median_ms"] / w["block_p99_median_ms"]
+
+    def pair(x: dict[str, float], digits: int) -> str:
+        return f"{x['p50_ms']:.{digits}f} / {x['p99_ms']:.{digits}f} ms"
+
     rows = [
-        ["node processing per sample (estimator + publishing; its ~/profile)",
-         f"{w['processing']['p50_ms']:.3f} / {w['processing']['p99_ms']:.3f} ms",
-         f"{d['processing']['p50_ms']:.3f} / {d['processing']['p99_ms']:.3f} ms", f"p99 x{ratio:.2f}"],
-        ["the same, median of the blocks' p99", f"{w['block_p99_median_ms']:.3f} ms", f"{d['block_p99_median_ms']:.3f} ms",
-         f"x{block:.2f}"],
-        ["input -> estimate at a reliable subscriber", f"{w['latency']['p50_ms']:.2f} / {w['latency']['p99_ms']:.2f} ms",
-         f"{d['latency']['p50_ms']:.2f} / {d['latency']['p99_ms']:.2f} ms", ""],
-        ["estimate -> page (newest estimate's age at a WebSocket client)", "—",
-         f"{d['page_age']['p50_ms']:.1f} / {d['page_age']['p99_ms']:.1f} ms", f"{d['frames_per_s']:.0f} frames/s (min)"],
+        ["node: processing per sample (`~/profile`)", pair(w["processing"], 3), pair(d["processing"], 3),
+         f"p99 x{d['processing']['p99_ms'] / w['processing']['p99_ms']:.2f}"],
+        ["node: median of the blocks' p99", f"{w['block_p99_median_ms']:.3f} ms", f"{d['block_p99_median_ms']:.3f} ms",
+         f"x{d['block_p99_median_ms'] / w['block_p99_median_ms']:.2f}"],
+        ["input -> `estimate` (reliable subscriber)", pair(w["latency"], 2), pair(d["latency"], 2), ""],
+        ["`estimate` -> page (WebSocket client)", "—", pair(d["page_age"], 1), f"{d['frames_per_s']:.0f} frames/s"],
     ]
     m = res["machine"]
-    return (md_table(["p50 / p99", "without dashboard", "with dashboard", ""], rows) +
-            f"\n\n`python benchmarks/node.py --run-dashboard`: {res['rounds']} rounds of {res['samples_per_block']:,} samples at "
-            f"230 Hz per condition, interleaved; {m['processor']}, {m['cpus']} CPUs, Python {m['python']}, {res['date']}.\n")
+    return (md_table(["p50 / p99", "without", "with dashboard", ""], rows) +
+            f"\n\n`python benchmarks/node.py --run-dashboard`, {res['date']}: {res['rounds']} x {res['samples_per_block']:,} "
+            f"samples per condition at 230 Hz, interleaved; node on CPU 0, the rest on CPU 1; {m['cpus']} CPUs, load "
+            f"average {res.get('load_average_before', float('nan')):.1f} before the run (a shared machine).\n")
 
 
 def screenshot(path: Path) -> None:
@@ -186,7 +200,7 @@ def screenshot(path: Path) -> None:
     print(f"wrote {path}")
 
 
-def run_and_write(rounds: int = 4, samples: int = 2300) -> None:
+def run_and_write(rounds: int = 8, samples: int = 1150) -> None:
     """The interleaved run (``rounds`` pairs of blocks of ``samples``), into dashboard.json."""
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "dashboard.json").write_text(json.dumps(run(rounds, samples), indent=1) + "\n")

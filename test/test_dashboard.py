@@ -84,6 +84,22 @@ def test_commands_parse():
     assert parse_command('{"op": "save"}').op == "save"
 
 
+def test_a_non_loopback_host_always_gets_a_token():
+    from gait_estimator.cli.dashboard_command import dashboard_token
+    from gait_estimator.core.errors import GaitEstimatorError
+    from gait_estimator.dashboard.server import TOKEN_ENV, is_loopback
+
+    assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.20") and not is_loopback("leg.local")
+    assert dashboard_token("127.0.0.1", None, {}) is None
+    made = {dashboard_token("0.0.0.0", None, {}) for _ in range(3)}
+    assert len(made) == 3 and all(t and len(t) >= 20 for t in made)
+    assert dashboard_token("0.0.0.0", None, {TOKEN_ENV: "from-the-env"}) == "from-the-env"
+    assert dashboard_token("127.0.0.1", "given-token", {TOKEN_ENV: "from-the-env"}) == "given-token"
+    with pytest.raises(GaitEstimatorError, match="at least 8"):
+        dashboard_token("0.0.0.0", "short", {})
+
+
 # -- the real thing
 
 
