@@ -68,3 +68,17 @@ def test_the_params_file_is_accepted_by_the_node(tmp_path, monkeypatch):
     bad.write_text(params.read_text(encoding="utf-8").replace("input_units: rad", "input_units: furlongs"))
     with pytest.raises(StartupError, match="input_units"):
         _start_with(bad)
+
+
+def test_the_dashboard_executable_takes_what_launch_appends():
+    """launch_ros appends ``--ros-args -r __node:=NAME`` to a node's command: the dashboard ignores it."""
+    import subprocess
+    import sys
+
+    exe = str(Path(sys.executable).parent / "estimator_dashboard")  # the console script beside this Python
+    run = subprocess.run([exe, "--help", "--ros-args", "-r", "__node:=estimator_dashboard"],
+                         capture_output=True, text=True, timeout=60, check=False)
+    assert run.returncode == 0, run.stderr
+    assert "gait-estimator dashboard" in run.stdout and "--read-only" in run.stdout
+    bad = subprocess.run([exe, "--port", "70000", "--ros-args"], capture_output=True, text=True, timeout=60, check=False)
+    assert bad.returncode == 2 and "--port" in bad.stderr
