@@ -96,12 +96,13 @@ def test_no_import_cycles_between_modules() -> None:
     assert cycles == []
 
 
-OPTIONAL = ("scipy", "matplotlib", "rosbags", "numba")
+OPTIONAL = ("scipy", "matplotlib", "rosbags", "numba", "aiohttp")
 """Optional packages (setup.py extras): imported inside the functions that need them, so that the
 estimator and ``process`` run with numpy and PyYAML only (test_public_api.py runs that)."""
-TOP_LEVEL_OPTIONAL = {"gait_estimator.core.compiled": "numba", "gait_estimator.analysis.plots": "matplotlib"}
+TOP_LEVEL_OPTIONAL = {"gait_estimator.core.compiled": "numba", "gait_estimator.analysis.plots": "matplotlib",
+                      "gait_estimator.dashboard.server": "aiohttp"}
 """Where a top-level import is fine: guarded (compiled: numba optional) or imported lazily itself
-(plots, by ``evaluate`` only)."""
+(plots, by ``evaluate`` only; the dashboard's server, by the ``dashboard`` command only)."""
 
 
 def test_optional_packages_are_imported_where_used() -> None:
