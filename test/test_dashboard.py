@@ -184,6 +184,9 @@ def _check_page(driver, multispeed_csv, tmp_path) -> None:
         node = NodeProcess(node_command(["-p", "kernels:=able_bodied", "-p", f"adapted_library_path:={library}"]), env)
         client = EstimatorClient(DOMAIN, outputs=("estimate", "mode"), reliable=True)
         assert client.wait_for_node(timeout_s=30.0), node.output()
+        _until(lambda: "no estimates" in _text(driver, "link"), 15, "the page: node up, no input yet")
+        assert _text(driver, "state") == "not ready"
+        assert driver.find_element("id", "state-box").get_attribute("class") == "state not_ready"
         rec = read_recording(multispeed_csv, rate_hz=230.0).slice(4600, 14500)
         stamps = 1_700_000_000 * 10**9 + np.round((rec.time_s - rec.time_s[0]) * 1e9).astype(np.int64)
         streamer = threading.Thread(target=client.stream, args=(np.radians(rec.angles_deg), stamps, 2.5 * 230.0))
