@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 OLD_NUMPY ?= 1.26.4
 OLD_VENV ?= .venv-numpy126
 
-.PHONY: venv test test-core-old-numpy lint demo bench bench-one-core soak docs docs-check clean
+.PHONY: venv browser test test-core-old-numpy lint demo bench bench-one-core soak docs docs-check clean
 
 $(BIN)/.installed: setup.py package.xml
 	$(PYTHON) -m venv $(VENV)
@@ -19,8 +19,13 @@ venv: $(BIN)/.installed
 lint: venv
 	$(BIN)/ruff check .
 
-test: venv lint test-core-old-numpy
-	ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST $(BIN)/pytest -q test
+# The dashboard's browser test (test/test_dashboard.py): Debian's headless Chromium and its driver,
+# installed when missing (CI runs as root on a fresh machine).
+browser:
+	@test -x /usr/bin/chromedriver || (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium chromium-driver)
+
+test: venv lint browser test-core-old-numpy
+	GAIT_REQUIRE_BROWSER=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST $(BIN)/pytest -q test
 
 $(OLD_VENV)/bin/.installed: setup.py
 	$(PYTHON) -m venv $(OLD_VENV)

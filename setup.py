@@ -21,9 +21,10 @@ EXTRAS = {
     "analysis": ["scipy>=1.11", "matplotlib>=3.6"],  # train, evaluate, label tools, figures
     "bags": ["rosbags>=0.10"],  # rosbag2 (mcap, sqlite3) reading and writing without ROS
     "ros": [*ROS, "rosbags>=0.10"],  # estimator_node, demo, play; numba recommended: [ros,fast]
-    "test": ["pytest>=7", "hypothesis>=6.80", "ruff>=0.5", "wheel"],
+    "test": ["pytest>=7", "hypothesis>=6.80", "ruff>=0.5", "wheel", "selenium>=4.20"],  # + Debian's chromium(-driver)
     "colcon": ["colcon-common-extensions", "ros-jazzy-ament-package"],
     "imu": ["imufusion>=1.3.3", "numba>=0.59"],  # raw IMUs' fusion: imufusion's AHRS, compiled with numba (docs/imu.md)
+    "dashboard": ["aiohttp>=3.9"],  # gait-estimator dashboard (with [ros]); the page's chart library is bundled
 }
 EXTRAS["all"] = sorted({r for reqs in EXTRAS.values() for r in reqs})
 
@@ -37,11 +38,13 @@ setup(
     license="MIT",
     python_requires=">=3.10",
     packages=find_packages(exclude=["test", "test.*"]),
+    package_data={"gait_estimator.dashboard": ["static/*.*", "static/vendor/uplot/*"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/kernels", glob("config/kernels/*.yaml")),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.xml")),
         *data_tree("data"),
     ],
     # The estimator, the offline `process` and the file formats need numpy and PyYAML only; the
@@ -56,6 +59,7 @@ setup(
         "console_scripts": [
             "gait-estimator = gait_estimator.cli:main",
             "estimator_node = gait_estimator.ros:node_main",
+            "estimator_dashboard = gait_estimator.cli.dashboard_command:main",
         ],
     },
 )

@@ -4,6 +4,8 @@
     python benchmarks/node.py          # tables only (part of `make docs`)
     python benchmarks/node.py --run    # first rerun the quiet-machine report (starts a ROS 2 node)
     python benchmarks/node.py --run-imu  # first rerun the two IMU-input sittings (six bench-node runs)
+    python benchmarks/node.py --run-dashboard  # first rerun the dashboard's cost (node_dashboard.py)
+    python benchmarks/node.py --screenshot docs/img/dashboard.png  # the dashboard's screenshot, only
 
 Reads, in benchmarks/results/node/ (a missing report leaves its column or section out):
 
@@ -21,7 +23,8 @@ Reads, in benchmarks/results/node/ (a missing report leaves its column or sectio
   the reverse order.
 
 Writes ``tables.md`` with the sections ``Two cores``, ``One core``, ``700 modes`` and ``IMU input``
-(docs/performance.md, docs/imu.md).
+(docs/performance.md, docs/imu.md), and ``results/dashboard/tables.md`` from its
+``dashboard.json`` (docs/dashboard.md).
 """
 
 from __future__ import annotations
@@ -318,8 +321,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--run", action="store_true", help="run the quiet-machine bench-node first (about 1 min), then the tables")
     ap.add_argument("--run-imu", action="store_true",
                     help="run the two IMU-input sittings first (six bench-node runs, about 6 min), then the tables")
+    ap.add_argument("--run-dashboard", action="store_true",
+                    help="run the dashboard's cost first (node with and without it, interleaved; about 3 min)")
+    ap.add_argument("--screenshot", type=Path, help="only write the dashboard's screenshot (PNG) here")
     ap.add_argument("--domain-id", type=int, default=91, help="ROS_DOMAIN_ID of the benches (default %(default)s)")
     args = ap.parse_args(argv)
+    if args.screenshot:
+        from node_dashboard import screenshot
+
+        screenshot(args.screenshot)
+        return 0
+    if args.run_dashboard:
+        from node_dashboard import run_and_write
+
+        run_and_write()
     if args.run:
         run_bench(args.domain_id)
     if args.run_imu:
@@ -336,6 +351,10 @@ def main(argv: list[str] | None = None) -> int:
         parts.append(imu_input(reports))
     (NODE / "tables.md").write_text("\n".join(parts), encoding="utf-8")
     print(f"wrote {(NODE / 'tables.md').relative_to(ROOT)}")
+    from node_dashboard import write_tables
+
+    if write_tables():
+        print("wrote benchmarks/results/dashboard/tables.md")
     return 0
 
 

@@ -2,7 +2,7 @@
 
 Architecture (data flows left to right; a subpackage imports only those to its left):
 
-    core  ->  io  ->  analysis  ->  ros  ->  cli
+    core  ->  io  ->  analysis  ->  ros  ->  dashboard  ->  cli
 
 * ``core``: kernels, matcher (numba-compiled step optional), resampling, supervision, calibration,
   personalisation, the estimator pipeline (numpy);
@@ -10,6 +10,7 @@ Architecture (data flows left to right; a subpackage imports only those to its l
   layouts, bundled data;
 * ``analysis``: strides, labels, training, evaluation, figures, benchmarks;
 * ``ros``: the node, its client, the bag player: the only place that imports rclpy;
+* ``dashboard``: the live web page of a running node (aiohttp; its ROS side is in ``ros``);
 * ``cli``: the ``gait-estimator`` argparse front ends.
 
 ``test/test_architecture.py`` enforces these rules. See docs/architecture.md.

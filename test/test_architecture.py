@@ -1,5 +1,5 @@
 """The layering of the package (see gait_estimator/__init__.py and docs/architecture.md):
-core -> io -> analysis -> ros -> cli, a subpackage importing only those to its left; only
+core -> io -> analysis -> ros -> dashboard -> cli, a subpackage importing only those to its left; only
 ``ros`` imports rclpy or ROS message packages; no import cycles between modules."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 PKG = Path(__file__).resolve().parents[1] / "gait_estimator"
-LAYERS = ("core", "io", "analysis", "ros", "cli")
+LAYERS = ("core", "io", "analysis", "ros", "dashboard", "cli")
 ROS_MODULES = ("rclpy", "builtin_interfaces", "diagnostic_msgs", "rcl_interfaces", "rosgraph_msgs", "sensor_msgs",
                "std_msgs", "std_srvs", "ament_index_python")
 
@@ -46,7 +46,7 @@ def _layer(module: str) -> str | None:
 
 def test_every_module_lives_in_a_layer() -> None:
     loose = [m for m in _modules() if m.count(".") == 1 and not m.endswith("__init__")]
-    assert loose == [], "modules outside core/io/analysis/ros/cli"
+    assert loose == [], "modules outside core/io/analysis/ros/dashboard/cli"
 
 
 @pytest.mark.parametrize("layer", LAYERS)
@@ -96,12 +96,13 @@ def test_no_import_cycles_between_modules() -> None:
     assert cycles == []
 
 
-OPTIONAL = ("scipy", "matplotlib", "rosbags", "numba")
+OPTIONAL = ("scipy", "matplotlib", "rosbags", "numba", "aiohttp")
 """Optional packages (setup.py extras): imported inside the functions that need them, so that the
 estimator and ``process`` run with numpy and PyYAML only (test_public_api.py runs that)."""
-TOP_LEVEL_OPTIONAL = {"gait_estimator.core.compiled": "numba", "gait_estimator.analysis.plots": "matplotlib"}
+TOP_LEVEL_OPTIONAL = {"gait_estimator.core.compiled": "numba", "gait_estimator.analysis.plots": "matplotlib",
+                      "gait_estimator.dashboard.server": "aiohttp"}
 """Where a top-level import is fine: guarded (compiled: numba optional) or imported lazily itself
-(plots, by ``evaluate`` only)."""
+(plots, by ``evaluate`` only; the dashboard's server, by the ``dashboard`` command only)."""
 
 
 def test_optional_packages_are_imported_where_used() -> None:

@@ -15,7 +15,7 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 HELPERS = {"common.py": "benchmarks.common", "cross_session_report.py": "benchmarks/cross_session.py",
            "offline.py": "benchmarks/performance.py", "imu_live.py": "benchmarks/imu.py",
-           "samples.py": "benchmarks.common"}
+           "samples.py": "benchmarks.common", "node_dashboard.py": "benchmarks/node.py"}
 """Modules the scripts import, not scripts: the command their docstring names."""
 SCRIPTS = sorted(p.name for p in BENCHMARKS.glob("*.py") if p.name not in HELPERS)
 

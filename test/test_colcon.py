@@ -74,7 +74,10 @@ def test_colcon_list_and_build_then_run_like_ros2_run(workspace: Path, monkeypat
     assert prefix == prefix_dir
     exe = prefix / "lib" / "gait_estimator" / "estimator_node"
     assert exe.is_file() and os.access(exe, os.X_OK)
+    dashboard = prefix / "lib" / "gait_estimator" / "estimator_dashboard"  # named by the launch file
+    assert dashboard.is_file() and os.access(dashboard, os.X_OK)
     share = Path(get_package_share_directory("gait_estimator"))
+    assert (share / "launch" / "estimator.launch.xml").is_file()
     assert (share / "config" / "estimator.yaml").is_file()
     assert (share / "config" / "kernels" / "able_bodied.yaml").is_file()
     assert (share / "data" / "swge" / "LICENSE").is_file()

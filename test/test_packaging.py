@@ -46,6 +46,10 @@ def test_pip_install_finds_bundled_kernels_and_recordings(tmp_path: Path) -> Non
     module, library, recording, samples, licence = proc.stdout.split()
     share = prefix / "share" / "gait_estimator"
     assert Path(module).is_relative_to(site)
+    static = Path(module).parent / "dashboard" / "static"  # the page's assets: nothing from the internet
+    assert {"index.html", "app.js", "app.css"} <= {f.name for f in static.iterdir()}
+    assert {"uPlot.iife.min.js", "uPlot.min.css", "LICENSE"} <= {f.name for f in (static / "vendor" / "uplot").iterdir()}
+    assert (prefix / "share" / "gait_estimator" / "launch" / "estimator.launch.xml").is_file()
     assert Path(library) == share / "config" / "kernels" / "able_bodied.yaml"
     assert Path(recording) == share / "data" / "swge" / "recordings" / "Multispeed_Walk_AB.csv"
     assert int(samples) == 14170

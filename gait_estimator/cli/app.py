@@ -27,6 +27,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.analysis_commands",
     "gait_estimator.cli.teach_command",
     "gait_estimator.cli.watch_command",
+    "gait_estimator.cli.dashboard_command",
 )
 """Further modules contributing subcommands (kept ROS-free at import time)."""
 

@@ -167,8 +167,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
         node.close()
         raise
     code = 0
+    page = None
     try:
         wait_node(client, node, args.timeout)
+        if args.dashboard:
+            page = _start_dashboard(args.domain_id, args.dashboard_port)
         echo_every = max(1, args.echo_every)
         _echo(client, echo_every)
         print(
@@ -196,7 +199,19 @@ def cmd_demo(args: argparse.Namespace) -> int:
     finally:
         client.close()
         node.close()
+        if page is not None:
+            page.close()
     return code
+
+
+def _start_dashboard(domain: int, port: int) -> Any:
+    """``demo --dashboard``: the dashboard beside the node, its URL printed; the process."""
+    from ..dashboard.process import start_dashboard
+    from ..ros.node_client import local_ros_environment
+
+    proc, url = start_dashboard(["--port", str(port), "--domain-id", str(domain)], local_ros_environment(domain))
+    print(f"dashboard: open {url} (live while the recording streams)", flush=True)
+    return proc
 
 
 # ---------------------------------------------------------------------------------------------
@@ -229,4 +244,7 @@ def add_commands(sub: Any) -> None:
                    help=f"ROS_DOMAIN_ID (default: the environment's, else {DEMO_DOMAIN_ID})")
     d.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for the node to connect")
     d.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
+    d.add_argument("--dashboard", action="store_true", help="also serve the live web view (gait-estimator dashboard) "
+                   "at the printed URL; needs the 'dashboard' extra")
+    d.add_argument("--dashboard-port", type=int, default=8080, help="its port (default %(default)s)")
     d.set_defaults(func=cmd_demo)

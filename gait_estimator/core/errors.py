@@ -21,6 +21,7 @@ EXTRAS: dict[str, str] = {
     "rosbags": "bags",
     "numba": "fast",
     "rclpy": "ros",
+    "aiohttp": "dashboard",
 }
 """Optional third-party packages -> the ``pip install 'gait_estimator[EXTRA]'`` extra that brings them."""
 

@@ -14,6 +14,8 @@ publishes (reliable, keep last 10):
 * ``estimate`` (sensor_msgs/JointState as stamped key/values, see ``outputs.py``) for every
   estimate, ``header.stamp`` = the input stamp, ``ready`` = 0 while the window fills;
 * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) at 1 Hz;
+* ``~/angles`` (std_msgs/Float64MultiArray), only while something subscribes: each sample as the
+  matcher saw it, in blocks ~30 a second, for the dashboard (``angles_output.py``);
 * ``~/profile`` (std_msgs/Float64MultiArray) at 1 Hz, only while something subscribes to it: the
   per-sample timing of the last second (see ``PROFILE_COLUMNS``; ``gait-estimator bench-node
   --profile``).
@@ -79,6 +81,7 @@ from ..io.outputs import (
     sse_label,
 )
 from ..io.stream import ANGLE_MESSAGE_ONLY, MALFORMED, REASONS, AngleExtractor, SampleRejected, StreamGuard, restart_threshold
+from .angles_output import AnglesOutput
 from .diagnostics import (  # noqa: F401  (PROFILE_COLUMNS: re-exported for the bench-node client)
     DIAGNOSTICS_PERIOD_S,
     DIAGNOSTICS_TOPIC,
@@ -164,6 +167,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         self._estimate_pub = self.create_publisher(JointState, ESTIMATE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS, event_callbacks=quiet)
         self._profile_pub = self.create_publisher(Float64MultiArray, PROFILE_TOPIC, OUTPUT_QOS, event_callbacks=quiet)
+        self._angles = AnglesOutput(self, OUTPUT_QOS)
         self._mode_msg = String()
         self._phase_msg = Float64()
         if self._input_type == "joint_state":
@@ -374,6 +378,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
             )
         t1 = time.perf_counter()
         self._publish(estimate, stamp)
+        self._angles.add(stamp, angles_deg, est.sensor_offset_deg)
         self._teacher.on_sample(t, angles_deg)  # may change the library and the estimator
 
         if self._period_first_stamp is None:

@@ -94,7 +94,7 @@ class Received:
         )
 
 
-def _drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscription]) -> Callable[[Any, Any], None]:
+def drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscription]) -> Callable[[Any, Any], None]:
     """Wrap a subscription callback ``callback(msg, info)`` to also take the messages queued
     behind the first one (rclpy's executor costs hundreds of microseconds per wake-up; see
     EstimatorNode._on_input). ``box`` receives the subscription once created. The wrapper takes
@@ -214,7 +214,7 @@ class EstimatorClient:
             msg_type, callback, qos = subs[topic]
             box: list[Subscription] = []
             raw = topic == ESTIMATE_TOPIC and not record
-            sub = self.node.create_subscription(msg_type, topic, _drained(callback, box), qos, raw=raw)
+            sub = self.node.create_subscription(msg_type, topic, drained(callback, box), qos, raw=raw)
             box.append(sub)
             self._subs.append(sub)
         self._js = JointState()

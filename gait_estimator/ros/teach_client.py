@@ -71,14 +71,17 @@ class TeachClient(ToolNode):
     Args:
         node: Fully qualified name of the estimator node (e.g. ``/estimator_node``).
         domain_id: ROS domain (None: ``ROS_DOMAIN_ID`` of the environment, else 0).
-        timeout_s: How long to wait for the node's parameter services.
+        timeout_s: How long to wait for the node's parameter services (None: do not wait; the
+            dashboard follows a node that may start later).
+        name: This client's node name.
 
     Raises:
         GaitEstimatorError: No node of that name answered within ``timeout_s`` (one line).
     """
 
-    def __init__(self, node: str = DEFAULT_NODE, domain_id: int | None = None, timeout_s: float = 5.0) -> None:
-        super().__init__("gait_estimator_teach", node, domain_id)  # Ctrl-C reaches the command: it cancels
+    def __init__(self, node: str = DEFAULT_NODE, domain_id: int | None = None, timeout_s: float | None = 5.0,
+                 name: str = "gait_estimator_teach") -> None:
+        super().__init__(name, node, domain_id)  # Ctrl-C reaches the command: it cancels
         self.diagnostics: dict[str, str] | None = None
         self.on_log: Callable[[str], None] | None = None
         self._started = self.node.get_clock().now().nanoseconds
@@ -86,7 +89,7 @@ class TeachClient(ToolNode):
         self.node.create_subscription(Log, "/rosout", self._on_log, 1000)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.params = AsyncParameterClient(self.node, self.target)
-        if not self.params.wait_for_services(timeout_s):
+        if timeout_s is not None and not self.params.wait_for_services(timeout_s):
             raise self.not_found(timeout_s, "answered")
 
     # -- callbacks
