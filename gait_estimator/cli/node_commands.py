@@ -171,7 +171,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     try:
         wait_node(client, node, args.timeout)
         if args.dashboard:
-            page = _start_dashboard(args.domain_id, args.dashboard_port)
+            page = _start_dashboard(domain, args.dashboard_port)
         echo_every = max(1, args.echo_every)
         _echo(client, echo_every)
         print(
