@@ -33,14 +33,12 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
+from ..core.adapt import MAD_TO_SIGMA
 from ..core.errors import GaitEstimatorError
 from ..core.kernels import KernelLibrary, KernelMode, make_mode
 from ..io.library_io import REFERENCE_MODE_IDS
 from ..io.recording import Recording
 from .strides import DetectionOptions, heel_strikes, normalise_strides, resample_uniform, stride_bounds
-
-MAD_TO_SIGMA = 1.4826
-"""Scale from median absolute deviation to a normal standard deviation."""
 
 
 @dataclass(frozen=True)

@@ -23,8 +23,9 @@ from ..analysis.strides import (
     stride_bounds,
 )
 from ..core.errors import GaitEstimatorError
+from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.readers import read_recording
-from ..io.recording import DEFAULT_REFERENCE_RATE_HZ, Recording, write_project_csv
+from ..io.recording import Recording, write_project_csv
 from .args import add_imu_reading_options, imu_reader_options, positive_float
 
 

@@ -24,6 +24,7 @@ import numpy as np
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
 from .atomic import atomic_open
+from .library_io import DEFAULT_REFERENCE_RATE_HZ
 
 
 @dataclass
@@ -95,7 +96,6 @@ class Recording:
 # Reference recording CSV
 
 _DIMENSION_RE = re.compile(r"^\s*(?:[^;]*;)*\s*Dimension:(?P<rows>\d+)x(?P<cols>\d+)")
-DEFAULT_REFERENCE_RATE_HZ = 230.0
 
 
 def _first_line(p: Path) -> str:
