@@ -10,8 +10,9 @@ from typing import Any
 
 from ..core.imu import FUSION_BY_CHANNEL, FusionParams, ImuCalibration
 from ..core.imu_learn import DEFAULT_LEARN, ImuLearnParams
+from ..core.options import EstimatorConfig
 
-DEFAULT_MAX_GAP_S = 0.5
+DEFAULT_MAX_GAP_S = EstimatorConfig.max_gap_s
 
 
 @dataclass(frozen=True)
