@@ -11,18 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis.strides import (
-    HEEL_STRIKE_SOURCES,
-    MAX_STRIDE_S,
-    MIN_PROMINENCE_DEG,
-    MIN_STRIDE_S,
-    DetectionOptions,
-    heel_strikes,
-    nearest_index,
-    resample_uniform,
-    stride_bounds,
-)
+from ..analysis.strides import HEEL_STRIKE_SOURCES, heel_strikes, nearest_index, resample_uniform
 from ..core.errors import GaitEstimatorError
+from ..core.strides import MAX_STRIDE_S, MIN_PROMINENCE_DEG, MIN_STRIDE_S, DetectionOptions, stride_bounds
 from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
@@ -85,7 +76,8 @@ def _read_labelled(path: str, args: argparse.Namespace, rate_hz: float | None = 
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from ..analysis.train import OutlierRule, TrainOptions, format_report, train_library
+    from ..analysis.train import format_report, train_library
+    from ..core.training import OutlierRule, TrainOptions
     from ..io.library_io import save_library
 
     recs = [_read_labelled(p, args) for p in args.recordings]

@@ -38,11 +38,11 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
-from ..analysis.teach import TAUGHT_LIBRARY
 from ..core.ahrs import warm_up
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount, Vec3
 from ..core.imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
+from ..core.teach import TAUGHT_LIBRARY
 from ..io.cdr import CdrError, Stamp, read_imu
 from ..io.imu_angles import ImuAngles
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
