@@ -30,6 +30,7 @@ from ..core.ahrs import fuse_raw_backwards
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
 from ..core.imu import CalibrationError, FusionParams, ImuCalibration
+from ..core.imu_calibrator import check_stream
 from ..core.imu_learn import (
     STILL_S,
     ImuLearnParams,
@@ -38,7 +39,7 @@ from ..core.imu_learn import (
     learn_calibration,
 )
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
-from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, check_stream, load_calibration
+from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
 from .read_options import ReadOptions
 from .stream import SampleRejected
 
