@@ -212,7 +212,7 @@ def cmd_label_strides(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------
 
 
-def add_commands(sub: argparse._SubParsersAction) -> None:
+def add_commands(sub: Any) -> None:
     """Register ``train``, ``evaluate``, ``resample`` and ``label-strides``."""
     hs_help = (
         "right heel strikes: 'column' (heel_strike column), 'right_foot' / 'right_shank' (peaks of that angle; "
