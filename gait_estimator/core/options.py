@@ -1,5 +1,6 @@
-"""The estimator's options: ``EstimatorConfig`` and the ``OPTIONS`` that describe it once for the
-node's parameters, the CLI's flags and the docs.
+"""The estimator's options: each one an ``EstimatorConfig`` field written once (``option``: its
+default, ``paper`` value and description), and the ``OPTIONS`` made from them for the node's
+parameters, the CLI's flags and the docs (test_options.py checks the YAML and the docs' tables).
 
 Two presets: ``default`` (what works for a new wearer: rate handling, cadence variants, offset
 tolerance and walking calibration, comparison per sample) and ``paper`` (the paper's algorithm,
@@ -46,7 +47,6 @@ def option(default: Any, description: str, paper: Any = None, advanced: bool = F
     """An ``EstimatorConfig`` field that is an option (see ``Option``): the one place its default,
     description and ``paper`` value are written."""
     return field(default=default, metadata={"description": description, "paper": paper, "advanced": advanced})
-
 
 
 def _resample_mode(value: Any) -> str:
