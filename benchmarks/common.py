@@ -34,17 +34,11 @@ import numpy as np
 
 from gait_estimator.analysis.evaluate import PredictionTable, circular_error, evaluate, settle_time, time_in_run
 from gait_estimator.analysis.labels import duration_labels, merge_steady, read_label_ranges, with_ranges
-from gait_estimator.analysis.strides import (
-    DetectionOptions,
-    HeelStrikes,
-    heel_strikes,
-    nearest_index,
-    resample_uniform,
-    stride_bounds,
-)
+from gait_estimator.analysis.strides import HeelStrikes, heel_strikes, nearest_index, resample_uniform
 from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.core.estimator import EstimateTrace
 from gait_estimator.core.kernels import KernelLibrary
+from gait_estimator.core.strides import DetectionOptions, stride_bounds
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import Recording
 

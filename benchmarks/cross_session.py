@@ -72,10 +72,11 @@ from cross_session_report import RATE_REFERENCE, targets, write_tables
 from synthetic import SyntheticConfig, generate, new_wearer
 
 from gait_estimator.analysis.labels import LabelRange, duration_labels, merge_steady, with_ranges
-from gait_estimator.analysis.strides import heel_strikes, stride_bounds
+from gait_estimator.analysis.strides import heel_strikes
 from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
 from gait_estimator.core.kernels import KernelLibrary
+from gait_estimator.core.strides import stride_bounds
 from gait_estimator.io.library_io import load_library
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import Recording

@@ -15,8 +15,9 @@ from __future__ import annotations
 import numpy as np
 
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, parse_axis
-from gait_estimator.io.imu_angles import ImuAngles
-from gait_estimator.io.imu_stream import ImuCalibrator, ImuPairer, SensorInput
+from gait_estimator.core.imu_angles import ImuAngles
+from gait_estimator.core.imu_calibrator import ImuCalibrator
+from gait_estimator.io.imu_stream import ImuPairer, SensorInput
 from gait_estimator.io.stream import StreamGuard, restart_threshold
 
 RIGHT = {"thigh": 0, "shank": 2}

@@ -35,8 +35,9 @@ import numpy as np
 from gait_estimator import load_library
 from gait_estimator.analysis.evaluate import PredictionTable, evaluate
 from gait_estimator.analysis.labels import LabelRange, duration_labels, labels_from_ranges, merge_steady
-from gait_estimator.analysis.strides import heel_strikes, stride_bounds
+from gait_estimator.analysis.strides import heel_strikes
 from gait_estimator.analysis.train import TrainOptions, train_library
+from gait_estimator.core.strides import stride_bounds
 from gait_estimator.io.outputs import ESTIMATE_TOPIC
 from gait_estimator.io.process import predict
 from gait_estimator.io.readers import read_recording

@@ -31,10 +31,12 @@ from gait_estimator.io.bag_write import (
     write_input_bag,
     write_output_bag,
 )
+from gait_estimator.io.imu_bag import read_imu_bag
 from gait_estimator.io.outputs import estimate_names, mode_names_from_sse_label, sse_label
 from gait_estimator.io.process import predict
+from gait_estimator.io.read_options import ReadOptions
 from gait_estimator.io.readers import read_recording
-from gait_estimator.io.recording import Recording, write_project_csv
+from gait_estimator.io.recording import Recording, read_project_csv, write_project_csv
 
 START_NS = 1_700_000_000_123_456_789
 N = 1000  # samples of the ramp recording used by most tests (window: 392 samples)
@@ -376,6 +378,22 @@ def test_joint_names_and_units_options(tmp_path, ramp, capsys):
     with pytest.raises(SystemExit):  # argparse: 4 names needed
         main(["process", str(bag), "-q", "--joint-names", "a,b"])
     assert "expected 4 distinct comma-separated names" in capsys.readouterr().err
+
+
+def test_a_misspelt_reader_option_is_refused_by_name(tmp_path, ramp, ramp_csv):
+    bag = write_input_bag(ramp, tmp_path / "bag", units="deg", start_ns=START_NS)
+    for read, path in ((read_recording, bag), (read_bag, bag), (read_recording, ramp_csv), (read_project_csv, ramp_csv)):
+        with pytest.raises(TypeError, match=r"unknown reading option 'input_unit' \(known: .*input_units"):
+            read(path, input_unit="deg")
+    with pytest.raises(TypeError, match="unknown reading options 'rate', 'topc'"):
+        read_recording(bag, topc="/segment_angles", rate=100.0)
+    with pytest.raises(TypeError, match="'imu_topic'"):
+        read_imu_bag(bag, imu_topic=["/a"] * 4)
+    # an options object and fields by name read alike; fields a format has no use for are left alone
+    by_name = read_recording(bag, input_units="deg", max_gap_s=0, rate_hz=50.0)
+    given = read_bag(bag, ReadOptions(input_units="deg", max_gap_s=0))
+    np.testing.assert_array_equal(by_name.angles_deg, given.angles_deg)
+    np.testing.assert_allclose(given.angles_deg, ramp.angles_deg, atol=1e-9)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -37,6 +37,8 @@ from gait_estimator.core.imu import (
     up_from_quaternion,
     ups_from_quaternions,
 )
+from gait_estimator.core.imu_angles import ImuAngles
+from gait_estimator.core.imu_calibrator import ImuCalibrator
 from gait_estimator.core.imu_learn import (
     ImuLearnParams,
     check_calibration,
@@ -45,7 +47,6 @@ from gait_estimator.core.imu_learn import (
     learn_calibration,
     quiet_runs,
 )
-from gait_estimator.io.imu_angles import ImuAngles
 from gait_estimator.io.imu_bag import ImuBagRecording, read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
@@ -53,13 +54,13 @@ from gait_estimator.io.imu_stream import (
     OUT_OF_RANGE,
     WRONG_FRAME,
     ZERO_NORM,
-    ImuCalibrator,
     ImuPairer,
     SensorInput,
     auto_tolerance_s,
     load_calibration,
     save_calibration,
 )
+from gait_estimator.io.read_options import ReadOptions
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import read_project_csv
 from gait_estimator.io.stream import SampleRejected
@@ -280,11 +281,9 @@ def test_learning_and_fusion_take_their_thresholds_as_parameters(angles):
 
 def test_thighs_and_shanks_fuse_with_their_own_settings_in_the_node_and_offline():
     """FUSION_BY_CHANNEL: thighs THIGH_FUSION, shanks SHANK_FUSION, in read_imu_bag as in the node."""
-    import inspect
-
     assert FUSION_BY_CHANNEL == (THIGH_FUSION, THIGH_FUSION, SHANK_FUSION, SHANK_FUSION)
     assert SHANK_FUSION.quasi_gain is not None and SHANK_FUSION.gain < THIGH_FUSION.gain < DEFAULT_FUSION.gain
-    assert inspect.signature(read_imu_bag).parameters["fusion_params"].default is FUSION_BY_CHANNEL
+    assert ReadOptions().fusion_params is FUSION_BY_CHANNEL  # read_imu_bag's default
     # the node's inputs: test_node_imu.py::test_configured_axes_need_no_calibration_file
 
 
@@ -569,10 +568,10 @@ def test_quiet_runs_are_where_a_standing_pose_can_be(angles):
 def test_live_calibrator_looks_for_a_standing_pose_only_after_quiet_gyros(angles, monkeypatch):
     """The bias search runs in the node's callback: on walking alone it never calls the (costly)
     standing-pose search; a standing pose is searched once its quiet stretch has ended."""
-    import gait_estimator.io.imu_stream as imu_stream
+    import gait_estimator.core.imu_calibrator as imu_calibrator
 
     calls = []
-    monkeypatch.setattr(imu_stream, "find_standing", lambda *a, **k: calls.append(1) or find_standing(*a, **k))
+    monkeypatch.setattr(imu_calibrator, "find_standing", lambda *a, **k: calls.append(1) or find_standing(*a, **k))
     rng = np.random.default_rng(11)
     mounts = random_mounts(rng)
     nan3 = (math.nan,) * 3

@@ -10,7 +10,10 @@ import numpy as np
 import pytest
 
 from gait_estimator.analysis.strides import heel_strikes
-from gait_estimator.analysis.teach import (
+from gait_estimator.analysis.train import TrainOptions, train_library
+from gait_estimator.core.errors import GaitEstimatorError
+from gait_estimator.core.estimator import Estimator
+from gait_estimator.core.teach import (
     ANALYSIS_PERIOD_S,
     KEEP_MARGIN_S,
     StrideCollector,
@@ -19,9 +22,6 @@ from gait_estimator.analysis.teach import (
     near_copies,
     with_mode,
 )
-from gait_estimator.analysis.train import TrainOptions, train_library
-from gait_estimator.core.errors import GaitEstimatorError
-from gait_estimator.core.estimator import Estimator
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import Recording
 

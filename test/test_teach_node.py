@@ -144,7 +144,7 @@ def test_teaching_goes_on_after_the_input_stream_restarts(ros, multispeed: Recor
     _stream(client, multispeed, 8.0, 12.5)  # about two strides under the first stamps
     assert node.get_parameter("teach_mode").value == "Slow"
     kept = node._teacher.session.good
-    assert kept >= 1, node._teacher.last_event
+    assert kept >= 1
     _stream(client, multispeed, 4.0, 6.0)  # the stream again from 4 s: stamps jump back 8.5 s
     event = node._teacher.last_event
     assert f"Slow: {kept}/3 strides" in event and "kept, collecting on" in event, event

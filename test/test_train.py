@@ -9,10 +9,11 @@ import pytest
 from synthetic import SyntheticConfig, generate
 
 from gait_estimator.analysis.labels import read_label_ranges, with_mode, with_ranges
-from gait_estimator.analysis.strides import normalise_strides
-from gait_estimator.analysis.train import OutlierRule, TrainOptions, reject_outliers, train_library
+from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.cli.app import main
 from gait_estimator.core.errors import GaitEstimatorError
+from gait_estimator.core.strides import find_peaks, normalise_strides
+from gait_estimator.core.training import OutlierRule, reject_outliers
 from gait_estimator.io.library_io import load_library
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import write_project_csv
@@ -222,3 +223,22 @@ def test_lg2_ramp_training_from_documented_labels(swge):
             m.length - m.info["duration_mean_s"] * lib.sample_rate_hz) <= 1
     # ramp ascent flexes the thighs more than descent (kernel physiology, cf. the AB kernels)
     assert lib.mode("RA").samples[:, 0].max() > lib.mode("RD").samples[:, 0].max() + 2
+
+
+def test_find_peaks_is_scipys_on_real_recordings(swge):
+    """core.strides.find_peaks (numpy; the node imports no scipy) returns what scipy.signal.find_peaks
+    returns, on every angle of the bundled recordings, raw and rounded to whole degrees (flat tops
+    and equal heights), for several stride distances and prominences."""
+    signal = pytest.importorskip("scipy.signal")
+    recordings = sorted(p for p in (swge / "recordings").glob("*.csv") if not p.name.endswith(".labels.csv"))
+    paths = [*recordings, *sorted((swge.parent / "camargo_ab06").glob("*.csv"))]
+    checked = 0
+    for path in paths:
+        rec = read_recording(path)
+        for x in [*rec.angles_deg.T, *rec.extra.values()]:
+            for values in (x, np.round(x)):
+                for distance, prominence in ((1, 0.0), (40, 5.0), (138, 20.0)):
+                    expected, _ = signal.find_peaks(values, distance=distance, prominence=prominence)
+                    np.testing.assert_array_equal(find_peaks(values, distance, prominence), expected)
+                    checked += expected.size
+    assert len(paths) == 7 and checked > 10_000

@@ -35,8 +35,9 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import GaitEstimatorError
+from ..core.strides import DetectionOptions, stride_bounds
 from ..io.recording import Recording
-from .strides import DetectionOptions, HeelStrikes, nearest_index, stride_bounds
+from .strides import HeelStrikes, nearest_index
 
 
 @dataclass(frozen=True)

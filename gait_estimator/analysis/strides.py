@@ -3,19 +3,8 @@
 Shared by ``train`` (kernels are averages of strides), ``evaluate`` (phase truth runs linearly
 from one right heel strike to the next) and the label tools.
 
-Heel-strike detection rule (documented in docs/training.md): the signal (right foot angle for level
-and ramp walking, right shank angle for stairs, both degrees, sagittal plane, positive =
-toes/shank rotated forward) is resampled to a uniform rate, then ``scipy.signal.find_peaks``
-keeps maxima that
-
-* are at least ``MIN_STRIDE_S`` apart (a right heel strike cannot follow the previous one
-  sooner than the shortest physiological stride; the higher peak wins), and
-* have a prominence of at least ``MIN_PROMINENCE_DEG`` (the foot and shank swing through
-  40-100 deg per stride; small wiggles while standing or turning are not heel strikes).
-
-Every peak time is refined to sub-sample precision by a parabola through the peak sample and
-its two neighbours. Consecutive heel strikes form a stride only when their interval lies in
-[``MIN_STRIDE_S``, ``MAX_STRIDE_S``]; longer intervals (standing, turning) are not strides.
+Heel strikes are found by ``core.strides`` (its rule: docs/training.md); this module adds
+the recording side: resampling, where the signal comes from, strides per recording.
 """
 
 from __future__ import annotations
@@ -26,30 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import RecordingError
+from ..core.strides import DetectionOptions, detect_peaks
 from ..io.recording import Recording
-
-MIN_STRIDE_S = 0.6
-"""Shortest accepted stride (s): faster than brisk walking/jogging cadence (~200 strides/min is 0.3 s/step)."""
-
-MAX_STRIDE_S = 2.5
-"""Longest accepted stride (s): slower than the paper's slowest mode (PR stair ascent, ~1.85 s)."""
-
-MIN_PROMINENCE_DEG = 20.0
-"""Smallest peak prominence (deg) accepted as a heel strike."""
 
 HEEL_STRIKE_SOURCES = ("auto", "column", "right_foot", "right_shank")
 """``--heel-strikes`` choices; ``auto`` = column if present, else right_foot if present, else right_shank."""
 
 _SIGNAL_COLUMNS = {"right_foot": "right_foot_deg", "right_shank": "right_shank_deg"}
-
-
-@dataclass(frozen=True)
-class DetectionOptions:
-    """Parameters of heel-strike detection and stride segmentation (seconds, degrees)."""
-
-    min_stride_s: float = MIN_STRIDE_S
-    max_stride_s: float = MAX_STRIDE_S
-    min_prominence_deg: float = MIN_PROMINENCE_DEG
 
 
 @dataclass(frozen=True)
@@ -98,28 +70,6 @@ def nearest_index(grid: np.ndarray, times: np.ndarray) -> np.ndarray:
     right = np.clip(np.searchsorted(grid, times), 1, len(grid) - 1)
     left = right - 1
     return np.where(np.abs(times - grid[left]) <= np.abs(grid[right] - times), left, right)
-
-
-def detect_peaks(
-    time_s: np.ndarray, signal_deg: np.ndarray, options: DetectionOptions | None = None
-) -> np.ndarray:
-    """Heel-strike times (s) from maxima of a uniformly sampled signal (deg); see module docstring."""
-    options = options or DetectionOptions()
-    t = np.asarray(time_s, dtype=np.float64)
-    x = np.asarray(signal_deg, dtype=np.float64)
-    if t.size < 3:
-        return np.empty(0)
-    dt = float(np.median(np.diff(t)))
-    distance = max(1, math.floor(options.min_stride_s / dt))
-    from scipy.signal import find_peaks  # the 'analysis' extra; imported here so the CLI starts without it
-
-    peaks, _ = find_peaks(x, distance=distance, prominence=options.min_prominence_deg)
-    peaks = peaks[(peaks > 0) & (peaks < x.size - 1)]
-    y0, y1, y2 = x[peaks - 1], x[peaks], x[peaks + 1]
-    denom = y0 - 2.0 * y1 + y2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        delta = np.where(denom < 0, 0.5 * (y0 - y2) / denom, 0.0)
-    return t[peaks] + np.clip(delta, -0.5, 0.5) * dt
 
 
 def resolve_source(rec: Recording, source: str) -> str:
@@ -175,45 +125,3 @@ def heel_strikes(
         f"at {rate:.6g} Hz)",
     )
 
-
-def stride_bounds(
-    times_s: np.ndarray, options: DetectionOptions | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Strides between consecutive heel strikes.
-
-    Returns:
-        (bounds, too_long_or_short): ``bounds`` (S, 2) start/end times (s) of the intervals whose
-        duration lies in [min_stride_s, max_stride_s]; the second array (R, 2) holds the others.
-    """
-    options = options or DetectionOptions()
-    h = np.asarray(times_s, dtype=np.float64)
-    pairs = np.column_stack([h[:-1], h[1:]]) if h.size >= 2 else np.empty((0, 2))
-    d = pairs[:, 1] - pairs[:, 0]
-    ok = (d >= options.min_stride_s) & (d <= options.max_stride_s)
-    return pairs[ok], pairs[~ok]
-
-
-def normalise_strides(
-    time_s: np.ndarray, values: np.ndarray, bounds: np.ndarray, length: int
-) -> np.ndarray:
-    """Time-normalise strides to ``length`` samples each.
-
-    Sample j of stride s is ``values`` interpolated linearly at
-    ``start_s + j / length * (end_s - start_s)``, j = 0 .. length-1 (phase j/length; the end heel
-    strike itself is the next stride's sample 0).
-
-    Args:
-        time_s: Increasing sample times (s), shape (T,).
-        values: Samples, shape (T, C) (degrees).
-        bounds: Stride start/end times (s), shape (S, 2).
-        length: Samples per normalised stride.
-
-    Returns:
-        Array (S, length, C).
-    """
-    b = np.asarray(bounds, dtype=np.float64).reshape(-1, 2)
-    phase = np.arange(length) / length
-    when = b[:, :1] + phase[None, :] * (b[:, 1:] - b[:, :1])  # (S, length)
-    v = np.asarray(values, dtype=np.float64)
-    out = np.stack([np.interp(when.ravel(), time_s, v[:, c]) for c in range(v.shape[1])], axis=-1)
-    return out.reshape(b.shape[0], length, v.shape[1])

@@ -11,20 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis.strides import (
-    HEEL_STRIKE_SOURCES,
-    MAX_STRIDE_S,
-    MIN_PROMINENCE_DEG,
-    MIN_STRIDE_S,
-    DetectionOptions,
-    heel_strikes,
-    nearest_index,
-    resample_uniform,
-    stride_bounds,
-)
+from ..analysis.strides import HEEL_STRIKE_SOURCES, heel_strikes, nearest_index, resample_uniform
 from ..core.errors import GaitEstimatorError
+from ..core.strides import MAX_STRIDE_S, MIN_PROMINENCE_DEG, MIN_STRIDE_S, DetectionOptions, stride_bounds
+from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.readers import read_recording
-from ..io.recording import DEFAULT_REFERENCE_RATE_HZ, Recording, write_project_csv
+from ..io.recording import Recording, write_project_csv
 from .args import add_imu_reading_options, imu_reader_options, positive_float
 
 
@@ -90,7 +82,8 @@ def _read_labelled(path: str, args: argparse.Namespace, rate_hz: float | None = 
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from ..analysis.train import OutlierRule, TrainOptions, format_report, train_library
+    from ..analysis.train import format_report, train_library
+    from ..core.training import OutlierRule, TrainOptions
     from ..io.library_io import save_library
 
     recs = [_read_labelled(p, args)[0] for p in args.recordings]
@@ -225,7 +218,7 @@ def cmd_label_strides(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------
 
 
-def add_commands(sub: argparse._SubParsersAction) -> None:
+def add_commands(sub: Any) -> None:
     """Register ``train``, ``evaluate``, ``resample`` and ``label-strides``."""
     hs_help = (
         "right heel strikes: 'column' (heel_strike column), 'right_foot' / 'right_shank' (peaks of that angle; "

@@ -26,6 +26,7 @@ from ..io.bag import (
     is_bag_path,
     read_bag,
 )
+from ..io.bag_write import STORAGES
 from ..io.imu_bag import is_imu_bag
 from ..io.process import Predictions, predict
 from ..io.readers import read_recording
@@ -33,8 +34,6 @@ from ..io.recording import Recording, write_project_csv
 from ..io.resources import DEFAULT_LIBRARY
 from ..io.stream import UNITS
 from .args import IMU_READING_OPTIONS, add_imu_reading_options, imu_reader_options, positive_float, seconds
-
-STORAGES = ("mcap", "sqlite3")
 
 
 def _joint_names(text: str) -> tuple[str, ...]:

@@ -20,7 +20,7 @@ import numpy as np
 from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, imu_samples
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
-from ..ros import require_ros
+from ..ros import EXECUTORS, require_ros
 from .args import choice_list, domain_id, positive_float, positive_int, prepare_output
 from .bench_profile import PROFILE_LABELS, clock_offset_ns, profile_stages
 from .node_commands import percentiles, start_node, wait_node
@@ -52,8 +52,6 @@ def _rates(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected positive rates, got {text!r}")
     return values
 
-EXECUTORS = ("events", "single_threaded")
-"""Values of estimator_node's ``executor`` parameter (gait_estimator.ros.node.EXECUTORS)."""
 INPUTS = ("joint_state", "imu", "imu-raw")
 """bench-node --input: JointState angles, or four Imu topics with orientations / gyro + accelerometer only."""
 OUTPUT_SETS = ("estimate", "all")

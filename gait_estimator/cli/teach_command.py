@@ -9,8 +9,8 @@ import argparse
 import os
 from typing import Any
 
-from ..analysis.teach import TEACH_STRIDES, check_teach_strides
 from ..core.errors import GaitEstimatorError
+from ..core.teach import TEACH_STRIDES, check_teach_strides
 from ..ros import require_ros
 from .args import add_target_node_options, positive_float
 

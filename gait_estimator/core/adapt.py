@@ -40,6 +40,7 @@ import numpy as np
 from .channels import N_CHANNELS, Sample
 from .kernels import KernelLibrary, KernelMode, resample_stride
 from .matcher import IncrementalMatcher, StepResult
+from .options import EstimatorConfig
 from .supervisor import Estimate
 
 MAD_TO_SIGMA = 1.4826  # median absolute deviation -> standard deviation of a normal distribution
@@ -62,9 +63,9 @@ class AdaptParams:
         max_shift: Largest alignment shift, fraction of the stride either way.
     """
 
-    rate: float = 0.0
-    min_confidence: float = 0.2
-    max_step_deg: float = 5.0
+    rate: float = EstimatorConfig.adapt_rate
+    min_confidence: float = EstimatorConfig.adapt_min_confidence
+    max_step_deg: float = EstimatorConfig.adapt_max_step_deg
     duration_tolerance: float = 0.10
     shape_sigmas: float = 3.5
     history: int = 16

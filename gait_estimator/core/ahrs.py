@@ -1,7 +1,7 @@
 """``RawFusion``'s filter compiled with numba: imufusion's AHRS without magnetometer, one call per sample.
 
 ``CompiledFusion`` has ``RawFusion``'s interface and does what it does: the gain tier from the
-gyro and accelerometer (``FusionParams``), then one update of the Fusion library's AHRS
+gyro and accelerometer (``imu.gain_tier``, the same function compiled), then one update of the Fusion library's AHRS
 (xioTechnologies/Fusion ``FusionAhrsUpdateNoMagnetometer``, the code behind ``imufusion``:
 startup gain ramp, gyroscope overrange restart, acceleration rejection and recovery), and the
 gravity direction. It computes in double precision with exact square roots where the library
@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from .compiled import AVAILABLE, njit
-from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, FusionParams, RawFusion, Vec3, tilt_quaternion_wxyz
+from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, FusionParams, RawFusion, Vec3, gain_tier, tilt_quaternion_wxyz
 
 INITIAL_STARTUP_GAIN = 10.0
 """The library's gain at the start of its startup ramp (after a gyroscope overrange)."""
@@ -34,6 +34,7 @@ _N_STATE = 11
 _BIAS, _OVERRANGE, _STILL_RATE2, _STILL_ACC2, _QUASI_RATE2, _QUASI_ACC2, _CALM_RATE2, _STILL_NEEDED, _MAX_STEP = \
     12, 15, 16, 17, 18, 19, 20, 21, 22
 _N_PARAMS = 23
+_gain_tier = njit(cache=True, nogil=True, inline="always")(gain_tier)
 
 
 @njit(cache=True, nogil=True)
@@ -45,19 +46,9 @@ def _step(s, p, g0, g1, g2, ax, ay, az, dt):  # pragma: no cover - compiled
         dt = p[_MAX_STEP]
     if dt > 0.0 and not -1e-6 <= dt - s[_PERIOD] <= 1e-6:
         s[_PERIOD] = dt
-    r2 = gx * gx + gy * gy + gz * gz
     n2 = ax * ax + ay * ay + az * az
-    if r2 >= p[_CALM_RATE2]:
-        s[_STILL] = 0.0
-        tier = 0
-    else:
-        m2, acc2 = n2 - 1.0, p[_STILL_ACC2]
-        s[_STILL] = s[_STILL] + 1.0 if r2 < p[_STILL_RATE2] and -acc2 < m2 < acc2 else 0.0
-        if s[_STILL] >= p[_STILL_NEEDED]:
-            tier = 2
-        else:
-            acc2 = p[_QUASI_ACC2]
-            tier = 1 if r2 < p[_QUASI_RATE2] and -acc2 < m2 < acc2 else 0
+    tier, s[_STILL] = _gain_tier(gx * gx + gy * gy + gz * gz, n2 - 1.0, s[_STILL], p[_STILL_RATE2:_CALM_RATE2 + 1],
+                                 p[_STILL_NEEDED])
     k = 4 * tier
     timeout = p[k + 3]
     if tier != s[_TIER]:  # new settings: the library resets the recovery threshold

@@ -30,6 +30,7 @@ import numpy as np
 from .channels import N_CHANNELS
 from .kernels import KernelLibrary, near_duplicates
 from .matcher import IncrementalMatcher, StepResult
+from .options import EstimatorConfig
 from .supervisor import Estimate, relative_margin
 
 
@@ -55,9 +56,9 @@ class CalibrationParams:
         recency_after_strides: Strides read before recency weighting starts; 0 = from the start.
     """
 
-    offset_rate: float = 0.15
-    cadence_rate: float = 0.1
-    cadence_tolerance: float = 0.04
+    offset_rate: float = EstimatorConfig.offset_calibration_rate
+    cadence_rate: float = EstimatorConfig.cadence_calibration_rate
+    cadence_tolerance: float = EstimatorConfig.cadence_tolerance
     confidence: float = 0.1
     step_deg: float = 5.0
     max_offset_deg: float = 15.0

@@ -10,6 +10,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .channels import Sample
+from .options import EstimatorConfig
 
 
 @dataclass(frozen=True)
@@ -22,8 +23,8 @@ class GapParams:
             cadence (the sensors may have been re-donned); 0 = never.
     """
 
-    max_gap_s: float = 0.5
-    calibration_reset_gap_s: float = 5.0
+    max_gap_s: float = EstimatorConfig.max_gap_s
+    calibration_reset_gap_s: float = EstimatorConfig.calibration_reset_gap_s
 
 
 class GapVerdict(NamedTuple):

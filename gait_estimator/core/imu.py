@@ -317,6 +317,21 @@ FUSION_BY_CHANNEL = (THIGH_FUSION, THIGH_FUSION, SHANK_FUSION, SHANK_FUSION)
 """Fusion settings per sensor, CHANNELS order (right_thigh, left_thigh, right_shank, left_shank)."""
 
 
+def gain_tier(rate2: float, acc2_off: float, still: float, limits: Any, still_needed: float) -> tuple[int, float]:
+    """The fusion's gain schedule for one sample: (tier, samples of stillness so far), tier 0
+    moving, 1 turning slowly, 2 still; from the squared gyro rate ((deg/s)^2), |acc|^2 - 1, the
+    stillness count before the sample, ``FusionParams.tier_limits()`` and ``still_samples``.
+    ``RawFusion`` calls it, ``core/ahrs.py`` compiles it into its step."""
+    if rate2 >= limits[4]:  # faster than both tiers allow (most of a stride); still_needed >= 1
+        return 0, 0.0
+    acc2 = limits[1]
+    still = still + 1.0 if rate2 < limits[0] and -acc2 < acc2_off < acc2 else 0.0
+    if still >= still_needed:
+        return 2, still
+    acc2 = limits[3]
+    return (1 if rate2 < limits[2] and -acc2 < acc2_off < acc2 else 0), still
+
+
 def tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
     """The smallest rotation (world <- sensor, [w, x, y, z]) that turns ``acc`` to world up."""
     n = float(np.linalg.norm(acc))
@@ -347,8 +362,8 @@ class RawFusion:
         self._ahrs = _imufusion().Ahrs()
         self._set_rate(rate_hz)
         self._ahrs.set_settings(self._settings[0])
-        self._still_rate2, self._still_acc2, self._quasi_rate2, self._quasi_acc2, self._calm_rate2 = params.tier_limits()
-        self._still = 0
+        self._limits = params.tier_limits()
+        self._still = 0.0
         self._tier = 0  # settings in use: 0 moving, 1 turning slowly, 2 still
         self.gyro_bias_dps = gyro_bias_dps
         self._first = True
@@ -397,20 +412,8 @@ class RawFusion:
             self._first = False
             ahrs.set_quaternion(tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64)))
             ahrs.skip_startup()
-        r2 = gx * gx + gy * gy + gz * gz
-        if r2 >= self._calm_rate2:  # faster than both tiers allow (most of a stride); _still_needed >= 1
-            self._still = tier = 0
-        else:
-            m2, acc2 = ax * ax + ay * ay + az * az - 1.0, self._still_acc2
-            if r2 < self._still_rate2 and -acc2 < m2 < acc2:
-                self._still = still = self._still + 1
-            else:
-                self._still = still = 0
-            if still >= self._still_needed:
-                tier = 2
-            else:
-                acc2 = self._quasi_acc2
-                tier = 1 if r2 < self._quasi_rate2 and -acc2 < m2 < acc2 else 0
+        tier, self._still = gain_tier(gx * gx + gy * gy + gz * gz, ax * ax + ay * ay + az * az - 1.0, self._still,
+                                      self._limits, self._still_needed)
         if tier != self._tier:
             self._tier = tier
             ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)

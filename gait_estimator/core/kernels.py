@@ -15,6 +15,9 @@ import numpy as np
 from .channels import CHANNELS, N_CHANNELS
 from .errors import LibraryError
 
+REFERENCE_MODE_IDS = {"Slow": 1, "Med": 2, "Fast": 3, "RA": 4, "RD": 5, "SA": 6, "SD": 7}
+"""Mode IDs of the paper's seven modes, as in the reference CSVs and output."""
+
 
 @dataclass(frozen=True)
 class KernelMode:

@@ -439,10 +439,6 @@ class IncrementalMatcher(_MatcherBase):
         s = self.window_sums()[row]  # not from the prefix-sum ring: the longest window's start slot is overwritten
         return (s / w - self._mu[row]) * self._unscale
 
-    def resync_all(self) -> None:
-        """Recompute every column from the window now (O(N^2 M); not needed in normal use)."""
-        self._e[:] = self.full_sse()
-
     def running_sse(self) -> np.ndarray:
         """The running e[r, j] (R, Nmax), padding inf; a copy."""
         return self._e.copy()

@@ -293,11 +293,6 @@ class _MatcherBase:
         conv = np.fft.irfft(np.fft.rfft(k.T, n=n) * np.fft.rfft(weights), n=n)  # circular: sum_t w_t k_{j-t}
         return conv / wsum[r]
 
-    def row_kernel(self, row: int) -> np.ndarray:
-        """The kernel of ``row`` (n, 4), degrees (unweighted channels as given)."""
-        n = int(self.lengths[row])
-        return self._kernels[row, :, :n].T.astype(np.float64) * self._unscale
-
     @property
     def sensor_offset_deg(self) -> np.ndarray:
         """The sensor offset assumed by the offset penalty (4,), degrees; zeros by default."""

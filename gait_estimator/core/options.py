@@ -1,5 +1,6 @@
-"""The estimator's options: ``EstimatorConfig`` and the ``OPTIONS`` that describe it once for the
-node's parameters, the CLI's flags and the docs.
+"""The estimator's options: each one an ``EstimatorConfig`` field written once (``option``: its
+default, ``paper`` value and description), and the ``OPTIONS`` made from them for the node's
+parameters, the CLI's flags and the docs (test_options.py checks the YAML and the docs' tables).
 
 Two presets: ``default`` (what works for a new wearer: rate handling, cadence variants, offset
 tolerance and walking calibration, comparison per sample) and ``paper`` (the paper's algorithm,
@@ -11,7 +12,7 @@ knobs: node parameters ``advanced.<name>``, a separate CLI flag group, docs/opti
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -42,53 +43,10 @@ class Option:
         return self.default if self.paper is None else self.paper
 
 
-OPTIONS: tuple[Option, ...] = (
-    Option("resample", "auto", "resample the input onto the library's sample rate from the stamps: auto (when "
-           "the input is stamped), on, off", "off"),
-    Option("channels", list(CHANNELS), "channels used for matching, e.g. [right_thigh, right_shank] for "
-           "unilateral sensing"),
-    Option("offset_calibration_rate", 0.15, "walking self-calibration of the sensor offsets: weight of one "
-           "confident stride, [0, 1]; 0 = off", 0.0),
-    Option("cadence_calibration_rate", 0.1, "walking self-calibration of the wearer's cadence: weight of one "
-           "confident stride's time scale, [0, 1]; 0 = off", 0.0),
-    Option("min_confidence", 0.0, "hold the last confident mode below this margin (error_2nd - error_best) / "
-           "error_best; 0 = off"),
-    Option("min_dwell_s", 0.0, "a new mode must win this long (s) before it is reported; 0 = off"),
-    Option("transitions", "", "YAML file of allowed transitions (allowed_transitions: {MODE: [MODE, ...]}); "
-           "'' = any"),
-    Option("adapt_rate", 0.0, "online personalisation: weight of one confident stride in its mode's kernel, "
-           "[0, 1]; 0 = off"),
-    Option("max_gap_s", 0.5, "a longer gap (s) between samples restarts the window; 0 = never"),
-    Option("calibration_reset_gap_s", 5.0, "a longer gap (s) between samples also forgets the learnt sensor "
-           "offsets and cadence (sensors may have been re-donned); 0 = never", 0.0),
-    # expert knobs
-    Option("time_scales", list(DEFAULT_TIME_SCALES), "stride-duration factors of the kernel variants matched "
-           "per mode (cadence ratio = 1/scale); [1.0] = the paper", [1.0], advanced=True),
-    Option("offset_tolerance_deg", 2.0, "per-channel window-vs-kernel mean difference (deg), beyond the learnt "
-           "sensor offset, that costs nothing; .inf = shapes only; 0 = none", 0.0, advanced=True),
-    Option("cadence_tolerance", 0.04, "relative band around the learnt time scale in which modes are read "
-           "(wider while strides spread)", advanced=True),
-    Option("normalize_error", True, "compare modes by mean squared error per window sample instead of SSE",
-           False, advanced=True),
-    Option("recency_half_life", 0.3, "age (strides) at which a compared sample's weight halves (from the "
-           "calibrations' 3rd stride on); 0 = uniform weights", 0.0, advanced=True),
-    Option("channel_weights", [1.0, 1.0, 1.0, 1.0], "weight of each channel in the error, CHANNELS order, >= 0",
-           advanced=True),
-    Option("phase_rate_tau_s", 0.2, "time constant (s) of the phase-rate smoothing", advanced=True),
-    Option("adapt_min_confidence", 0.2, "personalisation: lowest confidence margin allowed during an adapted "
-           "stride", advanced=True),
-    Option("adapt_max_step_deg", 5.0, "personalisation: per-sample clip (deg) of stride - kernel before "
-           "weighting", advanced=True),
-)
-ADVANCED = frozenset(o.name for o in OPTIONS if o.advanced)
-GAP_OPTIONS = frozenset({"max_gap_s", "calibration_reset_gap_s"})
-"""Options read at every update: changing them keeps the window and what was learnt."""
-
-PRESETS: dict[str, dict[str, Any]] = {
-    "default": {o.name: o.default for o in OPTIONS},
-    "paper": {o.name: o.paper_value for o in OPTIONS},
-}
-"""Option values of each preset (lists as given in OPTIONS)."""
+def option(default: Any, description: str, paper: Any = None, advanced: bool = False) -> Any:
+    """An ``EstimatorConfig`` field that is an option (see ``Option``): the one place its default,
+    description and ``paper`` value are written."""
+    return field(default=default, metadata={"description": description, "paper": paper, "advanced": advanced})
 
 
 def _resample_mode(value: Any) -> str:
@@ -110,27 +68,47 @@ def _check_number(name: str, value: Any, low: float = 0.0, high: float = math.in
 
 @dataclass(frozen=True)
 class EstimatorConfig:
-    """All estimator options; see OPTIONS for their meaning. Defaults = the ``default`` preset."""
+    """All estimator options, each declared once here (``option``): ``OPTIONS`` (node parameters, CLI
+    flags, docs) is made from these fields. Defaults = the ``default`` preset."""
 
-    resample: str = "auto"
-    time_scales: tuple[float, ...] = DEFAULT_TIME_SCALES
-    offset_tolerance_deg: float = 2.0
-    offset_calibration_rate: float = 0.15
-    cadence_calibration_rate: float = 0.1
-    cadence_tolerance: float = 0.04
-    normalize_error: bool = True
-    recency_half_life: float = 0.3
-    channels: tuple[str, ...] = CHANNELS
-    channel_weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
-    min_confidence: float = 0.0
-    min_dwell_s: float = 0.0
-    transitions: str = ""
-    phase_rate_tau_s: float = 0.2
-    adapt_rate: float = 0.0
-    adapt_min_confidence: float = 0.2
-    adapt_max_step_deg: float = 5.0
-    max_gap_s: float = 0.5
-    calibration_reset_gap_s: float = 5.0
+    resample: str = option("auto", "resample the input onto the library's sample rate from the stamps: auto "
+                           "(when the input is stamped), on, off", "off")
+    channels: tuple[str, ...] = option(CHANNELS, "channels used for matching, e.g. [right_thigh, right_shank] "
+                                       "for unilateral sensing")
+    offset_calibration_rate: float = option(0.15, "walking self-calibration of the sensor offsets: weight of one "
+                                            "confident stride, [0, 1]; 0 = off", 0.0)
+    cadence_calibration_rate: float = option(0.1, "walking self-calibration of the wearer's cadence: weight of one "
+                                             "confident stride's time scale, [0, 1]; 0 = off", 0.0)
+    min_confidence: float = option(0.0, "hold the last confident mode below this margin (error_2nd - error_best) "
+                                   "/ error_best; 0 = off")
+    min_dwell_s: float = option(0.0, "a new mode must win this long (s) before it is reported; 0 = off")
+    transitions: str = option("", "YAML file of allowed transitions (allowed_transitions: {MODE: [MODE, ...]}); "
+                              "'' = any")
+    adapt_rate: float = option(0.0, "online personalisation: weight of one confident stride in its mode's kernel, "
+                               "[0, 1]; 0 = off")
+    max_gap_s: float = option(0.5, "a longer gap (s) between samples restarts the window; 0 = never")
+    calibration_reset_gap_s: float = option(5.0, "a longer gap (s) between samples also forgets the learnt sensor "
+                                            "offsets and cadence (sensors may have been re-donned); 0 = never", 0.0)
+    # expert knobs
+    time_scales: tuple[float, ...] = option(DEFAULT_TIME_SCALES, "stride-duration factors of the kernel variants "
+                                            "matched per mode (cadence ratio = 1/scale); [1.0] = the paper", [1.0],
+                                            advanced=True)
+    offset_tolerance_deg: float = option(2.0, "per-channel window-vs-kernel mean difference (deg), beyond the "
+                                         "learnt sensor offset, that costs nothing; .inf = shapes only; 0 = none",
+                                         0.0, advanced=True)
+    cadence_tolerance: float = option(0.04, "relative band around the learnt time scale in which modes are read "
+                                      "(wider while strides spread)", advanced=True)
+    normalize_error: bool = option(True, "compare modes by mean squared error per window sample instead of SSE",
+                                   False, advanced=True)
+    recency_half_life: float = option(0.3, "age (strides) at which a compared sample's weight halves (from the "
+                                      "calibrations' 3rd stride on); 0 = uniform weights", 0.0, advanced=True)
+    channel_weights: tuple[float, ...] = option((1.0, 1.0, 1.0, 1.0), "weight of each channel in the error, "
+                                                "CHANNELS order, >= 0", advanced=True)
+    phase_rate_tau_s: float = option(0.2, "time constant (s) of the phase-rate smoothing", advanced=True)
+    adapt_min_confidence: float = option(0.2, "personalisation: lowest confidence margin allowed during an "
+                                         "adapted stride", advanced=True)
+    adapt_max_step_deg: float = option(5.0, "personalisation: per-sample clip (deg) of stride - kernel before "
+                                       "weighting", advanced=True)
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -187,6 +165,22 @@ class EstimatorConfig:
     def resamples(self, stamped: bool) -> bool:
         """Whether input with (``stamped``) or without real time stamps is resampled."""
         return self.resample == "on" or (self.resample == "auto" and stamped)
+
+
+OPTIONS: tuple[Option, ...] = tuple(
+    Option(f.name, list(f.default) if isinstance(f.default, tuple) else f.default, **f.metadata)
+    for f in fields(EstimatorConfig)
+)
+"""The options in declaration order (list defaults as node parameters take them)."""
+ADVANCED = frozenset(o.name for o in OPTIONS if o.advanced)
+GAP_OPTIONS = frozenset({"max_gap_s", "calibration_reset_gap_s"})
+"""Options read at every update: changing them keeps the window and what was learnt."""
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "default": {o.name: o.default for o in OPTIONS},
+    "paper": {o.name: o.paper_value for o in OPTIONS},
+}
+"""Option values of each preset (lists as given in OPTIONS)."""
 
 
 def config_from_values(values: dict[str, Any], preset: str = "default") -> EstimatorConfig:

@@ -35,11 +35,11 @@ class MatchParams:
         recency_half_life: Age (strides) at which a sample's weight halves; 0 = uniform.
     """
 
-    channel_weights: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
-    time_scales: tuple[float, ...] = (1.0,)
-    offset_tolerance_deg: float = 0.0
-    normalize: bool = False
-    recency_half_life: float = 0.0
+    channel_weights: tuple[float, ...] = EstimatorConfig.channel_weights
+    time_scales: tuple[float, ...] = EstimatorConfig.time_scales
+    offset_tolerance_deg: float = EstimatorConfig.offset_tolerance_deg
+    normalize: bool = EstimatorConfig.normalize_error
+    recency_half_life: float = EstimatorConfig.recency_half_life
 
     def build(self, library: KernelLibrary, backend: str = "auto") -> IncrementalMatcher:
         return IncrementalMatcher(

@@ -33,6 +33,7 @@ import yaml
 from . import compiled
 from .errors import GaitEstimatorError
 from .matcher import StepBlock, StepResult
+from .options import EstimatorConfig
 
 
 @dataclass(frozen=True)
@@ -157,10 +158,10 @@ class SupervisorParams:
         phase_rate_tau_s: Time constant of the phase-rate smoothing, seconds.
     """
 
-    min_confidence: float = 0.0
-    min_dwell_s: float = 0.0
-    transitions: str = ""
-    phase_rate_tau_s: float = 0.2
+    min_confidence: float = EstimatorConfig.min_confidence
+    min_dwell_s: float = EstimatorConfig.min_dwell_s
+    transitions: str = EstimatorConfig.transitions
+    phase_rate_tau_s: float = EstimatorConfig.phase_rate_tau_s
 
 
 class Supervisor:

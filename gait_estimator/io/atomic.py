@@ -41,12 +41,6 @@ def atomic_write_text(path: str | Path, text: str, encoding: str = "utf-8") -> N
         f.write(text)
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (see ``atomic_open``)."""
-    with atomic_open(path, "wb", encoding=None) as f:
-        f.write(data)
-
-
 def atomic_write_with(path: str | Path, write: Callable[[IO], None], binary: bool = False) -> None:
     """Call ``write(file)`` on a temporary file and put it in place of ``path`` atomically."""
     with atomic_open(path, "wb" if binary else "w", encoding=None if binary else "utf-8") as f:

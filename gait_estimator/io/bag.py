@@ -37,6 +37,7 @@ from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
 from . import bag_recover
 from .bag_recover import STORAGE_SUFFIXES, RawRecord
+from .read_options import DEFAULT_MAX_GAP_S, ReadOptions
 from .recording import Recording
 from .stream import UNITS, SampleRejected, StreamGuard, angles_from_array, angles_from_named
 
@@ -46,7 +47,6 @@ INPUT_MSGTYPES = {"joint_state": JOINT_STATE, "float64_multi_array": FLOAT64_MUL
 """``--type`` / ``input_type`` names of the supported input message types."""
 
 DEFAULT_TOPIC = "/segment_angles"
-DEFAULT_MAX_GAP_S = 0.5
 
 UNDECODABLE = "undecodable"
 """Skip reason for a message whose serialized data cannot be decoded as its declared type."""
@@ -266,32 +266,22 @@ def _joint_names(joint_names: Sequence[str] | str | None) -> tuple[str, ...]:
     return names
 
 
-def read_bag(
-    path: str | Path,
-    topic: str | None = None,
-    joint_names: Sequence[str] | str | None = None,
-    input_units: str = "rad",
-    max_gap_s: float = DEFAULT_MAX_GAP_S,
-    **_: Any,
-) -> BagRecording:
+def read_bag(path: str | Path, options: ReadOptions | None = None, /, **values: Any) -> BagRecording:
     """Read the driver topic of a bag into a BagRecording (angles in degrees, CHANNELS order).
 
     Args:
         path: rosbag2 directory or .mcap/.db3 file.
-        topic: Topic to read (default: DEFAULT_TOPIC, or the only JointState/Float64MultiArray
-            topic).
-        joint_names: Joint names of right_thigh, left_thigh, right_shank, left_shank in a
-            JointState (sequence or comma-separated string; default CHANNELS).
-        input_units: ``rad`` (default) or ``deg``: units of the angles in the messages.
-        max_gap_s: A gap longer than this (seconds) between accepted samples restarts the
-            matcher window (<= 0 disables), as the node's ``max_gap_s`` parameter.
+        options, values: ReadOptions, then fields by name; ``topic``, ``joint_names``,
+            ``input_units`` and ``max_gap_s`` concern a bag of angles.
 
     Raises:
         RecordingError: one line naming the bag and topic (missing topic, unsupported type,
             damaged bag, no usable samples).
     """
     p = Path(path)
-    names = _joint_names(joint_names)
+    o = ReadOptions.of(options, values)
+    topic, input_units, max_gap_s = o.topic, o.input_units, o.max_gap_s
+    names = _joint_names(o.joint_names)
     if input_units not in UNITS:
         raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {input_units!r}")
     max_gap = float(max_gap_s)

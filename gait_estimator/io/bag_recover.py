@@ -40,10 +40,9 @@ import yaml
 
 from ..core.errors import RecordingError
 from .mcap_scan import McapScan, has_end_magic, iter_mcap
-from .sqlite_pages import rebuild_rosbag2
+from .sqlite_pages import SQLITE_MAGIC, rebuild_rosbag2
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
-SQLITE_MAGIC = b"SQLite format 3\x00"
 SIDE_FILES = ("-wal", "-journal")
 
 

@@ -29,9 +29,9 @@ import numpy as np
 from ..core.ahrs import fuse_raw_backwards
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
-from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, FusionParams, ImuCalibration
+from ..core.imu import CalibrationError, FusionParams, ImuCalibration
+from ..core.imu_calibrator import check_stream
 from ..core.imu_learn import (
-    DEFAULT_LEARN,
     STILL_S,
     ImuLearnParams,
     check_configured,
@@ -39,7 +39,8 @@ from ..core.imu_learn import (
     learn_calibration,
 )
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
-from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, check_stream, load_calibration
+from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
+from .read_options import ReadOptions
 from .stream import SampleRejected
 
 IMU = "sensor_msgs/msg/Imu"
@@ -122,35 +123,21 @@ def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list 
     return paired, rejected
 
 
-def read_imu_bag(
-    path: str | Path,
-    imu_topics: list[str] | None = None,
-    imu_calibration: str | Path | ImuCalibration | None = None,
-    imu_lateral_axes: list[str] | None = None,
-    imu_proximal_axes: list[str] | None = None,
-    imu_standing_deg: list[float] | None = None,
-    imu_tolerance_s: float | None = None,
-    max_gap_s: float = 0.5,
-    fusion_params: FusionParams | Sequence[FusionParams] = FUSION_BY_CHANNEL,
-    learn_params: ImuLearnParams = DEFAULT_LEARN,
-    **_: Any,
-) -> ImuBagRecording:
+def read_imu_bag(path: str | Path, options: ReadOptions | None = None, /, **values: Any) -> ImuBagRecording:
     """Segment angles (deg, CHANNELS order) from a bag's four Imu topics.
 
     Args:
         path: rosbag2 directory or storage file.
-        imu_topics: The four topics (CHANNELS order); default: see the module docstring.
-        imu_calibration: A calibration (or its YAML file) to use instead of learning one.
-        imu_lateral_axes, imu_proximal_axes: Configured sensor axes per segment ('' = learn).
-        imu_standing_deg: Angle of each segment in the standing pose (deg; default 0).
-        imu_tolerance_s: Pairing tolerance (s, >= 0); None = measured (module docstring).
-        fusion_params: Raw-input fusion settings, one for all sensors or per sensor (CHANNELS order).
-        learn_params: Mount-learning settings.
+        options, values: ReadOptions, then fields by name; the ``imu_*`` ones, ``max_gap_s``,
+            ``fusion_params`` and ``learn_params`` concern Imu topics (defaults: module docstring).
 
     Raises:
         RecordingError: one line (missing topics, unusable messages, no calibration possible).
     """
     p = Path(path)
+    o = ReadOptions.of(options, values)
+    imu_calibration, imu_tolerance_s, learn_params = o.imu_calibration, o.imu_tolerance_s, o.learn_params
+    imu_lateral_axes, imu_proximal_axes, fusion_params = o.imu_lateral_axes, o.imu_proximal_axes, o.fusion_params
     if imu_tolerance_s is not None and not (math.isfinite(imu_tolerance_s) and imu_tolerance_s >= 0):
         raise RecordingError(f"IMU pairing tolerance must be a finite number of seconds >= 0, got {imu_tolerance_s!r}")
     try:
@@ -160,8 +147,8 @@ def read_imu_bag(
             cal = load_calibration(cal)
     except CalibrationError as exc:
         raise RecordingError(str(exc)) from None
-    standing_deg = list(imu_standing_deg or [0.0] * N_CHANNELS)
-    names, messages, undecodable = _read_messages(p, imu_topics)
+    standing_deg = list(o.imu_standing_deg or [0.0] * N_CHANNELS)
+    names, messages, undecodable = _read_messages(p, o.imu_topics)
     rate = _rate_hz(messages)
     tolerance_s = imu_tolerance_s if imu_tolerance_s is not None else _measured_tolerance(messages)
     fusion = [fusion_params] * N_CHANNELS if isinstance(fusion_params, FusionParams) else list(fusion_params)
@@ -207,7 +194,7 @@ def read_imu_bag(
         topic=",".join(names),
         msgtype=IMU,
         messages=len(messages) + undecodable,
-        max_gap_s=max_gap_s,
+        max_gap_s=o.max_gap_s,
         calibration=cal,
         calibration_note=note + backwards,
         fused_backwards_until=backwards_until,

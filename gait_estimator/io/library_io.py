@@ -26,7 +26,7 @@ import yaml
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import LibraryError
-from ..core.kernels import KernelLibrary, KernelMode, make_mode
+from ..core.kernels import REFERENCE_MODE_IDS, KernelLibrary, KernelMode, make_mode
 from .atomic import atomic_write_text, atomic_write_with
 
 FORMAT_TAG = "gait_estimator/kernel_library"
@@ -35,9 +35,6 @@ SAMPLE_DECIMALS = 9
 """Kernel samples are written to YAML rounded to this many decimals (degrees)."""
 DEFAULT_REFERENCE_RATE_HZ = 230.0
 """Sample rate given to the reference kernels: the paper's "approximately 230 Hz"."""
-
-REFERENCE_MODE_IDS = {"Slow": 1, "Med": 2, "Fast": 3, "RA": 4, "RD": 5, "SA": 6, "SD": 7}
-"""Mode IDs of the paper's seven modes, as in the reference CSVs and output."""
 
 _REF_YAML_KEYS = ("RThigh", "LThigh", "RShank", "LShank")
 PAPER_CITATION = (

@@ -9,6 +9,7 @@ from typing import Any
 from ..core.errors import RecordingError
 from .bag import is_bag_path, read_bag
 from .imu_bag import is_imu_bag, read_imu_bag
+from .read_options import ReadOptions
 from .recording import Recording, expected_columns, is_project_csv, is_reference_csv, read_project_csv, read_reference_csv
 
 READERS: tuple[tuple[Callable[[Path], bool], Callable[..., Recording]], ...] = (
@@ -20,26 +21,27 @@ READERS: tuple[tuple[Callable[[Path], bool], Callable[..., Recording]], ...] = (
 """(detect, read) pairs, tried in order: the first ``detect(path)`` that is true reads it."""
 
 
-def read_recording(path: str | Path, **options: Any) -> Recording:
+def read_recording(path: str | Path, options: ReadOptions | None = None, /, **values: Any) -> Recording:
     """Read a recording from a project CSV, a reference CSV or a rosbag2 directory/file.
 
     Args:
         path: File or directory.
-        **options: Passed to the reader; ``rate_hz`` (Hz) sets the time base of sources without
-            time stamps (the reference CSV; default: the paper's 230 Hz); ``imu_topics`` reads a
-            bag's four Imu topics even when it also has a segment-angle topic.
+        options, values: ReadOptions, then fields by name, for whichever reader reads ``path``;
+            ``imu_topics`` reads a bag's four Imu topics even when it also has an angle topic.
 
     Raises:
         RecordingError: one line naming the file and what is wrong.
+        TypeError: an unknown option.
     """
     p = Path(path)
+    o = ReadOptions.of(options, values)
     if not p.exists():
         raise RecordingError(f"{p}: no such file or directory")
-    if options.get("imu_topics") and is_bag_path(p):  # named IMU topics: read them, whatever else the bag holds
-        return read_imu_bag(p, **options)
+    if o.imu_topics and is_bag_path(p):  # named IMU topics: read them, whatever else the bag holds
+        return read_imu_bag(p, o)
     for detect, read in READERS:
         if detect(p):
-            return read(p, **options)
+            return read(p, o)
     if p.is_file() and p.suffix.lower() == ".csv":
         raise RecordingError(f"{p}: not a recognised recording: {expected_columns(p)}")
     raise RecordingError(f"{p}: not a recognised recording (expected a CSV file or a rosbag2 directory)")

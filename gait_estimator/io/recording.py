@@ -24,6 +24,8 @@ import numpy as np
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
 from .atomic import atomic_open
+from .library_io import DEFAULT_REFERENCE_RATE_HZ
+from .read_options import ReadOptions
 
 
 @dataclass
@@ -95,7 +97,6 @@ class Recording:
 # Reference recording CSV
 
 _DIMENSION_RE = re.compile(r"^\s*(?:[^;]*;)*\s*Dimension:(?P<rows>\d+)x(?P<cols>\d+)")
-DEFAULT_REFERENCE_RATE_HZ = 230.0
 
 
 def _first_line(p: Path) -> str:
@@ -110,8 +111,9 @@ def is_reference_csv(p: Path) -> bool:
     return p.is_file() and p.suffix.lower() == ".csv" and bool(_DIMENSION_RE.match(_first_line(p)))
 
 
-def read_reference_csv(p: Path, rate_hz: float | None = None, **_: Any) -> Recording:
-    """Read the reference ``Dimension:4xT`` CSV; time = sample index / ``rate_hz``."""
+def read_reference_csv(p: Path, options: ReadOptions | None = None, /, **values: Any) -> Recording:
+    """Read the reference ``Dimension:4xT`` CSV; time = sample index / ``options.rate_hz``."""
+    rate_hz = ReadOptions.of(options, values).rate_hz
     rate = DEFAULT_REFERENCE_RATE_HZ if rate_hz is None else float(rate_hz)
     if not (math.isfinite(rate) and rate > 0):
         raise RecordingError(f"{p}: invalid sample rate {rate_hz!r} for a recording without time stamps")
@@ -162,8 +164,9 @@ def is_project_csv(p: Path) -> bool:
     return p.is_file() and p.suffix.lower() == ".csv" and "time_s" in _first_line(p)
 
 
-def read_project_csv(p: Path, **_: Any) -> Recording:
-    """Read the project recording CSV (see module docstring)."""
+def read_project_csv(p: Path, options: ReadOptions | None = None, /, **values: Any) -> Recording:
+    """Read the project recording CSV (see module docstring); no option concerns it."""
+    ReadOptions.of(options, values)
     try:
         with p.open(encoding="utf-8", newline="") as f:
             reader = csv.reader(f)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.channels import CHANNELS, N_CHANNELS, Sample, sample_values
+from ..core.options import EstimatorConfig
 
 UNITS = ("rad", "deg")
 INPUT_TYPES = ("joint_state", "float64_multi_array", "imu")  # imu: four sensor_msgs/Imu (io/imu_stream.py)
@@ -177,7 +178,7 @@ class StreamGuard:
             reordered or duplicated sample: rejected (non_increasing_stamp).
     """
 
-    max_gap_s: float = 0.5
+    max_gap_s: float = EstimatorConfig.max_gap_s
     restart_back_s: float = 0.0
     rejected: Counter = field(default_factory=Counter)
     last_detail: dict[str, str] = field(default_factory=dict)

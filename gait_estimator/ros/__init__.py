@@ -8,6 +8,9 @@ import sys
 
 from ..core.errors import GaitEstimatorError
 
+EXECUTORS = ("events", "single_threaded")
+"""Values of the node's ``executor`` parameter: rclpy.experimental.EventsExecutor, SingleThreadedExecutor."""
+
 
 def require_ros() -> None:
     """Raise a one-line GaitEstimatorError if rclpy cannot be imported (ROS 2 not installed)."""

@@ -8,7 +8,7 @@ from typing import Any
 from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.node import Node
 
-from .parameters import EXECUTORS
+from . import EXECUTORS
 
 SPIN_PERIOD_S = 0.25
 """``main`` spins with this timeout, never without one: rclpy 7.1's EventsExecutor runs no

@@ -3,7 +3,7 @@
 Each message becomes its sensor's up direction (``io/imu_stream.py``: from the orientation, or from
 gyro + accelerometer when ``orientation_covariance[0] == -1``); the four streams are paired by stamp
 (``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting calibration
-(``io/imu_angles.ImuAngles``, which learns or checks it on the way; this module saves and logs what
+(``core/imu_angles.ImuAngles``, which learns or checks it on the way; this module saves and logs what
 it finds) and goes to the node's estimator like any other sample. Until the calibration is complete
 (saved file, configured axes, or learnt: stand still, then walk a few strides) no sample reaches the
 estimator. A saved or configured calibration is checked on the first walking
@@ -38,18 +38,18 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu
 from std_srvs.srv import Trigger
 
-from ..analysis.teach import TAUGHT_LIBRARY
 from ..core.ahrs import warm_up
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount, Vec3
+from ..core.imu_angles import ImuAngles
+from ..core.imu_calibrator import ImuCalibrator
 from ..core.imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
+from ..core.teach import TAUGHT_LIBRARY
 from ..io.cdr import CdrError, Stamp, read_imu
-from ..io.imu_angles import ImuAngles
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.imu_stream import (
     DEFAULT_TOLERANCE_S,
     UNPAIRED,
-    ImuCalibrator,
     ImuPairer,
     SensorInput,
     calibration_path_for,

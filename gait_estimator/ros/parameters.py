@@ -25,12 +25,11 @@ from ..core.options import GAP_OPTIONS, OPTIONS, PRESETS, EstimatorConfig
 from ..io.library_io import load_library
 from ..io.resources import DEFAULT_LIBRARY
 from ..io.stream import INPUT_TYPES, UNITS, AngleExtractor, restart_threshold
+from . import EXECUTORS
 from .priority import MAX_PRIORITY, process_priority, set_process_priority
 from .teach import NodeTeacher
 
 ADVANCED_PREFIX = "advanced."
-EXECUTORS = ("events", "single_threaded")
-"""Values of the ``executor`` parameter: rclpy.experimental.EventsExecutor, SingleThreadedExecutor."""
 REMOVED_OPTIONS = ("window_fraction", "subsample_phase", "switch_evidence_deg2s", "min_dwell_samples")
 """Options that left the product (docs/options.md); a params file still setting one gets a warning."""
 

@@ -2,7 +2,7 @@
 ``teach_channel``), and the node's start without a library (``kernels: ''``).
 
 While ``teach_mode`` names a mode, every accepted input sample also goes to an
-``analysis.teach.StrideCollector``; its events (strides, rejections and why, progress
+``core.teach.StrideCollector``; its events (strides, rejections and why, progress
 "Slow: 6/10 strides") are logged with the prefix ``teach:`` and shown in the diagnostics. When
 enough good strides are in, the kernel is added to the running library (a new name) or replaces
 the mode of that name, and ``teach_mode`` goes back to ''. Setting ``teach_mode`` to '' earlier
@@ -30,8 +30,11 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.parameter import Parameter
 
-from ..analysis.strides import MAX_STRIDE_S, detect_peaks
-from ..analysis.teach import (
+from ..core.channels import CHANNELS, Sample
+from ..core.errors import GaitEstimatorError
+from ..core.kernels import KernelLibrary, make_mode
+from ..core.strides import MAX_STRIDE_S
+from ..core.teach import (
     HEEL_STRIKE_CHANNEL,
     TEACH_STRIDES,
     StrideCollector,
@@ -42,9 +45,6 @@ from ..analysis.teach import (
     near_copies,
     with_mode,
 )
-from ..core.channels import CHANNELS, Sample
-from ..core.errors import GaitEstimatorError
-from ..core.kernels import KernelLibrary, make_mode
 
 LOG_PREFIX = "teach: "
 PARAMETERS: dict[str, tuple[Any, str]] = {
@@ -86,7 +86,6 @@ class NodeTeacher:
         node.add_post_set_parameters_callback(self._apply)
         if node._library is None:
             self._warm_up()
-        self._warm_up_detection()
         start = node.get_parameter("teach_mode").value
         if start:
             self._start(start)
@@ -99,16 +98,6 @@ class NodeTeacher:
                                              self.node._config)
         for i in range(40):
             estimator.update(i / 100.0, stride[i % 16])
-
-    @staticmethod
-    def _warm_up_detection() -> None:
-        """Import the heel-strike detection (scipy.signal) now: imported at a session's first look
-        for heel strikes, it would hold the input callback for most of a second, long enough for
-        the input queue to overflow and the samples of the first strides to be lost."""
-        try:
-            detect_peaks(np.arange(3.0), np.zeros(3))
-        except ImportError:  # no 'analysis' extra: nothing to warm up
-            pass
 
     # -- parameters
 

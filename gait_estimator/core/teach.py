@@ -13,10 +13,10 @@ angles in degrees, CHANNELS order) as they arrive and applies ``train``'s rules
 * consecutive heel strikes ``min_stride_s``-``max_stride_s`` apart are candidate strides; a
   longer interval is a stop or a turn, and a stream that runs longer than that without a heel
   strike is reported;
-* after every new stride the duration and shape outlier rules (``train.reject_outliers``) run over
+* after every new stride the duration and shape outlier rules (``training.reject_outliers``) run over
   all candidates: the strides they keep are the good ones;
 * once ``strides`` good strides are in (never fewer than ``min_strides``), the kernel is
-  ``train.train_mode`` on the candidates: the same averaging and rejection as ``train`` on a
+  ``training.train_mode`` on the candidates: the same averaging and rejection as ``train`` on a
   labels file covering the same strides.
 
 Memory stays bounded however long nobody walks: each candidate keeps its own stretch of the
@@ -34,17 +34,16 @@ import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from .. import __version__
-from ..core.channels import CHANNELS
-from ..core.errors import GaitEstimatorError
-from ..core.kernels import KernelLibrary, KernelMode, near_duplicates
-from ..io.recording import Recording
+from .channels import CHANNELS
+from .errors import GaitEstimatorError
+from .kernels import KernelLibrary, KernelMode, near_duplicates
 from .strides import DetectionOptions, detect_peaks, normalise_strides
-from .train import OutlierRule, StrideInfo, TrainOptions, reject_outliers, train_mode
+from .training import OutlierRule, StrideInfo, TrainOptions, reject_outliers, train_mode
 
 TEACH_STRIDES = 10
 """Default good strides per taught mode (the paper: about ten steady strides)."""
@@ -70,6 +69,13 @@ RATE_DIGITS = 6
 stream give 230.0000046 Hz; the sensor's rate is 230 Hz)."""
 RATE_SAMPLES = 50
 """Samples needed before the median rate is taken (without a library) and strides are looked for."""
+
+
+class Grid(NamedTuple):
+    """Samples on the uniform grid: times (s), angles (deg, CHANNELS order)."""
+
+    time_s: np.ndarray
+    angles_deg: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -152,7 +158,7 @@ class StrideCollector:
         self._analysed_at = -math.inf
         self.heel_strikes: list[float] = []
         self.candidates: list[tuple[float, float]] = []
-        self._pieces: list[Recording] = []  # per candidate: its stretch of the uniform grid
+        self._pieces: list[Grid] = []  # per candidate: its stretch of the uniform grid
         self._reasons: list[str] = []
         self._not_strides = 0  # heel-strike intervals too long to be a stride (a stop or a turn)
         self._silence_reported = False
@@ -232,7 +238,7 @@ class StrideCollector:
 
     # -----------------------------------------------------------------------------------------
 
-    def _uniform(self) -> Recording | None:
+    def _uniform(self) -> Grid | None:
         """The samples so far on the uniform grid anchored at the first sample."""
         t = np.asarray(self._times, dtype=np.float64)
         if t.size < RATE_SAMPLES or self._anchor is None:
@@ -250,7 +256,7 @@ class StrideCollector:
         grid = self._anchor + np.arange(k0, k1 + 1) / rate
         x = np.asarray(self._samples, dtype=np.float64)
         angles = np.column_stack([np.interp(grid, t, x[:, c]) for c in range(x.shape[1])])
-        return Recording(time_s=grid, angles_deg=angles, source=LIVE_SOURCE)
+        return Grid(grid, angles)
 
     def _analyse(self) -> list[str]:
         uni = self._uniform()
@@ -295,7 +301,7 @@ class StrideCollector:
         self._forget_before(end - (det.max_stride_s + det.min_stride_s + KEEP_MARGIN_S))
         return events
 
-    def _judge(self, uni: Recording) -> list[str]:
+    def _judge(self, uni: Grid) -> list[str]:
         """Outlier rules over all candidates; events for the new stride and for changed verdicts;
         the kernel once enough strides are good."""
         if len(self.candidates) > CANDIDATE_FACTOR * self.target:
@@ -350,11 +356,11 @@ class StrideCollector:
         return len(self._times)
 
 
-def _piece(uni: Recording, start_s: float, end_s: float) -> Recording:
+def _piece(uni: Grid, start_s: float, end_s: float) -> Grid:
     """The grid samples of ``uni`` a stride from ``start_s`` to ``end_s`` is interpolated from."""
     i0, i1 = np.searchsorted(uni.time_s, [start_s, end_s])
-    i0, i1 = max(0, int(i0) - PIECE_MARGIN), min(len(uni), int(i1) + PIECE_MARGIN)
-    return Recording(time_s=uni.time_s[i0:i1].copy(), angles_deg=uni.angles_deg[i0:i1].copy(), source=LIVE_SOURCE)
+    i0, i1 = max(0, int(i0) - PIECE_MARGIN), min(len(uni.time_s), int(i1) + PIECE_MARGIN)
+    return Grid(uni.time_s[i0:i1].copy(), uni.angles_deg[i0:i1].copy())
 
 
 # ---------------------------------------------------------------------------------------------

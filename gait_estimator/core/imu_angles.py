@@ -12,12 +12,18 @@ through the hooks.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Protocol
 
-from ..core.channels import N_CHANNELS
-from ..core.imu import ImuCalibration, Vec3
-from ..core.imu_learn import CalibrationCheck
-from .imu_stream import ImuCalibrator, SensorInput
+from .channels import N_CHANNELS
+from .imu import ImuCalibration, Vec3
+from .imu_calibrator import ImuCalibrator
+from .imu_learn import CalibrationCheck
+
+
+class SensorInput(Protocol):
+    """One sensor's input (``io/imu_stream.SensorInput``) as far as the flow sets it."""
+
+    def set_gyro_bias(self, bias_dps: Vec3) -> None: ...
 
 
 def _ignore(_: Any) -> None:
