@@ -11,7 +11,7 @@ import json
 import re
 from dataclasses import dataclass
 
-from ..analysis.teach import check_teach_strides
+from ..core.teach import check_teach_strides
 from ..core.errors import GaitEstimatorError
 
 MAX_MESSAGE_BYTES = 1024
