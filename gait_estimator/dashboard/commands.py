@@ -11,8 +11,8 @@ import json
 import re
 from dataclasses import dataclass
 
-from ..core.teach import check_teach_strides
 from ..core.errors import GaitEstimatorError
+from ..core.teach import check_teach_strides
 
 MAX_MESSAGE_BYTES = 1024
 MODE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,39}$")

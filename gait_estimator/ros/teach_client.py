@@ -18,8 +18,8 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import Trigger
 
-from ..core.teach import TeachOptions
 from ..core.errors import GaitEstimatorError
+from ..core.teach import TeachOptions
 from .node_client import spin_executor_until
 from .teach import LOG_PREFIX
 from .tool_node import ToolNode
