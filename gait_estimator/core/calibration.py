@@ -53,6 +53,8 @@ class CalibrationParams:
             log time scale wide on each side.
         typical_fit_rate: Smallest weight of one stride in the typical fit.
         recency_after_strides: Strides read before recency weighting starts; 0 = from the start.
+        scale_search_modes: Until the cadence is learnt, the modes matched at every time scale
+            (those that fit best at the scale nearest 1; the others at that scale only).
     """
 
     offset_rate: float = 0.15
@@ -68,6 +70,7 @@ class CalibrationParams:
     spread_factor: float = 2.0
     typical_fit_rate: float = 0.1
     recency_after_strides: int = 3
+    scale_search_modes: int = 3
 
 
 class _StrideTrack(NamedTuple):
@@ -127,7 +130,7 @@ class WalkingCalibration:
         self.cadence_strides = 0
         self.cadence_spread = 0.0
         """Running RMS deviation of the strides' log time scale from the learnt one."""
-        self.matcher.set_scale_band(None)
+        self.matcher.set_scale_band(*self._start_band())
         self._last: _StrideTrack | None = None
         if self.recency_waits:
             self.matcher.start_uniform()  # until the switch, which rebuilds the weighted sums from the window
@@ -223,6 +226,17 @@ class WalkingCalibration:
         self.cadence_spread = math.sqrt(var)
         if self.cadence_strides >= self.params.cadence_min_strides:
             self._narrow_scales()
+
+    def _start_band(self) -> tuple[np.ndarray | None, int]:
+        """The scale band until the cadence is learnt: the scale nearest 1, and every scale for
+        the ``scale_search_modes`` best-fitting modes (every scale for all without cadence
+        learning)."""
+        if not self.learns_cadence:
+            return None, 0
+        distance = np.abs(np.log(self.matcher.time_scales))
+        band = np.zeros(distance.size, dtype=bool)
+        band[int(distance.argmin())] = True
+        return band, self.params.scale_search_modes
 
     def _narrow_scales(self) -> None:
         """Read modes only at the time scales within cadence_tolerance, or spread_factor running

@@ -17,6 +17,7 @@ from . import compiled
 from .channels import N_CHANNELS
 from .kernels import KernelLibrary
 from .matching import (
+    SEARCH_EVERY,
     MatchTrace,
     StepResult,
     _MatcherBase,
@@ -93,7 +94,9 @@ class NaiveMatcher(_MatcherBase):
         self._count += 1
         e = self.full_sse()
         sums = (self.age_weighted_sums() if self._decay else self.window_sums()) if self._offset else None
-        return self._result(self._scores(e, sums))
+        result = self._result(self._scores(e, sums))
+        self._search_step()
+        return result
 
     def state_bytes(self) -> int:
         return self._kernels.nbytes + self._ring.nbytes + self._valid.nbytes
@@ -170,8 +173,9 @@ class IncrementalMatcher(_MatcherBase):
         self._last = self.lengths - 1
         # numba outputs, reused every step
         self._out_col = np.zeros(r, dtype=np.int64)
-        self._scratch = np.zeros((r, n) if self._per_shift else (r, 1))  # per-shift scores of the compiled step
         self._out_score = np.zeros(r)
+        if self.backend == "numba":
+            self._row_score = self._out_score  # the compiled step's per-row scores (rows it reads out)
         total = int(self._valid.sum())
         self._resync_block = max(1, min(int(resync_block), total))
         if resync_period > 0:
@@ -207,15 +211,14 @@ class IncrementalMatcher(_MatcherBase):
         self._synced[:] = -1
         self._synced[rows] = self._count
 
-    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
-        super().set_scale_band(allowed)
+    def _set_readable(self) -> None:
+        super()._set_readable()
         if self.backend != "numba":
             return
         was = np.zeros(self.n_rows, dtype=np.bool_)
         was[self._active] = True
-        now = np.zeros(self.n_rows, dtype=np.bool_)
-        active = self._rows if self._scale_allowed.all() else self._band_rows
-        now[active] = True
+        active = self._rows if self._readable.all() else self._band_rows
+        now = self._readable
         self._synced[was & ~now] = self._count  # rows leaving the band are exact now
         self._active = active
         self._choose_step()
@@ -274,6 +277,7 @@ class IncrementalMatcher(_MatcherBase):
             result = self._step_numpy(np.array((d0, d1, d2, d3)), dsq)
         if self._resync_every and self._count % self._resync_every == 0:
             self._resync()
+        self._search_step()
         return result
 
     def weighted_samples(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -297,6 +301,8 @@ class IncrementalMatcher(_MatcherBase):
             raise ValueError("run_steps needs the numba backend")
         if self._resync_every:
             stop = min(stop, start + self._resync_every - self._count % self._resync_every)
+        if self._search:
+            stop = min(stop, start + SEARCH_EVERY - self._count % SEARCH_EVERY)
         track = np.zeros(0) if tracker is None else tracker
         near = np.zeros((self.n_modes, self.n_modes), dtype=bool) if near is None else near
         scratch_v, scratch_c, scratch_w = np.empty((3, self.n_modes), dtype=np.int64)
@@ -306,8 +312,8 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, count, samples, squares, start, stop,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self.normalize, self.n_scales,
-            self._scale_allowed, self._active, self._out_col, self._out_score,
+            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._tau, self.normalize, self.n_scales,
+            self._readable, self._active, self._out_col, self._out_score,
             out.sse, out.phases, out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
             track, near, mid_stride[0], mid_stride[1], self.max_window,
         )
@@ -315,6 +321,7 @@ class IncrementalMatcher(_MatcherBase):
         out.ready[start:done] = count + 1 + np.arange(done - start) >= self.max_window
         if self._resync_every and self._count % self._resync_every == 0:
             self._resync()
+        self._search_step()
         return done, ended
 
     def _step_numba(self, d0: float, d1: float, d2: float, d3: float, dsq: float) -> StepResult:
@@ -325,8 +332,8 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self.normalize,
-            self.n_scales, self._scale_allowed, self._active,
+            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._tau, self.normalize,
+            self.n_scales, self._readable, self._active,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
         self._count += 1
@@ -356,7 +363,7 @@ class IncrementalMatcher(_MatcherBase):
         self._ring_sq[i % w] = dsq
         if not (self._offset or self.normalize):
             return self._result(self._e)
-        if self._scale_allowed.all():
+        if self._readable.all():
             return self._result(self._scores(self._e, sums))
         # As the compiled step: read out only the rows in the scale band (mode_row_scores scores
         # a mode's other rows when they are asked for).
@@ -496,5 +503,5 @@ class IncrementalMatcher(_MatcherBase):
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
         arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid,
-                  self._psum_ring, self._mu, self._mu_seg, self._wsums, self._scratch]
+                  self._psum_ring, self._mu, self._mu_seg, self._mu_seg_range, self._wsums]
         return int(sum(a.nbytes for a in arrays))

@@ -61,6 +61,10 @@ from .channels import N_CHANNELS, Sample, sample_values
 from .kernels import KernelLibrary, resample_stride
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
+SEARCH_EVERY = 16
+"""Steps between two choices of the modes read at every time scale (``set_scale_band``)."""
+SEARCH_MARGIN = 0.1
+"""Relative score by which a mode must fit better than a searched one to take its place."""
 
 @dataclass(frozen=True)
 class StepResult:
@@ -202,12 +206,16 @@ class _MatcherBase:
         self._all = np.arange(self.n_modes)
         self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
         self._scale_allowed = np.ones(self.n_scales, dtype=np.bool_)
-        self._band_rows = np.arange(self.n_rows)  # the rows at those scales, mode-major
+        self._band_rows = np.arange(self.n_rows)  # the rows read out, mode-major
+        self._readable = np.ones(self.n_rows, dtype=np.bool_)  # per row: read out
+        self._search = 0
+        self._searched = np.zeros(self.n_modes, dtype=np.bool_)
         self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
         self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
         self._mu = np.zeros((self.n_rows, N_CHANNELS))
         # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
         self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._per_shift else 1))
+        self._mu_seg_range = np.zeros((self.n_rows, 2, N_CHANNELS))  # per row: min and max of mu_seg over shifts
         for m in range(self.n_modes):
             self._set_rows(m, library.modes[m].samples)
         self._ring = np.zeros((self.max_window, N_CHANNELS))
@@ -227,7 +235,7 @@ class _MatcherBase:
             self._kernels[r, :, :n] = k.T
             self._mu[r] = k.mean(axis=0)
             if self._mu_seg.shape[2] > 1:
-                self._mu_seg[r, :, :n] = self._shift_means(k, r)
+                self._set_shift_means(r, self._shift_means(k, r))
 
     def _weights(self, half_life: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per row: the weight factor per sample of age lambda, lambda^W (the weight of the sample
@@ -257,7 +265,7 @@ class _MatcherBase:
             self._means_half_life = h
             for r in range(self.n_rows):
                 n = int(self.lengths[r])
-                self._mu_seg[r, :, :n] = self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r)
+                self._set_shift_means(r, self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r))
         self._reweighted()
 
     def start_uniform(self) -> None:
@@ -277,6 +285,11 @@ class _MatcherBase:
 
     def _reweighted(self) -> None:
         """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
+
+    def _set_shift_means(self, r: int, means: np.ndarray) -> None:
+        """Row ``r``'s per-shift kernel means (4, n) and their range over the shifts."""
+        self._mu_seg[r, :, : means.shape[1]] = means
+        self._mu_seg_range[r] = means.min(axis=1), means.max(axis=1)
 
     def _shift_means(self, k: np.ndarray, r: int) -> np.ndarray:
         """Per column j, the (weighted) mean of the kernel part row ``r``'s window is compared with
@@ -319,15 +332,59 @@ class _MatcherBase:
         """Per time scale, whether a mode may be read at it (S,) bool; a copy."""
         return self._scale_allowed.copy()
 
-    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
+    @property
+    def searched_modes(self) -> np.ndarray:
+        """The modes read at every time scale besides the band's (``set_scale_band``'s
+        ``search``), (M,) bool; a copy."""
+        return self._searched.copy()
+
+    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None, search: int = 0) -> None:
         """Read every mode only at the time scales flagged in ``allowed`` (S,) (``time_scales``
-        order; None = all). The running sums of every row are kept, so this may change at any
-        sample."""
+        order; None = all), and the ``search`` modes that fit best at every scale (chosen again
+        every ``SEARCH_EVERY`` steps, ``_choose_searched``). The running sums of every row are
+        kept, so this may change at any sample."""
         a = np.ones(self.n_scales, dtype=np.bool_) if allowed is None else np.asarray(allowed, dtype=np.bool_).reshape(-1)
         if a.size != self.n_scales or not a.any():
             raise ValueError(f"scale band needs {self.n_scales} flags, at least one true, got {a.tolist()}")
+        if search < 0:
+            raise ValueError(f"search must be >= 0 modes, got {search}")
         self._scale_allowed[:] = a
-        self._band_rows = (np.arange(self.n_modes)[:, None] * self.n_scales + np.flatnonzero(a)[None, :]).ravel()
+        self._search = 0 if a.all() else min(int(search), self.n_modes)
+        self._searched[:] = False
+        if self._search:
+            self._choose_searched()
+        self._set_readable()
+
+    def _set_readable(self) -> None:
+        """The rows read out: the band's scales of every mode, every scale of the searched modes."""
+        readable = (self._scale_allowed[None, :] | self._searched[:, None]).ravel()
+        self._readable[:] = readable
+        self._band_rows = np.flatnonzero(readable)
+
+    def _choose_searched(self) -> bool:
+        """Choose the searched modes from the last step's scores (each mode's best over the rows it
+        is read at): the best ones, a mode replacing a searched one only if it fits better by
+        SEARCH_MARGIN (near ties do not swap rows in and out); True if they changed."""
+        score = np.where(self._readable, self._row_score, np.inf).reshape(self.n_modes, self.n_scales).min(axis=1)
+        chosen = self._searched.copy()
+        for m in np.argsort(score, kind="stable"):  # ends at the first mode that does not enter
+            if chosen[m]:
+                continue
+            if chosen.sum() < self._search:
+                chosen[m] = True
+                continue
+            worst = int(np.flatnonzero(chosen)[score[chosen].argmax()])
+            if not score[m] < (1.0 - SEARCH_MARGIN) * score[worst]:
+                break
+            chosen[worst], chosen[m] = False, True
+        changed = bool(np.any(chosen != self._searched))
+        self._searched[:] = chosen
+        return changed
+
+    def _search_step(self) -> None:
+        """After a step: every ``SEARCH_EVERY`` steps, choose the searched modes again."""
+        if self._search and self._count % SEARCH_EVERY == 0 and self._choose_searched():
+            self._set_readable()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
         """The best score of every row (time scale) of ``mode`` at the last step, (S,), whatever
@@ -452,8 +509,8 @@ class _MatcherBase:
         s = self.n_scales
         if s > 1:
             per_mode = best.reshape(self.n_modes, s)
-            if not self._scale_allowed.all():
-                per_mode = np.where(self._scale_allowed, per_mode, np.inf)
+            if not self._readable.all():
+                per_mode = np.where(self._readable.reshape(self.n_modes, s), per_mode, np.inf)
             variant = per_mode.argmin(axis=1)
             rows = self._all * s + variant
         else:
