@@ -203,7 +203,7 @@ class WalkingCalibration:
         m, p = est.mode_index, self.params
         variant = 0 if result.variant is None else int(result.variant[m])
         assert result.column is not None
-        x = self.matcher.mean_offset(m * self.matcher.n_scales + variant, int(result.column[m]))
+        x = self.matcher.mean_offset(self.matcher.row_of(m, variant), int(result.column[m]))
         step = np.clip(x - self.sensor_offset_deg, -p.step_deg, p.step_deg)
         self.sensor_offset_deg = np.clip(self.sensor_offset_deg + p.offset_rate * step,
                                          -p.max_offset_deg, p.max_offset_deg)

@@ -139,7 +139,8 @@ def step_rows(
         if use_offset and not per_shift:
             const = _offset_penalty(s0, s1, s2, s3, wp, mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
-            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r])
+            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r],
+                                         out_col[r] + 1)
         else:
             best, bj = _argmin(er, n)
             best -= const
@@ -150,11 +151,12 @@ def step_rows(
     n_modes = lens.shape[0] // n_scales
     best_mode = 0
     for m in range(n_modes):
-        r0 = m * n_scales
         rb = -1
-        for r in range(r0, r0 + n_scales):
+        vb = 0
+        for v in range(n_scales):  # row v * M + m: mode m at scale v
+            r = v * n_modes + m
             if readable[r] and (rb < 0 or out_score[r] < out_score[rb]):
-                rb = r
+                rb, vb = r, v
         n = lens[rb]
         j = out_col[rb]
         ph = (float(j + 1) % n) / n
@@ -162,7 +164,7 @@ def step_rows(
             ph = 0.0
         out_sse[m] = out_score[rb]
         out_phase[m] = ph
-        out_variant[m] = rb - r0
+        out_variant[m] = vb
         out_column[m] = j
         out_window[m] = n if i + 1 >= n else i + 1
         if out_score[rb] < out_sse[best_mode]:
@@ -242,12 +244,13 @@ def _penalty_bound(a, lo, hi, t, f):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range):  # pragma: no cover - compiled
+def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, guess):  # pragma: no cover - compiled
     """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
     a*: the window means, mu (4, Nmax) the kernel part's means per shift, mu_range (2, 4) their
-    range). A score is at least e[j] - wp * (the largest penalty any shift can have), so only the
-    shifts whose e[j] is within that of the best score so far are scored: the result is the
-    exhaustive scan's (test_matcher compares it with the numpy read-out)."""
+    range). A score is at least e[j] - wp * (the largest penalty any shift can have), so starting
+    from the score at column ``guess``, only the blocks of shifts whose smallest e[j] is within
+    that of the best score so far are scored: the result is the exhaustive scan's (test_matcher
+    compares it with the numpy read-out)."""
     t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
     f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
     m0, m1, m2, m3 = mu[0], mu[1], mu[2], mu[3]
@@ -255,7 +258,7 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range):  # pragma: n
                   + _penalty_bound(a1, mu_range[0, 1], mu_range[1, 1], t1, f1)
                   + _penalty_bound(a2, mu_range[0, 2], mu_range[1, 2], t2, f2)
                   + _penalty_bound(a3, mu_range[0, 3], mu_range[1, 3], t3, f3))
-    _, bj = _argmin(e, n)  # a good first candidate
+    bj = guess if 0 <= guess < n else 0  # a good first candidate: where the last step's best moved to
     best = _shift_score(e, bj, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
     slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
     for lo in range(0, n, 8):  # in blocks of 8 shifts: one test per block

@@ -195,7 +195,7 @@ class IncrementalMatcher(_MatcherBase):
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
         # Both steps read out only the rows in the scale band: score this mode's rows now.
-        rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
+        rows = self.mode_rows(mode)
         self._sync_rows(rows)
         sums = None
         if self._offset:
@@ -464,7 +464,7 @@ class IncrementalMatcher(_MatcherBase):
             raise ValueError(f"new kernel for mode {self.mode_names[mode]!r} must be finite with shape "
                              f"{self.library.modes[mode].samples.shape}, got {k.shape}")
         self._set_rows(mode, k)
-        rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
+        rows = self.mode_rows(mode)
         self._update_row_constants(rows)
         self._e[rows] = self._rows_sse_fft(rows, self._lam)
         if self._active is not self._rows:  # outside the band: the age-weighted sums too

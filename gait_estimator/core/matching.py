@@ -192,8 +192,9 @@ class _MatcherBase:
         self._tau = np.stack([tolerance, np.zeros(N_CHANNELS)])
         self._offset = self.offset_tolerance_deg > 0
         base = library.lengths
-        # Rows are mode-major: row m * S + s is mode m at time scale s.
-        self.lengths = np.maximum(2, np.rint(np.outer(base, self.time_scales))).astype(np.int64).reshape(-1)
+        # Rows are scale-major: row s * M + m is mode m at time scale s (the rows of one scale, which
+        # the compiled step updates once the cadence is learnt, lie next to each other in memory).
+        self.lengths = np.maximum(2, np.rint(np.outer(self.time_scales, base))).astype(np.int64).reshape(-1)
         self.windows = self.lengths  # every row compares its whole stride
         self.n_rows = int(self.lengths.size)
         self.max_length = int(self.lengths.max())
@@ -206,7 +207,7 @@ class _MatcherBase:
         self._all = np.arange(self.n_modes)
         self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
         self._scale_allowed = np.ones(self.n_scales, dtype=np.bool_)
-        self._band_rows = np.arange(self.n_rows)  # the rows read out, mode-major
+        self._band_rows = np.arange(self.n_rows)  # the rows read out
         self._readable = np.ones(self.n_rows, dtype=np.bool_)  # per row: read out
         self._search = 0
         self._searched = np.zeros(self.n_modes, dtype=np.bool_)
@@ -226,7 +227,7 @@ class _MatcherBase:
 
     def _set_rows(self, mode: int, samples: np.ndarray) -> None:
         """(Re)build the rows of ``mode`` from its kernel ``samples`` (N_m, 4), degrees."""
-        for r in range(mode * self.n_scales, (mode + 1) * self.n_scales):
+        for r in self.mode_rows(mode):
             n = int(self.lengths[r])
             # float32-representable values: the compiled step streams a float32 copy (half the
             # memory traffic); every path computes with exactly these values, in float64
@@ -236,6 +237,14 @@ class _MatcherBase:
             self._mu[r] = k.mean(axis=0)
             if self._mu_seg.shape[2] > 1:
                 self._set_shift_means(r, self._shift_means(k, r))
+
+    def row_of(self, mode: int, scale: int) -> int:
+        """The row of ``mode`` at time scale index ``scale``."""
+        return scale * self.n_modes + mode
+
+    def mode_rows(self, mode: int) -> np.ndarray:
+        """The rows of ``mode``, (S,), ``time_scales`` order."""
+        return mode + self.n_modes * np.arange(self.n_scales)
 
     def _weights(self, half_life: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per row: the weight factor per sample of age lambda, lambda^W (the weight of the sample
@@ -357,7 +366,7 @@ class _MatcherBase:
 
     def _set_readable(self) -> None:
         """The rows read out: the band's scales of every mode, every scale of the searched modes."""
-        readable = (self._scale_allowed[None, :] | self._searched[:, None]).ravel()
+        readable = (self._scale_allowed[:, None] | self._searched[None, :]).ravel()
         self._readable[:] = readable
         self._band_rows = np.flatnonzero(readable)
 
@@ -365,7 +374,7 @@ class _MatcherBase:
         """Choose the searched modes from the last step's scores (each mode's best over the rows it
         is read at): the best ones, a mode replacing a searched one only if it fits better by
         SEARCH_MARGIN (near ties do not swap rows in and out); True if they changed."""
-        score = np.where(self._readable, self._row_score, np.inf).reshape(self.n_modes, self.n_scales).min(axis=1)
+        score = np.where(self._readable, self._row_score, np.inf).reshape(self.n_scales, self.n_modes).min(axis=0)
         chosen = self._searched.copy()
         for m in np.argsort(score, kind="stable"):  # ends at the first mode that does not enter
             if chosen[m]:
@@ -389,8 +398,7 @@ class _MatcherBase:
     def mode_row_scores(self, mode: int) -> np.ndarray:
         """The best score of every row (time scale) of ``mode`` at the last step, (S,), whatever
         the scale band."""
-        s = self.n_scales
-        return self._row_score[mode * s : (mode + 1) * s]
+        return self._row_score[self.mode_rows(mode)]
 
     def best_scale_index(self, mode: int) -> int:
         """Index in ``time_scales`` of the row of ``mode`` that scored best at the last step,
@@ -508,11 +516,11 @@ class _MatcherBase:
         self._row_score = best
         s = self.n_scales
         if s > 1:
-            per_mode = best.reshape(self.n_modes, s)
+            per_mode = best.reshape(s, self.n_modes)
             if not self._readable.all():
-                per_mode = np.where(self._readable.reshape(self.n_modes, s), per_mode, np.inf)
-            variant = per_mode.argmin(axis=1)
-            rows = self._all * s + variant
+                per_mode = np.where(self._readable.reshape(s, self.n_modes), per_mode, np.inf)
+            variant = per_mode.argmin(axis=0)
+            rows = variant * self.n_modes + self._all
         else:
             variant, rows = None, self._all
         cols, sse = cols[rows], best[rows]
