@@ -14,7 +14,7 @@ from gait_estimator import IncrementalMatcher, KernelLibrary
 from gait_estimator.core import compiled
 from gait_estimator.core.kernels import make_mode, resample_stride
 from gait_estimator.core.matcher import NaiveMatcher
-from gait_estimator.core.matching import SEARCH_EVERY
+from gait_estimator.core.scale_band import SEARCH_EVERY
 from gait_estimator.io.readers import read_recording
 
 

@@ -59,7 +59,7 @@ class CalibrationParams:
 
     offset_rate: float = 0.15
     cadence_rate: float = 0.1
-    cadence_tolerance: float = 0.04
+    cadence_tolerance: float = 0.02
     confidence: float = 0.1
     step_deg: float = 5.0
     max_offset_deg: float = 15.0

@@ -139,8 +139,7 @@ def step_rows(
         if use_offset and not per_shift:
             const = _offset_penalty(s0, s1, s2, s3, wp, mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
-            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r],
-                                         out_col[r] + 1)
+            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r])
         else:
             best, bj = _argmin(er, n)
             best -= const
@@ -244,11 +243,11 @@ def _penalty_bound(a, lo, hi, t, f):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, guess):  # pragma: no cover - compiled
+def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range):  # pragma: no cover - compiled
     """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
     a*: the window means, mu (4, Nmax) the kernel part's means per shift, mu_range (2, 4) their
     range). A score is at least e[j] - wp * (the largest penalty any shift can have), so starting
-    from the score at column ``guess``, only the blocks of shifts whose smallest e[j] is within
+    from the score at the smallest e[j], only the blocks of shifts whose smallest e[j] is within
     that of the best score so far are scored: the result is the exhaustive scan's (test_matcher
     compares it with the numpy read-out)."""
     t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
@@ -258,7 +257,7 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, guess):  # pr
                   + _penalty_bound(a1, mu_range[0, 1], mu_range[1, 1], t1, f1)
                   + _penalty_bound(a2, mu_range[0, 2], mu_range[1, 2], t2, f2)
                   + _penalty_bound(a3, mu_range[0, 3], mu_range[1, 3], t3, f3))
-    bj = guess if 0 <= guess < n else 0  # a good first candidate: where the last step's best moved to
+    _, bj = _argmin(e, n)  # a good first candidate
     best = _shift_score(e, bj, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
     slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
     for lo in range(0, n, 8):  # in blocks of 8 shifts: one test per block

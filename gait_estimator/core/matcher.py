@@ -17,7 +17,6 @@ from . import compiled
 from .channels import N_CHANNELS
 from .kernels import KernelLibrary
 from .matching import (
-    SEARCH_EVERY,
     MatchTrace,
     StepResult,
     _MatcherBase,
@@ -26,6 +25,7 @@ from .matching import (
     check_recency_half_life,
     check_time_scales,
 )
+from .scale_band import SEARCH_EVERY
 
 __all__ = [
     "BACKENDS", "PARALLEL_MIN_ROWS", "IncrementalMatcher", "MatchTrace", "NaiveMatcher", "StepBlock", "StepResult",
@@ -211,14 +211,13 @@ class IncrementalMatcher(_MatcherBase):
         self._synced[:] = -1
         self._synced[rows] = self._count
 
-    def _set_readable(self) -> None:
-        super()._set_readable()
+    def _band_changed(self) -> None:
         if self.backend != "numba":
             return
         was = np.zeros(self.n_rows, dtype=np.bool_)
         was[self._active] = True
-        active = self._rows if self._readable.all() else self._band_rows
-        now = self._readable
+        now = self._band.readable
+        active = self._rows if now.all() else self._band.rows
         self._synced[was & ~now] = self._count  # rows leaving the band are exact now
         self._active = active
         self._choose_step()
@@ -301,7 +300,7 @@ class IncrementalMatcher(_MatcherBase):
             raise ValueError("run_steps needs the numba backend")
         if self._resync_every:
             stop = min(stop, start + self._resync_every - self._count % self._resync_every)
-        if self._search:
+        if self._band.search:
             stop = min(stop, start + SEARCH_EVERY - self._count % SEARCH_EVERY)
         track = np.zeros(0) if tracker is None else tracker
         near = np.zeros((self.n_modes, self.n_modes), dtype=bool) if near is None else near
@@ -313,7 +312,7 @@ class IncrementalMatcher(_MatcherBase):
             self._psum_ring, self._psum, count, samples, squares, start, stop,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
             self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._tau, self.normalize, self.n_scales,
-            self._readable, self._active, self._out_col, self._out_score,
+            self._band.readable, self._active, self._out_col, self._out_score,
             out.sse, out.phases, out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
             track, near, mid_stride[0], mid_stride[1], self.max_window,
         )
@@ -333,7 +332,7 @@ class IncrementalMatcher(_MatcherBase):
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
             self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._tau, self.normalize,
-            self.n_scales, self._readable, self._active,
+            self.n_scales, self._band.readable, self._active,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
         self._count += 1
@@ -363,11 +362,11 @@ class IncrementalMatcher(_MatcherBase):
         self._ring_sq[i % w] = dsq
         if not (self._offset or self.normalize):
             return self._result(self._e)
-        if self._readable.all():
+        if self._band.readable.all():
             return self._result(self._scores(self._e, sums))
         # As the compiled step: read out only the rows in the scale band (mode_row_scores scores
         # a mode's other rows when they are asked for).
-        rows = self._band_rows
+        rows = self._band.rows
         score = np.full(self._e.shape, np.inf)
         score[rows] = self._scores(self._e[rows], None if sums is None else sums[rows], rows)
         return self._result(score)

@@ -59,12 +59,9 @@ import numpy as np
 
 from .channels import N_CHANNELS, Sample, sample_values
 from .kernels import KernelLibrary, resample_stride
+from .scale_band import ScaleBand
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
-SEARCH_EVERY = 16
-"""Steps between two choices of the modes read at every time scale (``set_scale_band``)."""
-SEARCH_MARGIN = 0.1
-"""Relative score by which a mode must fit better than a searched one to take its place."""
 
 @dataclass(frozen=True)
 class StepResult:
@@ -206,11 +203,7 @@ class _MatcherBase:
         self._rows = np.arange(self.n_rows)
         self._all = np.arange(self.n_modes)
         self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
-        self._scale_allowed = np.ones(self.n_scales, dtype=np.bool_)
-        self._band_rows = np.arange(self.n_rows)  # the rows read out
-        self._readable = np.ones(self.n_rows, dtype=np.bool_)  # per row: read out
-        self._search = 0
-        self._searched = np.zeros(self.n_modes, dtype=np.bool_)
+        self._band = ScaleBand(self.n_modes, self.n_scales)  # the rows read out
         self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
         self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
         self._mu = np.zeros((self.n_rows, N_CHANNELS))
@@ -339,61 +332,29 @@ class _MatcherBase:
     @property
     def scale_band(self) -> np.ndarray:
         """Per time scale, whether a mode may be read at it (S,) bool; a copy."""
-        return self._scale_allowed.copy()
+        return self._band.allowed.copy()
 
     @property
     def searched_modes(self) -> np.ndarray:
         """The modes read at every time scale besides the band's (``set_scale_band``'s
         ``search``), (M,) bool; a copy."""
-        return self._searched.copy()
+        return self._band.searched.copy()
 
     def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None, search: int = 0) -> None:
         """Read every mode only at the time scales flagged in ``allowed`` (S,) (``time_scales``
         order; None = all), and the ``search`` modes that fit best at every scale (chosen again
-        every ``SEARCH_EVERY`` steps, ``_choose_searched``). The running sums of every row are
-        kept, so this may change at any sample."""
-        a = np.ones(self.n_scales, dtype=np.bool_) if allowed is None else np.asarray(allowed, dtype=np.bool_).reshape(-1)
-        if a.size != self.n_scales or not a.any():
-            raise ValueError(f"scale band needs {self.n_scales} flags, at least one true, got {a.tolist()}")
-        if search < 0:
-            raise ValueError(f"search must be >= 0 modes, got {search}")
-        self._scale_allowed[:] = a
-        self._search = 0 if a.all() else min(int(search), self.n_modes)
-        self._searched[:] = False
-        if self._search:
-            self._choose_searched()
-        self._set_readable()
+        every ``SEARCH_EVERY`` steps: ``ScaleBand``). The running sums of every row are kept, so
+        this may change at any sample."""
+        self._band.set(allowed, search, self._row_score)
+        self._band_changed()
 
-    def _set_readable(self) -> None:
-        """The rows read out: the band's scales of every mode, every scale of the searched modes."""
-        readable = (self._scale_allowed[:, None] | self._searched[None, :]).ravel()
-        self._readable[:] = readable
-        self._band_rows = np.flatnonzero(readable)
-
-    def _choose_searched(self) -> bool:
-        """Choose the searched modes from the last step's scores (each mode's best over the rows it
-        is read at): the best ones, a mode replacing a searched one only if it fits better by
-        SEARCH_MARGIN (near ties do not swap rows in and out); True if they changed."""
-        score = np.where(self._readable, self._row_score, np.inf).reshape(self.n_scales, self.n_modes).min(axis=0)
-        chosen = self._searched.copy()
-        for m in np.argsort(score, kind="stable"):  # ends at the first mode that does not enter
-            if chosen[m]:
-                continue
-            if chosen.sum() < self._search:
-                chosen[m] = True
-                continue
-            worst = int(np.flatnonzero(chosen)[score[chosen].argmax()])
-            if not score[m] < (1.0 - SEARCH_MARGIN) * score[worst]:
-                break
-            chosen[worst], chosen[m] = False, True
-        changed = bool(np.any(chosen != self._searched))
-        self._searched[:] = chosen
-        return changed
+    def _band_changed(self) -> None:
+        """The rows read out changed (nothing to do for the naive matcher)."""
 
     def _search_step(self) -> None:
         """After a step: every ``SEARCH_EVERY`` steps, choose the searched modes again."""
-        if self._search and self._count % SEARCH_EVERY == 0 and self._choose_searched():
-            self._set_readable()
+        if self._band.after_step(self._count, self._row_score):
+            self._band_changed()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
         """The best score of every row (time scale) of ``mode`` at the last step, (S,), whatever
@@ -517,8 +478,8 @@ class _MatcherBase:
         s = self.n_scales
         if s > 1:
             per_mode = best.reshape(s, self.n_modes)
-            if not self._readable.all():
-                per_mode = np.where(self._readable.reshape(s, self.n_modes), per_mode, np.inf)
+            if not self._band.readable.all():
+                per_mode = np.where(self._band.readable.reshape(s, self.n_modes), per_mode, np.inf)
             variant = per_mode.argmin(axis=0)
             rows = variant * self.n_modes + self._all
         else:

@@ -66,7 +66,7 @@ OPTIONS: tuple[Option, ...] = (
            "per mode (cadence ratio = 1/scale); [1.0] = the paper", [1.0], advanced=True),
     Option("offset_tolerance_deg", 2.0, "per-channel window-vs-kernel mean difference (deg), beyond the learnt "
            "sensor offset, that costs nothing; .inf = shapes only; 0 = none", 0.0, advanced=True),
-    Option("cadence_tolerance", 0.04, "relative band around the learnt time scale in which modes are read "
+    Option("cadence_tolerance", 0.02, "relative band around the learnt time scale in which modes are read "
            "(wider while strides spread)", advanced=True),
     Option("normalize_error", True, "compare modes by mean squared error per window sample instead of SSE",
            False, advanced=True),
@@ -117,7 +117,7 @@ class EstimatorConfig:
     offset_tolerance_deg: float = 2.0
     offset_calibration_rate: float = 0.15
     cadence_calibration_rate: float = 0.1
-    cadence_tolerance: float = 0.04
+    cadence_tolerance: float = 0.02
     normalize_error: bool = True
     recency_half_life: float = 0.3
     channels: tuple[str, ...] = CHANNELS
