@@ -59,7 +59,8 @@ def step_rows(
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
     decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
-    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, mu_range: np.ndarray, tau: np.ndarray,
+    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, mu_range: np.ndarray, mu_blocks: np.ndarray,
+    tau: np.ndarray,
     normalize: bool, n_scales: int, readable: np.ndarray, active: np.ndarray,
     out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
@@ -75,7 +76,8 @@ def step_rows(
     lam^N, wsum the weight sum of a full window (N without decay) and wsums (R, 4) the
     age-weighted window sums, updated in place; offset: apply the offset penalty (mu (R, 4)
     kernel means, mu_seg (R, 4, Nmax) per-shift age-weighted means of the kernel with age
-    weights, mu_range (R, 2, 4) their minimum and maximum over the shifts, tau (2, 4):
+    weights, mu_range (R, 2, 4) their minimum and maximum over the shifts, mu_blocks (R, 2, 4, B)
+    the same per block of 16 shifts, tau (2, 4):
     tolerances and sensor offsets; with decay the window's weight W_a and age-weighted sums stand
     for W and the sums);
     normalize: divide by the window's weight;
@@ -139,7 +141,8 @@ def step_rows(
         if use_offset and not per_shift:
             const = _offset_penalty(s0, s1, s2, s3, wp, mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
-            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r])
+            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r],
+                                         mu_blocks[r])
         else:
             best, bj = _argmin(er, n)
             best -= const
@@ -243,13 +246,14 @@ def _penalty_bound(a, lo, hi, t, f):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range):  # pragma: no cover - compiled
+def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks):  # pragma: no cover - compiled
     """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
     a*: the window means, mu (4, Nmax) the kernel part's means per shift, mu_range (2, 4) their
-    range). A score is at least e[j] - wp * (the largest penalty any shift can have), so starting
-    from the score at the smallest e[j], only the blocks of shifts whose smallest e[j] is within
-    that of the best score so far are scored: the result is the exhaustive scan's (test_matcher
-    compares it with the numpy read-out)."""
+    range, mu_blocks (2, 4, B) per block of 16 shifts). A score is at least e[j] - wp * (the
+    largest penalty any shift of its block can have), so starting from the score at the smallest
+    e[j], only the blocks whose smallest e[j] is within that bound (over all shifts, then over the
+    block's) of the best score so far are scored: the result is the exhaustive scan's
+    (test_matcher compares it with the numpy read-out)."""
     t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
     f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
     m0, m1, m2, m3 = mu[0], mu[1], mu[2], mu[3]
@@ -260,16 +264,24 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range):  # pragma: n
     _, bj = _argmin(e, n)  # a good first candidate
     best = _shift_score(e, bj, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
     slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
-    for lo in range(0, n, 8):  # in blocks of 8 shifts: one test per block
-        hi = min(lo + 8, n)
+    for lo in range(0, n, 16):  # in blocks of 16 shifts (SHIFT_BLOCK): one test per block
+        hi = min(lo + 16, n)
         low = e[lo]
         for j in range(lo + 1, hi):
             low = min(low, e[j])
-        if low - bound <= best + slack:
-            for j in range(lo, hi):
-                v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
-                if v < best or (v == best and j < bj):
-                    best, bj = v, j
+        if low - bound > best + slack:
+            continue
+        q = lo // 16  # the bound over this block's shifts only
+        near = wp * (_penalty_bound(a0, mu_blocks[0, 0, q], mu_blocks[1, 0, q], t0, f0)
+                     + _penalty_bound(a1, mu_blocks[0, 1, q], mu_blocks[1, 1, q], t1, f1)
+                     + _penalty_bound(a2, mu_blocks[0, 2, q], mu_blocks[1, 2, q], t2, f2)
+                     + _penalty_bound(a3, mu_blocks[0, 3, q], mu_blocks[1, 3, q], t3, f3))
+        if low - near > best + 1e-9 * (abs(best) + abs(near)):
+            continue
+        for j in range(lo, hi):
+            v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+            if v < best or (v == best and j < bj):
+                best, bj = v, j
     return best, bj
 
 
@@ -314,7 +326,7 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
 def run_steps(  # pragma: no cover - compiled
     e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
     decay, lam, lam_w, wsum, wsums,
-    offset, mu, mu_seg, mu_range, tau, normalize, n_scales, readable, active, out_col, out_score,
+    offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize, n_scales, readable, active, out_col, out_score,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
@@ -333,7 +345,7 @@ def run_steps(  # pragma: no cover - compiled
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
         b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
-                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, mu_range, tau, normalize,
+                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize,
                  n_scales, readable, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
         best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
         if track.shape[0] == 0:

@@ -311,7 +311,8 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, count, samples, squares, start, stop,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._tau, self.normalize, self.n_scales,
+            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
+            self.n_scales,
             self._band.readable, self._active, self._out_col, self._out_score,
             out.sse, out.phases, out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
             track, near, mid_stride[0], mid_stride[1], self.max_window,
@@ -331,7 +332,7 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._tau, self.normalize,
+            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
             self.n_scales, self._band.readable, self._active,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
@@ -502,5 +503,5 @@ class IncrementalMatcher(_MatcherBase):
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
         arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid,
-                  self._psum_ring, self._mu, self._mu_seg, self._mu_seg_range, self._wsums]
+                  self._psum_ring, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._wsums]
         return int(sum(a.nbytes for a in arrays))

@@ -62,6 +62,8 @@ from .kernels import KernelLibrary, resample_stride
 from .scale_band import ScaleBand
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
+SHIFT_BLOCK = 16
+"""Shifts per block of the compiled per-shift read-out's bounds (``compiled._argmin_per_shift``)."""
 
 @dataclass(frozen=True)
 class StepResult:
@@ -210,6 +212,8 @@ class _MatcherBase:
         # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
         self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._per_shift else 1))
         self._mu_seg_range = np.zeros((self.n_rows, 2, N_CHANNELS))  # per row: min and max of mu_seg over shifts
+        blocks = -(-self._mu_seg.shape[2] // SHIFT_BLOCK)
+        self._mu_seg_blocks = np.zeros((self.n_rows, 2, N_CHANNELS, blocks))  # the same per block of shifts
         for m in range(self.n_modes):
             self._set_rows(m, library.modes[m].samples)
         self._ring = np.zeros((self.max_window, N_CHANNELS))
@@ -289,9 +293,14 @@ class _MatcherBase:
         """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
 
     def _set_shift_means(self, r: int, means: np.ndarray) -> None:
-        """Row ``r``'s per-shift kernel means (4, n) and their range over the shifts."""
-        self._mu_seg[r, :, : means.shape[1]] = means
+        """Row ``r``'s per-shift kernel means (4, n) and their range over all shifts and over each
+        block of SHIFT_BLOCK shifts."""
+        n = means.shape[1]
+        self._mu_seg[r, :, :n] = means
         self._mu_seg_range[r] = means.min(axis=1), means.max(axis=1)
+        starts = np.arange(0, n, SHIFT_BLOCK)
+        self._mu_seg_blocks[r, :, :, : starts.size] = np.minimum.reduceat(means, starts, axis=1), np.maximum.reduceat(
+            means, starts, axis=1)
 
     def _shift_means(self, k: np.ndarray, r: int) -> np.ndarray:
         """Per column j, the (weighted) mean of the kernel part row ``r``'s window is compared with
