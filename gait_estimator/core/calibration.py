@@ -7,7 +7,8 @@ At a heel strike that ends a confidently reported stride (``WalkingCalibration.o
   per-channel offsets (clipped steps); the matcher measures mean differences from them;
 * cadence: the reported mode's best time scale (read between the matcher's scales) moves the
   learnt (log) scale; from ``cadence_min_strides`` strides on every mode is read only at scales
-  near it, so speed classes are told apart at the wearer's own cadence;
+  near it, so speed classes are told apart at the wearer's own cadence (before, at the scale
+  nearest 1, and the ``scale_search_modes`` best-fitting modes at every scale);
 * typical fit: a running mean of the squared RMS fit of those strides;
 * recency weighting (the matcher's ``recency_half_life``) starts after ``recency_after_strides``
   strides: before the offsets and cadence are learnt its shorter memory cannot tell the speed
