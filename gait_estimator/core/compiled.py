@@ -142,7 +142,7 @@ def step_rows(
             const = _offset_penalty(s0, s1, s2, s3, wp, mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
             best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r],
-                                         mu_blocks[r])
+                                         mu_blocks[r], out_col[r] + 1)
         else:
             best, bj = _argmin(er, n)
             best -= const
@@ -246,14 +246,14 @@ def _penalty_bound(a, lo, hi, t, f):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks):  # pragma: no cover - compiled
+def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks, guess):  # pragma: no cover
     """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
     a*: the window means, mu (4, Nmax) the kernel part's means per shift, mu_range (2, 4) their
     range, mu_blocks (2, 4, B) per block of 16 shifts). A score is at least e[j] - wp * (the
-    largest penalty any shift of its block can have), so starting from the score at the smallest
-    e[j], only the blocks whose smallest e[j] is within that bound (over all shifts, then over the
-    block's) of the best score so far are scored: the result is the exhaustive scan's
-    (test_matcher compares it with the numpy read-out)."""
+    largest penalty any shift of its block can have), so starting from the score at column
+    ``guess`` (the last step's best, moved on by one), only the blocks whose smallest e[j] is
+    within that bound (over all shifts, then over the block's) of the best score so far are
+    scored: the result is the exhaustive scan's (test_matcher compares it with the numpy read-out)."""
     t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
     f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
     m0, m1, m2, m3 = mu[0], mu[1], mu[2], mu[3]
@@ -261,7 +261,7 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks):  
                   + _penalty_bound(a1, mu_range[0, 1], mu_range[1, 1], t1, f1)
                   + _penalty_bound(a2, mu_range[0, 2], mu_range[1, 2], t2, f2)
                   + _penalty_bound(a3, mu_range[0, 3], mu_range[1, 3], t3, f3))
-    _, bj = _argmin(e, n)  # a good first candidate
+    bj = guess if 0 <= guess < n else 0  # a first candidate: where the last step's best shift moved to
     best = _shift_score(e, bj, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
     slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
     for lo in range(0, n, 16):  # in blocks of 16 shifts (SHIFT_BLOCK): one test per block
