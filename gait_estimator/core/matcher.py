@@ -419,7 +419,11 @@ class IncrementalMatcher(_MatcherBase):
         hi = min(lo + self._resync_block, self._valid.size)
         flat = lo + np.flatnonzero(self._valid.ravel()[lo:hi])
         rows, diag = np.divmod(flat, self.max_length)
-        if flat.size:
+        if self._active is not self._rows:  # rows the compiled step leaves are rebuilt when they come back
+            inside = np.zeros(self.n_rows, dtype=np.bool_)
+            inside[self._active] = True
+            rows, diag = rows[inside[rows]], diag[inside[rows]]
+        if rows.size:
             cols = (diag + self._count) % self.lengths[rows]
             self._e[rows, cols] = self._window_sse(rows, cols)
         if hi >= self._valid.size:
