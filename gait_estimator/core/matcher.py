@@ -95,7 +95,7 @@ class NaiveMatcher(_MatcherBase):
         e = self.full_sse()
         sums = (self.age_weighted_sums() if self._decay else self.window_sums()) if self._offset else None
         result = self._result(self._scores(e, sums))
-        self._search_step()
+        self._search_step(result.sse)
         return result
 
     def state_bytes(self) -> int:
@@ -276,7 +276,7 @@ class IncrementalMatcher(_MatcherBase):
             result = self._step_numpy(np.array((d0, d1, d2, d3)), dsq)
         if self._resync_every and self._count % self._resync_every == 0:
             self._resync()
-        self._search_step()
+        self._search_step(result.sse)
         return result
 
     def weighted_samples(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -321,7 +321,8 @@ class IncrementalMatcher(_MatcherBase):
         out.ready[start:done] = count + 1 + np.arange(done - start) >= self.max_window
         if self._resync_every and self._count % self._resync_every == 0:
             self._resync()
-        self._search_step()
+        if done > start:
+            self._search_step(out.sse[done - 1])
         return done, ended
 
     def _step_numba(self, d0: float, d1: float, d2: float, d3: float, dsq: float) -> StepResult:

@@ -361,9 +361,10 @@ class _MatcherBase:
     def _band_changed(self) -> None:
         """The rows read out changed (nothing to do for the naive matcher)."""
 
-    def _search_step(self) -> None:
-        """After a step: every ``SEARCH_EVERY`` steps, choose the searched modes again."""
-        if self._band.after_step(self._count, self._row_score):
+    def _search_step(self, score: np.ndarray) -> None:
+        """After a step with per-mode ``score`` (M,): every ``SEARCH_EVERY`` steps, choose the
+        searched modes again."""
+        if self._band.after_step(self._count, score):
             self._band_changed()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:

@@ -37,22 +37,25 @@ class ScaleBand:
         self.search = 0 if a.all() else min(int(search), self.n_modes)
         self.searched[:] = False
         if self.search:
-            self.choose(row_score)
+            self.choose(np.where(self.readable, row_score, np.inf).reshape(self.n_scales, self.n_modes).min(axis=0))
         self._update_rows()
 
-    def after_step(self, steps: int, row_score: np.ndarray) -> bool:
-        """Every SEARCH_EVERY ``steps``, choose the searched modes again; True if the rows changed."""
-        if self.search and steps % SEARCH_EVERY == 0 and self.choose(row_score):
+    def after_step(self, steps: int, score: np.ndarray) -> bool:
+        """Every SEARCH_EVERY ``steps``, choose the searched modes again from the step's per-mode
+        ``score`` (M,); True if the rows changed."""
+        if self.search and steps % SEARCH_EVERY == 0 and self.choose(score):
             self._update_rows()
             return True
         return False
 
-    def choose(self, row_score: np.ndarray) -> bool:
-        """Choose the searched modes from the last step's scores (each mode's best over the rows it
-        is read at): the best ones, a mode replacing a searched one only if it fits better by
-        SEARCH_MARGIN (near ties do not swap rows in and out); True if they changed."""
-        score = np.where(self.readable, row_score, np.inf).reshape(self.n_scales, self.n_modes).min(axis=0)
+    def choose(self, score: np.ndarray) -> bool:
+        """Choose the searched modes from the last step's per-mode scores (each mode's best over
+        the rows it is read at): the best ones, a mode replacing a searched one only if it fits
+        better by SEARCH_MARGIN (near ties do not swap rows in and out); True if they changed."""
         chosen = self.searched.copy()
+        if chosen.sum() == self.search:  # full: the loop below would stop at the best other mode
+            if self.search == self.n_modes or not score[~chosen].min() < (1.0 - SEARCH_MARGIN) * score[chosen].max():
+                return False
         for m in np.argsort(score, kind="stable"):  # ends at the first mode that does not enter
             if chosen[m]:
                 continue
