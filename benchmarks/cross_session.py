@@ -113,7 +113,7 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "default: no cadence calibration": {"cadence_calibration_rate": 0.0},
     "default: cadence calibration 0.2": {"cadence_calibration_rate": 0.2},
     "default: cadence tolerance 8 %": {"cadence_tolerance": 0.08},
-    "default: cadence tolerance 2 %": {"cadence_tolerance": 0.02},
+    "default: cadence tolerance 4 %": {"cadence_tolerance": 0.04},
     "default: SSE (not per sample)": {"normalize_error": False},
     "default: uniform weights": {"recency_half_life": 0.0},
     "default: recency half-life 0.2": {"recency_half_life": 0.2},

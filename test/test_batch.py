@@ -109,13 +109,14 @@ def test_bulk_hands_back_what_it_cannot_do(multispeed_csv: Path, able_bodied) ->
 def test_bulk_equals_the_threaded_float32_step_of_large_libraries(multispeed_csv: Path, able_bodied) -> None:
     """From PARALLEL_MIN_ROWS rows on, both paths read float32 kernels and spread the rows over
     threads (when the process has more than one CPU): the same results as on one thread."""
-    lib = able_bodied.replicated(40)
+    lib = able_bodied.replicated(70)  # >= PARALLEL_MIN_ROWS rows at one time scale
     rec = read_recording(multispeed_csv)
     t, x, idx = rec.time_s[:1600], rec.angles_deg[:1600], rec.index[:1600]
     a, b, one = Estimator(lib), Estimator(lib), Estimator(lib)
     assert a.matcher._kernels.dtype == np.float32
     one.matcher.parallel = False
-    one.matcher.set_scale_band(None)  # chooses the one-thread step
+    one.matcher.set_scale_band(one.matcher.scale_band, one.calibration.params.scale_search_modes)  # the same band,
+    # and the one-thread step
     assert one.matcher._compiled_step is compiled.step_rows
     bulk = run_batch(b, t, x, idx)
     assert_identical(streamed(a, t, x, idx), bulk)

@@ -457,7 +457,8 @@ def _med_walk_with_offsets(able_bodied) -> tuple[np.ndarray, np.ndarray, np.ndar
 def test_walking_calibration_finds_constant_sensor_offsets(able_bodied) -> None:
     """Level walking with sensors that read differently (re-donned; the right thigh 6 deg up):
     the default estimator learns the offsets from confident strides and keeps the mode; without
-    calibration and with the paper's zero tolerance the offsets cost it the mode."""
+    calibration and with the paper's zero tolerance the offsets cost it the mode most of the time
+    (no stride is confident: its cadence is never learnt)."""
     offsets, t, x = _med_walk_with_offsets(able_bodied)
     est = Estimator(able_bodied)
     trace = run_estimator(est, t, x)
@@ -466,7 +467,7 @@ def test_walking_calibration_finds_constant_sensor_offsets(able_bodied) -> None:
     assert set(np.asarray(trace.modes)[tail]) == {"Med"}
     assert Estimator(able_bodied, EstimatorConfig.preset("paper")).config.offset_calibration_rate == 0.0
     off = run_estimator(Estimator(able_bodied, EstimatorConfig(offset_calibration_rate=0.0, offset_tolerance_deg=0.0)), t, x)
-    assert "Med" not in set(np.asarray(off.modes)[tail])
+    assert np.mean(np.asarray(off.modes)[tail] == "Med") < 0.5
 
 
 def test_walking_calibration_counts_near_copies_as_one_mode(able_bodied) -> None:
@@ -505,7 +506,7 @@ def test_cadence_calibration_tells_speed_classes_apart_at_the_wearer_cadence(abl
     amplitudes, noise, 100-500 Hz) walks ramps and stairs, then Fast. The default estimator
     learns the time scale from confident strides and reads the Fast strides as Fast; without the
     calibration they are mostly read as Med (a slower wearer's Fast lasts as long as the kernels'
-    Med). reset_calibration forgets the scale and opens the band again."""
+    Med). reset_calibration forgets the scale and searches every scale again."""
     from synthetic import generate, new_wearer
 
     wearer = new_wearer(1)
@@ -521,7 +522,7 @@ def test_cadence_calibration_tells_speed_classes_apart_at_the_wearer_cadence(abl
     off = run_estimator(Estimator(able_bodied, EstimatorConfig(cadence_calibration_rate=0.0)), rec.time_s, rec.angles_deg)
     assert np.mean(np.asarray(off.modes)[tail] == "Fast") < 0.5
     est.reset_calibration()
-    assert math.isnan(est.cadence_scale) and est.matcher.scale_band.all()
+    assert math.isnan(est.cadence_scale) and est.matcher.searched_modes.sum() == 3  # every scale for the best 3
     assert EstimatorConfig.preset("paper").cadence_calibration_rate == 0.0
 
 
@@ -587,8 +588,8 @@ def test_new_options_keep_the_learnt_calibration(able_bodied) -> None:
 
 def test_adopting_an_early_cadence_keeps_every_scale(able_bodied) -> None:
     """An estimator that has read fewer cadence strides than it needs to narrow the time scales
-    hands over a band that is still open, and the adopting estimator keeps it open too (it
-    narrows from the same stride count as the one it adopts from)."""
+    hands over a band that is still open (the best-fitting modes at every scale), and the adopting
+    estimator keeps it open too (it narrows from the same stride count as the one it adopts from)."""
     x = _stretched_strides(able_bodied, "Med", 8, 0.93)
     t = np.arange(len(x)) / 230.0
     est = Estimator(able_bodied)
@@ -596,11 +597,12 @@ def test_adopting_an_early_cadence_keeps_every_scale(able_bodied) -> None:
         est.update(float(t[i]), x[i])
         if est.calibration.cadence_strides == 1:
             break
-    assert est.calibration.cadence_strides == 1 and est.matcher.scale_band.all()
+    assert est.calibration.cadence_strides == 1 and est.matcher.searched_modes.any()
     other = Estimator(able_bodied, EstimatorConfig(min_dwell_s=0.1))
     other.adopt_calibration(est)
     assert other.calibration.cadence_strides == 1
     np.testing.assert_array_equal(other.matcher.scale_band, est.matcher.scale_band)
+    assert other.matcher.searched_modes.any()
 
 
 def test_cadence_calibration_stays_open_when_the_scales_spread(able_bodied) -> None:

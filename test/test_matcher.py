@@ -14,6 +14,7 @@ from gait_estimator import IncrementalMatcher, KernelLibrary
 from gait_estimator.core import compiled
 from gait_estimator.core.kernels import make_mode, resample_stride
 from gait_estimator.core.matcher import NaiveMatcher
+from gait_estimator.core.scale_band import SEARCH_EVERY
 from gait_estimator.io.readers import read_recording
 
 
@@ -565,6 +566,41 @@ def test_large_libraries_use_the_threaded_float32_step_with_the_same_results(abl
     np.testing.assert_array_equal(a.mode_index, b.mode_index)
     np.testing.assert_allclose(a.sse, b.sse, rtol=1e-10)
     np.testing.assert_allclose(a.phase, b.phase, rtol=0, atol=1e-12)
+
+
+@pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")
+def test_searched_modes_are_read_at_every_scale(multispeed_csv, able_bodied) -> None:
+    """set_scale_band(band, search=k): every mode at the band's scale, the k best-fitting ones at
+    every scale, chosen again every SEARCH_EVERY steps. Both steps agree at every step, also with
+    sensor offsets (the compiled per-shift read-out skips shifts that cannot win: same result);
+    searching every mode equals the open band."""
+    x = read_recording(multispeed_csv).angles_deg[2000:3600]
+    opts = {"time_scales": (0.88, 0.94, 1.0, 1.06, 1.12), "offset_tolerance_deg": 2.0, "normalize": True,
+            "recency_half_life": 0.3}
+    centre = [False, False, True, False, False]
+    out, searched = [], []
+    for backend, search in (("numba", 2), ("numpy", 2), ("numba", len(able_bodied)), ("numba", 0)):
+        m = IncrementalMatcher(able_bodied, backend=backend, **opts)
+        m.set_scale_band(centre if search else None, search=search)
+        rows, sets = [], []
+        for i, d in enumerate(x):
+            if i == 900:
+                m.set_sensor_offset([3.0, -2.0, 1.0, 0.5])
+            sets.append(m.searched_modes)  # the modes this step reads at every scale
+            rows.append(m.step(d))
+        out.append(rows)
+        searched.append(np.array(sets))
+    np.testing.assert_array_equal(searched[0], searched[1])
+    assert 0 < np.count_nonzero(np.diff(searched[0], axis=0).any(axis=1)) < len(x) // SEARCH_EVERY
+    for i, (a, b) in enumerate(zip(out[0], out[1], strict=True)):
+        assert a.mode_index == b.mode_index and np.array_equal(a.variant, b.variant)
+        np.testing.assert_allclose(a.sse, b.sse, rtol=1e-9)
+        assert np.all(a.variant[~searched[0][i]] == 2) and searched[0][i].sum() == 2
+    for a, b in zip(out[2], out[3], strict=True):  # every mode searched: the open band
+        assert a.mode_index == b.mode_index and np.array_equal(a.variant, b.variant)
+        np.testing.assert_allclose(a.sse, b.sse, rtol=1e-9)
+    with pytest.raises(ValueError, match="search"):
+        m.set_scale_band(centre, search=-1)
 
 
 @pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")

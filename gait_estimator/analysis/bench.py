@@ -139,24 +139,50 @@ def calibrated_after(library: KernelLibrary, samples: np.ndarray, backend: str =
     return len(samples)
 
 
+PRESET_RATIO_TARGET = 2.0
+"""The default preset's ``Estimator.update`` may take this many times the paper preset's (median and p99)."""
+
+
+def preset_target_met(row: dict[str, Any]) -> bool:
+    """Whether a default-preset row of ``bench`` is within PRESET_RATIO_TARGET of its paper row,
+    median and p99."""
+    return max(row["median_ratio_to_paper"], row["p99_ratio_to_paper"]) <= PRESET_RATIO_TARGET
+
+
+def _summary(us: np.ndarray) -> dict[str, float]:
+    return {"step_us_median": float(np.median(us)), "step_us_p99": float(np.percentile(us, 99)),
+            "step_us_mean": float(us.mean()), "step_us_max": float(us.max()), "steps_timed": len(us)}
+
+
 def time_presets(library: KernelLibrary, m: int, steps: int, backend: str) -> list[dict[str, Any]]:
-    """``Estimator.update`` of the default and the paper preset at M = m on one synthetic walk:
-    both timed on the same ``steps`` samples after the default preset's walking calibrations have
-    acted (its steady state; the paper preset warmed up on the same samples), and the default
-    preset also while it calibrates (from a full window to then)."""
+    """``Estimator.update`` of the default and the paper preset at M = m on one synthetic walk,
+    fed to both sample by sample in turn (so that both see the same machine load), each timed:
+    while the default preset calibrates (from a full window until its walking calibrations have
+    acted) and on the next ``steps`` samples (its steady state). Rows per preset and stretch, with
+    the matcher's state memory."""
     walk = synthetic_walk(library, 4000 + steps)
     start = calibrated_after(library, walk, backend)
     x = walk[: start + steps]
+    t = np.arange(len(x)) / library.sample_rate_hz
+    presets = ("paper", "default")
+    estimators = [Estimator(library, EstimatorConfig.preset(p), backend=backend) for p in presets]
+    first = estimators[1].matcher.max_window
+    ns = np.empty((len(presets), len(x)))
+    clock = time.perf_counter_ns
+    for i in range(len(x)):
+        ti, xi = float(t[i]), x[i]
+        for k, est in enumerate(estimators):
+            t0 = clock()
+            est.update(ti, xi)
+            ns[k, i] = clock() - t0
     rows = []
-    for preset in ("paper", "default"):
-        est = Estimator(library, EstimatorConfig.preset(preset), backend=backend)
+    for k, preset in enumerate(presets):
+        state = {"state_bytes": estimators[k].matcher.state_bytes()}
         rows.append({"modes": m, "impl": f"estimator ({backend})", "preset": preset, "timed_from_sample": start,
-                     **time_updates(est, x, library.sample_rate_hz, start)})
-    est = Estimator(library, EstimatorConfig.preset("default"), backend=backend)
-    first = est.matcher.max_window
-    if start > first + 10:
-        rows.append({"modes": m, "impl": f"estimator ({backend}), calibrating", "preset": "default",
-                     "timed_from_sample": first, **time_updates(est, x[:start], library.sample_rate_hz, first)})
+                     **_summary(ns[k, start:] / 1e3), **state})
+        if start > first + 10:
+            rows.append({"modes": m, "impl": f"estimator ({backend}), calibrating", "preset": preset,
+                         "timed_from_sample": first, **_summary(ns[k, first:start] / 1e3), **state})
     return rows
 
 
@@ -253,6 +279,8 @@ def bench(
         if preset == "default" and paper is not None and "step_us_median" in r:
             r["median_ratio_to_paper"] = r["step_us_median"] / paper["step_us_median"]
             r["p99_ratio_to_paper"] = r["step_us_p99"] / paper["step_us_p99"]
+            if "state_bytes" in r and "state_bytes" in paper:
+                r["state_ratio_to_paper"] = r["state_bytes"] / paper["state_bytes"]
         if preset == "default" and paper is not None and "samples_per_s" in r:
             r["throughput_ratio_to_paper"] = r["samples_per_s"] / paper["samples_per_s"]
         first = by_key.get((m, f"incremental ({backends[0]})", "paper"))

@@ -132,7 +132,7 @@ def cmd_process(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from ..analysis.bench import bench, drift, load_times, time_reference
+    from ..analysis.bench import bench, drift, load_times, preset_target_met, time_reference
 
     lib = load_library(args.kernels)
     if args.compare_reference and not args.reference_samples:
@@ -168,6 +168,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
             + (f"  offline {r['offline_samples_per_s']:9.0f} samples/s" if "offline_samples_per_s" in r else "")
             + (f"  x{r['median_ratio_to_paper']:.2f} paper (p99 x{r['p99_ratio_to_paper']:.2f})"
                if "p99_ratio_to_paper" in r else "")
+            + (f"; state x{r['state_ratio_to_paper']:.1f}" if "state_ratio_to_paper" in r else "")
+            + (f"; target <= 2x: {'met' if preset_target_met(r) else 'missed'}"
+               if r["impl"].startswith("estimator") and "p99_ratio_to_paper" in r else "")
         )
     for r in report["library_load"]:
         print(f"load {r['modes']}-mode library from {r['format']:<4}: {r['load_s']:.3f} s ({r['file_bytes'] / 1e6:.1f} MB)")

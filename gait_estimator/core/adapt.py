@@ -236,7 +236,7 @@ class Personaliser:
             else:
                 stride = self._history[np.arange(start, step) % h]
                 variant = 0 if result.variant is None else int(result.variant[m])
-                new = adapter.finish_stride(m, stride, float(matcher.lengths[m * matcher.n_scales + variant]))
+                new = adapter.finish_stride(m, stride, float(matcher.lengths[matcher.row_of(m, variant)]))
                 if new is not None:
                     matcher.set_kernel(m, new)
         adapter.track(step, m, est.phase, est.held, est.confidence, est.ready)

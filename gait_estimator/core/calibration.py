@@ -7,7 +7,8 @@ At a heel strike that ends a confidently reported stride (``WalkingCalibration.o
   per-channel offsets (clipped steps); the matcher measures mean differences from them;
 * cadence: the reported mode's best time scale (read between the matcher's scales) moves the
   learnt (log) scale; from ``cadence_min_strides`` strides on every mode is read only at scales
-  near it, so speed classes are told apart at the wearer's own cadence;
+  near it, so speed classes are told apart at the wearer's own cadence (before, at the scale
+  nearest 1, and the ``scale_search_modes`` best-fitting modes at every scale);
 * typical fit: a running mean of the squared RMS fit of those strides;
 * recency weighting (the matcher's ``recency_half_life``) starts after ``recency_after_strides``
   strides: before the offsets and cadence are learnt its shorter memory cannot tell the speed
@@ -54,6 +55,8 @@ class CalibrationParams:
             log time scale wide on each side.
         typical_fit_rate: Smallest weight of one stride in the typical fit.
         recency_after_strides: Strides read before recency weighting starts; 0 = from the start.
+        scale_search_modes: Until the cadence is learnt, the modes matched at every time scale
+            (those that fit best at the scale nearest 1; the others at that scale only).
     """
 
     offset_rate: float = EstimatorConfig.offset_calibration_rate
@@ -69,6 +72,7 @@ class CalibrationParams:
     spread_factor: float = 2.0
     typical_fit_rate: float = 0.1
     recency_after_strides: int = 3
+    scale_search_modes: int = 3
 
 
 class _StrideTrack(NamedTuple):
@@ -128,7 +132,7 @@ class WalkingCalibration:
         self.cadence_strides = 0
         self.cadence_spread = 0.0
         """Running RMS deviation of the strides' log time scale from the learnt one."""
-        self.matcher.set_scale_band(None)
+        self.matcher.set_scale_band(*self._start_band())
         self._last: _StrideTrack | None = None
         if self.recency_waits:
             self.matcher.start_uniform()  # until the switch, which rebuilds the weighted sums from the window
@@ -201,7 +205,7 @@ class WalkingCalibration:
         m, p = est.mode_index, self.params
         variant = 0 if result.variant is None else int(result.variant[m])
         assert result.column is not None
-        x = self.matcher.mean_offset(m * self.matcher.n_scales + variant, int(result.column[m]))
+        x = self.matcher.mean_offset(self.matcher.row_of(m, variant), int(result.column[m]))
         step = np.clip(x - self.sensor_offset_deg, -p.step_deg, p.step_deg)
         self.sensor_offset_deg = np.clip(self.sensor_offset_deg + p.offset_rate * step,
                                          -p.max_offset_deg, p.max_offset_deg)
@@ -224,6 +228,17 @@ class WalkingCalibration:
         self.cadence_spread = math.sqrt(var)
         if self.cadence_strides >= self.params.cadence_min_strides:
             self._narrow_scales()
+
+    def _start_band(self) -> tuple[np.ndarray | None, int]:
+        """The scale band until the cadence is learnt: the scale nearest 1, and every scale for
+        the ``scale_search_modes`` best-fitting modes (every scale for all without cadence
+        learning)."""
+        if not self.learns_cadence:
+            return None, 0
+        distance = np.abs(np.log(self.matcher.time_scales))
+        band = np.zeros(distance.size, dtype=bool)
+        band[int(distance.argmin())] = True
+        return band, self.params.scale_search_modes
 
     def _narrow_scales(self) -> None:
         """Read modes only at the time scales within cadence_tolerance, or spread_factor running

@@ -59,8 +59,9 @@ def step_rows(
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
     decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
-    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, tau: np.ndarray, scratch: np.ndarray,
-    normalize: bool, n_scales: int, allowed: np.ndarray, active: np.ndarray,
+    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, mu_range: np.ndarray, mu_blocks: np.ndarray,
+    tau: np.ndarray,
+    normalize: bool, n_scales: int, readable: np.ndarray, active: np.ndarray,
     out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
@@ -75,11 +76,13 @@ def step_rows(
     lam^N, wsum the weight sum of a full window (N without decay) and wsums (R, 4) the
     age-weighted window sums, updated in place; offset: apply the offset penalty (mu (R, 4)
     kernel means, mu_seg (R, 4, Nmax) per-shift age-weighted means of the kernel with age
-    weights, tau (2, 4): tolerances and sensor offsets; with decay the window's weight W_a and
-    age-weighted sums stand for W and the sums; scratch (R, Nmax): room for per-shift scores);
+    weights, mu_range (R, 2, 4) their minimum and maximum over the shifts, mu_blocks (R, 2, 4, B)
+    the same per block of 16 shifts, tau (2, 4):
+    tolerances and sensor offsets; with decay the window's weight W_a and age-weighted sums stand
+    for W and the sums);
     normalize: divide by the window's weight;
-    allowed (n_scales,) bool: the time scales a mode may be read at (at least one); active: the
-    rows updated and read out (those at allowed scales, or all); the others keep their sums.
+    readable (R,) bool: the rows a mode may be read at (at least one per mode); active: the rows
+    updated and read out (the readable ones, or all); the others keep their sums.
     Writes per active row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
     wmax = ring.shape[0]
@@ -138,19 +141,8 @@ def step_rows(
         if use_offset and not per_shift:
             const = _offset_penalty(s0, s1, s2, s3, wp, mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
-            a0, a1, a2, a3 = s0 / wp, s1 / wp, s2 / wp, s3 / wp
-            t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
-            f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
-            m0, m1, m2, m3 = mu_seg[r, 0], mu_seg[r, 1], mu_seg[r, 2], mu_seg[r, 3]
-            sr = scratch[r]
-            for j in range(n):  # no loop-carried dependence: vectorised
-                x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
-                g0 = max(abs(x0 - f0) - t0, 0.0)
-                g1 = max(abs(x1 - f1) - t1, 0.0)
-                g2 = max(abs(x2 - f2) - t2, 0.0)
-                g3 = max(abs(x3 - f3) - t3, 0.0)
-                sr[j] = er[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
-            best, bj = _argmin(sr, n)
+            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r],
+                                         mu_blocks[r], out_col[r] + 1)
         else:
             best, bj = _argmin(er, n)
             best -= const
@@ -161,11 +153,12 @@ def step_rows(
     n_modes = lens.shape[0] // n_scales
     best_mode = 0
     for m in range(n_modes):
-        r0 = m * n_scales
         rb = -1
-        for r in range(r0, r0 + n_scales):
-            if allowed[r - r0] and (rb < 0 or out_score[r] < out_score[rb]):
-                rb = r
+        vb = 0
+        for v in range(n_scales):  # row v * M + m: mode m at scale v
+            r = v * n_modes + m
+            if readable[r] and (rb < 0 or out_score[r] < out_score[rb]):
+                rb, vb = r, v
         n = lens[rb]
         j = out_col[rb]
         ph = (float(j + 1) % n) / n
@@ -173,7 +166,7 @@ def step_rows(
             ph = 0.0
         out_sse[m] = out_score[rb]
         out_phase[m] = ph
-        out_variant[m] = rb - r0
+        out_variant[m] = vb
         out_column[m] = j
         out_window[m] = n if i + 1 >= n else i + 1
         if out_score[rb] < out_sse[best_mode]:
@@ -232,6 +225,67 @@ def _argmin(v, n):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3):  # pragma: no cover
+    """e[j] minus the offset penalty at column j with the kernel part's means m*[j] (per shift)."""
+    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+    g0 = max(abs(x0 - f0) - t0, 0.0)
+    g1 = max(abs(x1 - f1) - t1, 0.0)
+    g2 = max(abs(x2 - f2) - t2, 0.0)
+    g3 = max(abs(x3 - f3) - t3, 0.0)
+    return e[j] - wp * (x0 * x0 - g0 * g0 + x1 * x1 - g1 * g1 + x2 * x2 - g2 * g2 + x3 * x3 - g3 * g3)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _penalty_bound(a, lo, hi, t, f):  # pragma: no cover - compiled
+    """The largest offset penalty of one channel (``_shift_score``'s g(x) = x^2 - max(|x - f| - t, 0)^2)
+    over window-vs-kernel mean differences x = a - m with m in [lo, hi]: g is convex (a parabola
+    between two tangent lines), so its largest value is at an end."""
+    x0, x1 = a - hi, a - lo
+    g0, g1 = max(abs(x0 - f) - t, 0.0), max(abs(x1 - f) - t, 0.0)
+    return max(x0 * x0 - g0 * g0, x1 * x1 - g1 * g1)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks, guess):  # pragma: no cover
+    """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
+    a*: the window means, mu (4, Nmax) the kernel part's means per shift, mu_range (2, 4) their
+    range, mu_blocks (2, 4, B) per block of 16 shifts). A score is at least e[j] - wp * (the
+    largest penalty any shift of its block can have), so starting from the score at column
+    ``guess`` (the last step's best, moved on by one), only the blocks whose smallest e[j] is
+    within that bound (over all shifts, then over the block's) of the best score so far are
+    scored: the result is the exhaustive scan's (test_matcher compares it with the numpy read-out)."""
+    t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
+    f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
+    m0, m1, m2, m3 = mu[0], mu[1], mu[2], mu[3]
+    bound = wp * (_penalty_bound(a0, mu_range[0, 0], mu_range[1, 0], t0, f0)
+                  + _penalty_bound(a1, mu_range[0, 1], mu_range[1, 1], t1, f1)
+                  + _penalty_bound(a2, mu_range[0, 2], mu_range[1, 2], t2, f2)
+                  + _penalty_bound(a3, mu_range[0, 3], mu_range[1, 3], t3, f3))
+    bj = guess if 0 <= guess < n else 0  # a first candidate: where the last step's best shift moved to
+    best = _shift_score(e, bj, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+    slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
+    for lo in range(0, n, 16):  # in blocks of 16 shifts (SHIFT_BLOCK): one test per block
+        hi = min(lo + 16, n)
+        low = e[lo]
+        for j in range(lo + 1, hi):
+            low = min(low, e[j])
+        if low - bound > best + slack:
+            continue
+        q = lo // 16  # the bound over this block's shifts only
+        near = wp * (_penalty_bound(a0, mu_blocks[0, 0, q], mu_blocks[1, 0, q], t0, f0)
+                     + _penalty_bound(a1, mu_blocks[0, 1, q], mu_blocks[1, 1, q], t1, f1)
+                     + _penalty_bound(a2, mu_blocks[0, 2, q], mu_blocks[1, 2, q], t2, f2)
+                     + _penalty_bound(a3, mu_blocks[0, 3, q], mu_blocks[1, 3, q], t3, f3))
+        if low - near > best + 1e-9 * (abs(best) + abs(near)):
+            continue
+        for j in range(lo, hi):
+            v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+            if v < best or (v == best and j < bj):
+                best, bj = v, j
+    return best, bj
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _aged_update(er, n, a, lw, base, x0, x1, x2, x3, k0, k1, k2, k3, kq):  # pragma: no cover - compiled
     """Running sums of one whole-stride row with age weights, in place from the last column down:
     e[j] = a e[j-1] + base + (1 - lw) ||k_j||^2 - 2 k_j . x, with base = ||d||^2 - lw ||old||^2,
@@ -272,7 +326,7 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
 def run_steps(  # pragma: no cover - compiled
     e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
     decay, lam, lam_w, wsum, wsums,
-    offset, mu, mu_seg, tau, scratch, normalize, n_scales, allowed, active, out_col, out_score,
+    offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize, n_scales, readable, active, out_col, out_score,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
@@ -291,8 +345,8 @@ def run_steps(  # pragma: no cover - compiled
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
         b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
-                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, tau, scratch, normalize,
-                 n_scales, allowed, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
+                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize,
+                 n_scales, readable, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
         best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
         if track.shape[0] == 0:
             continue

@@ -25,6 +25,7 @@ from .matching import (
     check_recency_half_life,
     check_time_scales,
 )
+from .scale_band import SEARCH_EVERY
 
 __all__ = [
     "BACKENDS", "PARALLEL_MIN_ROWS", "IncrementalMatcher", "MatchTrace", "NaiveMatcher", "StepBlock", "StepResult",
@@ -93,7 +94,9 @@ class NaiveMatcher(_MatcherBase):
         self._count += 1
         e = self.full_sse()
         sums = (self.age_weighted_sums() if self._decay else self.window_sums()) if self._offset else None
-        return self._result(self._scores(e, sums))
+        result = self._result(self._scores(e, sums))
+        self._search_step(result.sse)
+        return result
 
     def state_bytes(self) -> int:
         return self._kernels.nbytes + self._ring.nbytes + self._valid.nbytes
@@ -170,8 +173,9 @@ class IncrementalMatcher(_MatcherBase):
         self._last = self.lengths - 1
         # numba outputs, reused every step
         self._out_col = np.zeros(r, dtype=np.int64)
-        self._scratch = np.zeros((r, n) if self._per_shift else (r, 1))  # per-shift scores of the compiled step
         self._out_score = np.zeros(r)
+        if self.backend == "numba":
+            self._row_score = self._out_score  # the compiled step's per-row scores (rows it reads out)
         total = int(self._valid.sum())
         self._resync_block = max(1, min(int(resync_block), total))
         if resync_period > 0:
@@ -191,7 +195,7 @@ class IncrementalMatcher(_MatcherBase):
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
         # Both steps read out only the rows in the scale band: score this mode's rows now.
-        rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
+        rows = self.mode_rows(mode)
         self._sync_rows(rows)
         sums = None
         if self._offset:
@@ -207,15 +211,13 @@ class IncrementalMatcher(_MatcherBase):
         self._synced[:] = -1
         self._synced[rows] = self._count
 
-    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
-        super().set_scale_band(allowed)
+    def _band_changed(self) -> None:
         if self.backend != "numba":
             return
         was = np.zeros(self.n_rows, dtype=np.bool_)
         was[self._active] = True
-        now = np.zeros(self.n_rows, dtype=np.bool_)
-        active = self._rows if self._scale_allowed.all() else self._band_rows
-        now[active] = True
+        now = self._band.readable
+        active = self._rows if now.all() else self._band.rows
         self._synced[was & ~now] = self._count  # rows leaving the band are exact now
         self._active = active
         self._choose_step()
@@ -274,6 +276,7 @@ class IncrementalMatcher(_MatcherBase):
             result = self._step_numpy(np.array((d0, d1, d2, d3)), dsq)
         if self._resync_every and self._count % self._resync_every == 0:
             self._resync()
+        self._search_step(result.sse)
         return result
 
     def weighted_samples(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -297,6 +300,8 @@ class IncrementalMatcher(_MatcherBase):
             raise ValueError("run_steps needs the numba backend")
         if self._resync_every:
             stop = min(stop, start + self._resync_every - self._count % self._resync_every)
+        if self._band.search:
+            stop = min(stop, start + SEARCH_EVERY - self._count % SEARCH_EVERY)
         track = np.zeros(0) if tracker is None else tracker
         near = np.zeros((self.n_modes, self.n_modes), dtype=bool) if near is None else near
         scratch_v, scratch_c, scratch_w = np.empty((3, self.n_modes), dtype=np.int64)
@@ -306,8 +311,9 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, count, samples, squares, start, stop,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self.normalize, self.n_scales,
-            self._scale_allowed, self._active, self._out_col, self._out_score,
+            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
+            self.n_scales,
+            self._band.readable, self._active, self._out_col, self._out_score,
             out.sse, out.phases, out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
             track, near, mid_stride[0], mid_stride[1], self.max_window,
         )
@@ -315,6 +321,8 @@ class IncrementalMatcher(_MatcherBase):
         out.ready[start:done] = count + 1 + np.arange(done - start) >= self.max_window
         if self._resync_every and self._count % self._resync_every == 0:
             self._resync()
+        if done > start:
+            self._search_step(out.sse[done - 1])
         return done, ended
 
     def _step_numba(self, d0: float, d1: float, d2: float, d3: float, dsq: float) -> StepResult:
@@ -325,8 +333,8 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._tau, self._scratch, self.normalize,
-            self.n_scales, self._scale_allowed, self._active,
+            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
+            self.n_scales, self._band.readable, self._active,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
         self._count += 1
@@ -356,11 +364,11 @@ class IncrementalMatcher(_MatcherBase):
         self._ring_sq[i % w] = dsq
         if not (self._offset or self.normalize):
             return self._result(self._e)
-        if self._scale_allowed.all():
+        if self._band.readable.all():
             return self._result(self._scores(self._e, sums))
         # As the compiled step: read out only the rows in the scale band (mode_row_scores scores
         # a mode's other rows when they are asked for).
-        rows = self._band_rows
+        rows = self._band.rows
         score = np.full(self._e.shape, np.inf)
         score[rows] = self._scores(self._e[rows], None if sums is None else sums[rows], rows)
         return self._result(score)
@@ -412,7 +420,11 @@ class IncrementalMatcher(_MatcherBase):
         hi = min(lo + self._resync_block, self._valid.size)
         flat = lo + np.flatnonzero(self._valid.ravel()[lo:hi])
         rows, diag = np.divmod(flat, self.max_length)
-        if flat.size:
+        if self._active is not self._rows:  # rows the compiled step leaves are rebuilt when they come back
+            inside = np.zeros(self.n_rows, dtype=np.bool_)
+            inside[self._active] = True
+            rows, diag = rows[inside[rows]], diag[inside[rows]]
+        if rows.size:
             cols = (diag + self._count) % self.lengths[rows]
             self._e[rows, cols] = self._window_sse(rows, cols)
         if hi >= self._valid.size:
@@ -453,7 +465,7 @@ class IncrementalMatcher(_MatcherBase):
             raise ValueError(f"new kernel for mode {self.mode_names[mode]!r} must be finite with shape "
                              f"{self.library.modes[mode].samples.shape}, got {k.shape}")
         self._set_rows(mode, k)
-        rows = np.arange(mode * self.n_scales, (mode + 1) * self.n_scales)
+        rows = self.mode_rows(mode)
         self._update_row_constants(rows)
         self._e[rows] = self._rows_sse_fft(rows, self._lam)
         if self._active is not self._rows:  # outside the band: the age-weighted sums too
@@ -492,5 +504,5 @@ class IncrementalMatcher(_MatcherBase):
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
         arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid,
-                  self._psum_ring, self._mu, self._mu_seg, self._wsums, self._scratch]
+                  self._psum_ring, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._wsums]
         return int(sum(a.nbytes for a in arrays))

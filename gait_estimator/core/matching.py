@@ -43,7 +43,8 @@ Options (the defaults are the paper, which reproduces the reference exactly):
   weighted mean of the kernel part at each shift (precomputed, (R, 4, N)); the penalty is then
   the exact minimum of the weighted SSE over offsets within tau, as above. 0 = uniform weights
   (the paper); ``set_recency_half_life`` changes it at any sample;
-* ``set_scale_band``: the time scales a mode may be read at (all by default). The estimator's
+* ``set_scale_band``: the time scales a mode may be read at (all by default), and how many of
+  the best-fitting modes are read at every scale besides (``scale_band.py``). The estimator's
   cadence calibration narrows them to the wearer's learnt cadence; every row keeps its running
   sums exactly (the compiled step updates only the band's rows and rebuilds the others' from the
   window when they are needed again), so the band may change at any sample.
@@ -59,8 +60,11 @@ import numpy as np
 
 from .channels import N_CHANNELS, Sample, sample_values
 from .kernels import KernelLibrary, resample_stride
+from .scale_band import ScaleBand
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
+SHIFT_BLOCK = 16
+"""Shifts per block of the compiled per-shift read-out's bounds (``compiled._argmin_per_shift``)."""
 
 @dataclass(frozen=True)
 class StepResult:
@@ -188,8 +192,9 @@ class _MatcherBase:
         self._tau = np.stack([tolerance, np.zeros(N_CHANNELS)])
         self._offset = self.offset_tolerance_deg > 0
         base = library.lengths
-        # Rows are mode-major: row m * S + s is mode m at time scale s.
-        self.lengths = np.maximum(2, np.rint(np.outer(base, self.time_scales))).astype(np.int64).reshape(-1)
+        # Rows are scale-major: row s * M + m is mode m at time scale s (the rows of one scale, which
+        # the compiled step updates once the cadence is learnt, lie next to each other in memory).
+        self.lengths = np.maximum(2, np.rint(np.outer(self.time_scales, base))).astype(np.int64).reshape(-1)
         self.windows = self.lengths  # every row compares its whole stride
         self.n_rows = int(self.lengths.size)
         self.max_length = int(self.lengths.max())
@@ -201,13 +206,15 @@ class _MatcherBase:
         self._rows = np.arange(self.n_rows)
         self._all = np.arange(self.n_modes)
         self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
-        self._scale_allowed = np.ones(self.n_scales, dtype=np.bool_)
-        self._band_rows = np.arange(self.n_rows)  # the rows at those scales, mode-major
+        self._band = ScaleBand(self.n_modes, self.n_scales)  # the rows read out
         self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
         self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
         self._mu = np.zeros((self.n_rows, N_CHANNELS))
         # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
         self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._per_shift else 1))
+        self._mu_seg_range = np.zeros((self.n_rows, 2, N_CHANNELS))  # per row: min and max of mu_seg over shifts
+        blocks = -(-self._mu_seg.shape[2] // SHIFT_BLOCK)
+        self._mu_seg_blocks = np.zeros((self.n_rows, 2, N_CHANNELS, blocks))  # the same per block of shifts
         for m in range(self.n_modes):
             self._set_rows(m, library.modes[m].samples)
         self._ring = np.zeros((self.max_window, N_CHANNELS))
@@ -218,7 +225,7 @@ class _MatcherBase:
 
     def _set_rows(self, mode: int, samples: np.ndarray) -> None:
         """(Re)build the rows of ``mode`` from its kernel ``samples`` (N_m, 4), degrees."""
-        for r in range(mode * self.n_scales, (mode + 1) * self.n_scales):
+        for r in self.mode_rows(mode):
             n = int(self.lengths[r])
             # float32-representable values: the compiled step streams a float32 copy (half the
             # memory traffic); every path computes with exactly these values, in float64
@@ -227,7 +234,15 @@ class _MatcherBase:
             self._kernels[r, :, :n] = k.T
             self._mu[r] = k.mean(axis=0)
             if self._mu_seg.shape[2] > 1:
-                self._mu_seg[r, :, :n] = self._shift_means(k, r)
+                self._set_shift_means(r, self._shift_means(k, r))
+
+    def row_of(self, mode: int, scale: int) -> int:
+        """The row of ``mode`` at time scale index ``scale``."""
+        return scale * self.n_modes + mode
+
+    def mode_rows(self, mode: int) -> np.ndarray:
+        """The rows of ``mode``, (S,), ``time_scales`` order."""
+        return mode + self.n_modes * np.arange(self.n_scales)
 
     def _weights(self, half_life: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per row: the weight factor per sample of age lambda, lambda^W (the weight of the sample
@@ -257,7 +272,7 @@ class _MatcherBase:
             self._means_half_life = h
             for r in range(self.n_rows):
                 n = int(self.lengths[r])
-                self._mu_seg[r, :, :n] = self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r)
+                self._set_shift_means(r, self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r))
         self._reweighted()
 
     def start_uniform(self) -> None:
@@ -277,6 +292,16 @@ class _MatcherBase:
 
     def _reweighted(self) -> None:
         """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
+
+    def _set_shift_means(self, r: int, means: np.ndarray) -> None:
+        """Row ``r``'s per-shift kernel means (4, n) and their range over all shifts and over each
+        block of SHIFT_BLOCK shifts."""
+        n = means.shape[1]
+        self._mu_seg[r, :, :n] = means
+        self._mu_seg_range[r] = means.min(axis=1), means.max(axis=1)
+        starts = np.arange(0, n, SHIFT_BLOCK)
+        self._mu_seg_blocks[r, :, :, : starts.size] = np.minimum.reduceat(means, starts, axis=1), np.maximum.reduceat(
+            means, starts, axis=1)
 
     def _shift_means(self, k: np.ndarray, r: int) -> np.ndarray:
         """Per column j, the (weighted) mean of the kernel part row ``r``'s window is compared with
@@ -312,23 +337,35 @@ class _MatcherBase:
     @property
     def scale_band(self) -> np.ndarray:
         """Per time scale, whether a mode may be read at it (S,) bool; a copy."""
-        return self._scale_allowed.copy()
+        return self._band.allowed.copy()
 
-    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None) -> None:
+    @property
+    def searched_modes(self) -> np.ndarray:
+        """The modes read at every time scale besides the band's (``set_scale_band``'s
+        ``search``), (M,) bool; a copy."""
+        return self._band.searched.copy()
+
+    def set_scale_band(self, allowed: Sequence[bool] | np.ndarray | None, search: int = 0) -> None:
         """Read every mode only at the time scales flagged in ``allowed`` (S,) (``time_scales``
-        order; None = all). The running sums of every row are kept, so this may change at any
-        sample."""
-        a = np.ones(self.n_scales, dtype=np.bool_) if allowed is None else np.asarray(allowed, dtype=np.bool_).reshape(-1)
-        if a.size != self.n_scales or not a.any():
-            raise ValueError(f"scale band needs {self.n_scales} flags, at least one true, got {a.tolist()}")
-        self._scale_allowed[:] = a
-        self._band_rows = (np.arange(self.n_modes)[:, None] * self.n_scales + np.flatnonzero(a)[None, :]).ravel()
+        order; None = all), and the ``search`` modes that fit best at every scale (chosen again
+        every ``SEARCH_EVERY`` steps: ``ScaleBand``). The running sums of every row are kept, so
+        this may change at any sample."""
+        self._band.set(allowed, search, self._row_score)
+        self._band_changed()
+
+    def _band_changed(self) -> None:
+        """The rows read out changed (nothing to do for the naive matcher)."""
+
+    def _search_step(self, score: np.ndarray) -> None:
+        """After a step with per-mode ``score`` (M,): every ``SEARCH_EVERY`` steps, choose the
+        searched modes again."""
+        if self._band.after_step(self._count, score):
+            self._band_changed()
 
     def mode_row_scores(self, mode: int) -> np.ndarray:
         """The best score of every row (time scale) of ``mode`` at the last step, (S,), whatever
         the scale band."""
-        s = self.n_scales
-        return self._row_score[mode * s : (mode + 1) * s]
+        return self._row_score[self.mode_rows(mode)]
 
     def best_scale_index(self, mode: int) -> int:
         """Index in ``time_scales`` of the row of ``mode`` that scored best at the last step,
@@ -446,11 +483,11 @@ class _MatcherBase:
         self._row_score = best
         s = self.n_scales
         if s > 1:
-            per_mode = best.reshape(self.n_modes, s)
-            if not self._scale_allowed.all():
-                per_mode = np.where(self._scale_allowed, per_mode, np.inf)
-            variant = per_mode.argmin(axis=1)
-            rows = self._all * s + variant
+            per_mode = best.reshape(s, self.n_modes)
+            if not self._band.readable.all():
+                per_mode = np.where(self._band.readable.reshape(s, self.n_modes), per_mode, np.inf)
+            variant = per_mode.argmin(axis=0)
+            rows = variant * self.n_modes + self._all
         else:
             variant, rows = None, self._all
         cols, sse = cols[rows], best[rows]

@@ -96,7 +96,7 @@ class EstimatorConfig:
     offset_tolerance_deg: float = option(2.0, "per-channel window-vs-kernel mean difference (deg), beyond the "
                                          "learnt sensor offset, that costs nothing; .inf = shapes only; 0 = none",
                                          0.0, advanced=True)
-    cadence_tolerance: float = option(0.04, "relative band around the learnt time scale in which modes are read "
+    cadence_tolerance: float = option(0.02, "relative band around the learnt time scale in which modes are read "
                                       "(wider while strides spread)", advanced=True)
     normalize_error: bool = option(True, "compare modes by mean squared error per window sample instead of SSE",
                                    False, advanced=True)
