@@ -172,8 +172,8 @@ def test_tuples_and_arrays_give_the_same_estimates(able_bodied) -> None:
     a, b = Estimator(able_bodied), Estimator(able_bodied)
     for i in range(len(x)):
         ea, eb = a.update(t[i], x[i]), b.update(float(t[i]), tuple(x[i].tolist()))
-        fields = ("mode_index", "phase", "confidence", "cadence_ratio", "phase_rate", "held")
-        assert [getattr(ea, f) for f in fields] == [getattr(eb, f) for f in fields]
+        fields = ("mode_index", "mode", "state", "phase", "confidence", "cadence_ratio", "phase_rate", "held")
+        np.testing.assert_equal([getattr(ea, f) for f in fields], [getattr(eb, f) for f in fields])
         np.testing.assert_array_equal(ea.sse, eb.sse)
 
 

@@ -58,6 +58,8 @@ OPTIONS: tuple[Option, ...] = (
            "'' = any"),
     Option("adapt_rate", 0.0, "online personalisation: weight of one confident stride in its mode's kernel, "
            "[0, 1]; 0 = off"),
+    Option("states", True, "report stand (segments still) and unknown (no kernel fits) as the mode, no mode "
+           "or phase while not ready (docs/controller.md); false = a library mode always", False),
     Option("max_gap_s", 0.5, "a longer gap (s) between samples restarts the window; 0 = never"),
     Option("calibration_reset_gap_s", 5.0, "a longer gap (s) between samples also forgets the learnt sensor "
            "offsets and cadence (sensors may have been re-donned); 0 = never", 0.0),
@@ -129,6 +131,7 @@ class EstimatorConfig:
     adapt_rate: float = 0.0
     adapt_min_confidence: float = 0.2
     adapt_max_step_deg: float = 5.0
+    states: bool = True
     max_gap_s: float = 0.5
     calibration_reset_gap_s: float = 5.0
 
