@@ -12,7 +12,7 @@ Definitions (docs/training.md, "`evaluate`: definitions"):
   ``strides`` (0.6-2.5 s), elsewhere none.
 * Phase error is circular, ``min(|a - b|, 1 - |a - b|)``, a fraction of a stride (0-0.5);
   ``phase_error_*`` use correctly classified evaluated rows with phase truth (as the paper),
-  ``phase_error_all_*`` every evaluated row with phase truth.
+  ``phase_error_all_*`` every evaluated row with phase truth and a phase (not stand or unknown).
 * ``steady``: the same over rows at least one matcher window (``settle_s``, the time the
   predictions took to become ready) after the start of their run of identical truth labels, i.e.
   once the whole window holds data of the current mode (the paper evaluates steady-state trials).
@@ -233,7 +233,7 @@ def evaluate(
     evaluated = matched & pred.ready & (labels != "")
     al = Aligned(t, pred.mode, pred.phase, pred.ready, pred.sse, pred.sse_modes, labels, correct, ph_true, evaluated, hs)
     err = circular_error(pred.phase, np.nan_to_num(ph_true))
-    has_phase = evaluated & np.isfinite(ph_true)
+    has_phase = evaluated & np.isfinite(ph_true) & np.isfinite(pred.phase)
     good = has_phase & correct
     names, matrix = _confusion(pred, labels, evaluated)
     settle = settle_time(pred)

@@ -1,0 +1,83 @@
+"""Whether a stream's angles can be degrees: the check that catches ``input_units`` set wrong.
+
+The estimator reads degrees (converted from the input's configured units). Segment angles of a
+person lie within +-180 deg, and walking swings the thigh and shank by tens of degrees. So, per
+block of ``BLOCK_S`` of input (a verdict within two blocks):
+
+* any |angle| above ``MAX_DEG``: these cannot be degrees (degrees read as radians give 57x);
+* every |angle| within ``RADIAN_BOUND`` while at least two channels move by ``RADIAN_RANGE`` or
+  more: radians read as degrees (walking in radians: thigh and shank ranges of 0.5-1.2). A
+  standing wearer (ranges below it) is never flagged, whatever the angles.
+
+``UnitsCheck.observe`` is the one rule, O(1) per sample; the node warns (throttled) and its
+diagnostics say WARN, the offline commands print one warning line (``first_problem``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+BLOCK_S = 1.0
+MAX_DEG = 360.0
+RADIAN_BOUND = math.pi * 1.05
+RADIAN_RANGE = 0.4
+
+
+class UnitsCheck:
+    """Watches a stream of angles (degrees, as converted from ``input_units``) and says when they
+    cannot be degrees. ``problem`` keeps the first verdict until ``reset``."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.problem: str | None = None
+        self._start: float | None = None
+        self._low = [math.inf] * 4
+        self._high = [-math.inf] * 4
+
+    def observe(self, time_s: float, x: Sequence[float]) -> str | None:
+        """Take one sample ``x`` (4 angles, degrees) at ``time_s`` (s); return a new verdict (a
+        sentence) the first time the block it ends shows angles that cannot be degrees."""
+        low, high = self._low, self._high
+        for c in range(4):
+            v = x[c]
+            if v < low[c]:
+                low[c] = v
+            if v > high[c]:
+                high[c] = v
+        if self._start is None:
+            self._start = time_s
+        if time_s - self._start < BLOCK_S or self.problem is not None:
+            return None
+        verdict = block_verdict(low, high)
+        self._start, self._low, self._high = None, [math.inf] * 4, [-math.inf] * 4
+        if verdict is not None:
+            self.problem = verdict
+        return verdict
+
+
+def block_verdict(low: Sequence[float], high: Sequence[float]) -> str | None:
+    """The verdict on a block whose angles (degrees) ranged from ``low`` to ``high`` per channel."""
+    peak = max(max(abs(v) for v in low), max(abs(v) for v in high))
+    if peak > MAX_DEG:
+        return (f"angles reach {peak:.0f} deg: not degrees (radians read as degrees give at most "
+                f"{MAX_DEG:.0f}); the input is likely in degrees read as radians")
+    moving = sum(1 for a, b in zip(low, high, strict=True) if b - a >= RADIAN_RANGE)
+    if peak <= RADIAN_BOUND and moving >= 2:
+        return (f"angles stay within +-{peak:.2f} deg while the segments move: the input is likely in "
+                "radians read as degrees")
+    return None
+
+
+def first_problem(time_s: np.ndarray, angles_deg: np.ndarray) -> tuple[float, str] | None:
+    """``UnitsCheck`` over a whole recording: (time of the verdict, s; the verdict), or None."""
+    check = UnitsCheck()
+    for t, row in zip(np.asarray(time_s).tolist(), np.asarray(angles_deg).tolist(), strict=True):
+        verdict = check.observe(t, row)
+        if verdict is not None:
+            return t, verdict
+    return None
