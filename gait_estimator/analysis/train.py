@@ -35,6 +35,7 @@ import numpy as np
 from .. import __version__
 from ..core.errors import GaitEstimatorError
 from ..core.kernels import KernelLibrary, KernelMode, make_mode
+from ..core.states import FIT_LIMIT_KEY, fit_limit_deg
 from ..io.library_io import REFERENCE_MODE_IDS
 from ..io.recording import Recording
 from .strides import DetectionOptions, heel_strikes, normalise_strides, resample_uniform, stride_bounds
@@ -333,6 +334,7 @@ def train_mode(
         "duration_min_s": round(float(kd.min()), 5),
         "duration_max_s": round(float(kd.max()), 5),
         "stride_rms_from_kernel_deg": round(float(spread.mean()), 4),
+        FIT_LIMIT_KEY: round(fit_limit_deg(strides, kernel), 4),
         "sample_rate_hz": rate,
         "rejected": [s.as_dict() for s in infos if s.rejected],
         "sources": sorted({s for s, _, _ in parts}),

@@ -4,13 +4,14 @@ The stage after the supervisor (``Estimator._step``, and in bulk ``batch.py``). 
 sample, from the angles it matched and the supervisor's estimate:
 
 * ``not_ready``: the matcher's window is not full: no mode (``""``) and no phase (NaN);
-* ``stand``: the segments have been still for ``stand_after_s``: every matched channel's angle
-  within ``still_speed_dps * still_tau_s`` of its exponential average (time constant
-  ``still_tau_s``), i.e. a smoothed angular speed below ``still_speed_dps``. Ends at the first
-  sample that moves faster;
-* ``unknown``: the reported mode's fit (``fit_rms_deg``) has been beyond that mode's fit limit for
-  ``unknown_after_s``: a library taught or trained here stores the limit per mode
-  (``fit_limit_deg``, in the mode's ``info``); others get ``default_fit_limit_deg``;
+* ``stand``: the segments have been still for ``stand_after_s``: every matched channel's smoothed
+  angular speed (``state_step``) below ``still_speed_dps``. Ends at the first sample that moves
+  faster;
+* ``unknown``: the reported mode's fit (``fit_rms_deg``) has been beyond that mode's fit limit, or
+  the stride rate (``phase_rate``) above ``max_cadence_ratio`` times its kernel's, for
+  ``unknown_after_s`` (and stays until it has been within it as long): a library taught or
+  trained here stores each mode's limit (``fit_limit_deg`` in its ``info``, ``fit_limit_deg``
+  here) times ``fit_limit_scale``; others get ``default_fit_limit_deg``;
 * ``walking``: otherwise: a library mode, with its phase.
 
 ``mode`` reads ``stand`` or ``unknown`` in those states, and the phase is NaN in every state but
@@ -63,20 +64,27 @@ class StateParams:
     Attributes:
         enabled: Report ``stand`` and ``unknown`` and blank mode/phase while not ready.
         still_speed_dps: Smoothed angular speed (deg/s) below which a segment is still.
-        still_tau_s: Time constant (s) of the angle average the speed is read against.
+        fast_tau_s: Time constant (s) of the fast angle average (noise smoothing).
+        slow_tau_s: Time constant (s) of the slow angle average the fast one is read against.
         stand_after_s: Seconds of stillness before ``stand``.
         fit_limit_scale: Factor on a mode's stored fit limit.
         default_fit_limit_deg: Fit limit (deg RMS) of a mode with none stored.
-        unknown_after_s: Seconds beyond the fit limit before ``unknown``.
+        max_cadence_ratio: Stride rate (``phase_rate``) over the reported mode's kernel's above
+            which no kernel variant fits either (running-like strides; slower strides are walking:
+            turns and first steps).
+        unknown_after_s: Seconds beyond the fit limit before ``unknown``, and within it before
+            walking again.
     """
 
     enabled: bool = True
     still_speed_dps: float = 10.0
-    still_tau_s: float = 0.1
-    stand_after_s: float = 0.3
-    fit_limit_scale: float = 1.5
-    default_fit_limit_deg: float = 8.0
-    unknown_after_s: float = 0.1
+    fast_tau_s: float = 0.05
+    slow_tau_s: float = 0.15
+    stand_after_s: float = 0.2
+    fit_limit_scale: float = 2.5
+    default_fit_limit_deg: float = 12.0
+    max_cadence_ratio: float = 1.3
+    unknown_after_s: float = 0.2
 
     def limits(self, library: KernelLibrary) -> np.ndarray:
         """Each mode's fit limit, degrees RMS, (M,)."""
@@ -96,40 +104,66 @@ def fit_limit_deg(strides: np.ndarray, kernel: np.ndarray) -> float:
     return float(rms.max())
 
 
-MEMORY = 8
-"""state_step's memory: known, last time, the four angle averages, still since, over limit since."""
+MEMORY = 17
+"""state_step's memory: known, last time, fast (4) and slow (4) angle averages, still since, over
+the limit since, unknown (1.0) or not, within the limit since; the last interval and its two
+smoothing weights (resampled input repeats one interval)."""
 
 
 def state_step(mem, time_s: float, x0: float, x1: float, x2: float, x3: float, active, ready: bool,
-               fit: float, limit: float, still_dps: float, tau: float, stand_after: float,
-               unknown_after: float) -> int:
+               fit: float, limit: float, cadence: float, max_cadence: float, still_dps: float, fast_tau: float,
+               slow_tau: float, stand_after: float, unknown_after: float) -> int:
     """The state of one matcher sample at ``time_s`` (seconds), angles ``x0..x3`` (degrees),
     ``active`` (4,) 1.0 for matched channels; ``mem`` (MEMORY,) updated in place; ``fit`` and
-    ``limit``: the reported mode's fit and its limit, degrees."""
+    ``limit``: the reported mode's fit and its limit, degrees; ``cadence``: the wearer's stride
+    rate over the reported mode's kernel's (nan unknown), ``max_cadence`` its upper limit.
+
+    Stillness: each angle's fast and slow exponential averages (time constants ``fast_tau`` <
+    ``slow_tau``, s) differ by speed x (slow_tau - fast_tau) for an angle moving at a steady speed,
+    and by little for sensor noise."""
     if mem[0] == 0.0:
-        mem[0], mem[2], mem[3], mem[4], mem[5], mem[6], mem[7] = 1.0, x0, x1, x2, x3, time_s, math.nan
+        for c in range(4):
+            v = (x0, x1, x2, x3)[c]
+            mem[2 + c] = v
+            mem[6 + c] = v
+        mem[0], mem[10], mem[11], mem[12], mem[13], mem[14] = 1.0, time_s, math.nan, 0.0, math.nan, math.nan
     else:
-        k = 1.0 - math.exp(-(time_s - mem[1]) / tau)
-        mem[2] += k * (x0 - mem[2])
-        mem[3] += k * (x1 - mem[3])
-        mem[4] += k * (x2 - mem[4])
-        mem[5] += k * (x3 - mem[5])
+        dt = time_s - mem[1]
+        if dt != mem[14]:
+            mem[14], mem[15], mem[16] = dt, 1.0 - math.exp(-dt / fast_tau), 1.0 - math.exp(-dt / slow_tau)
+        kf, ks = mem[15], mem[16]
+        mem[2] += kf * (x0 - mem[2])
+        mem[3] += kf * (x1 - mem[3])
+        mem[4] += kf * (x2 - mem[4])
+        mem[5] += kf * (x3 - mem[5])
+        mem[6] += ks * (x0 - mem[6])
+        mem[7] += ks * (x1 - mem[7])
+        mem[8] += ks * (x2 - mem[8])
+        mem[9] += ks * (x3 - mem[9])
     mem[1] = time_s
-    d = max(active[0] * abs(x0 - mem[2]), active[1] * abs(x1 - mem[3]), active[2] * abs(x2 - mem[4]),
-            active[3] * abs(x3 - mem[5]))
-    if d >= still_dps * tau:
-        mem[6] = time_s
-    if not ready:
-        mem[7] = math.nan
-        return 0
-    if time_s - mem[6] >= stand_after - 1e-9:
-        mem[7] = math.nan
-        return 2
-    if fit > limit:
-        if math.isnan(mem[7]):
-            mem[7] = time_s
-        return 3 if time_s - mem[7] >= unknown_after - 1e-9 else 1
-    mem[7] = math.nan
+    d = max(active[0] * abs(mem[2] - mem[6]), active[1] * abs(mem[3] - mem[7]), active[2] * abs(mem[4] - mem[8]),
+            active[3] * abs(mem[5] - mem[9]))
+    if d >= still_dps * (slow_tau - fast_tau):
+        mem[10] = time_s
+    if not ready or time_s - mem[10] >= stand_after - 1e-9:
+        mem[11], mem[12], mem[13] = math.nan, 0.0, math.nan
+        return 0 if not ready else 2
+    # unknown after unknown_after s beyond a limit, walking again after as long within them
+    if fit > limit or cadence > max_cadence:
+        mem[13] = math.nan
+        if math.isnan(mem[11]):
+            mem[11] = time_s
+        if mem[12] > 0.0 or time_s - mem[11] >= unknown_after - 1e-9:
+            mem[12] = 1.0
+            return 3
+        return 1
+    mem[11] = math.nan
+    if mem[12] > 0.0:
+        if math.isnan(mem[13]):
+            mem[13] = time_s
+        if time_s - mem[13] < unknown_after - 1e-9:
+            return 3
+        mem[12], mem[13] = 0.0, math.nan
     return 1
 
 
@@ -147,6 +181,8 @@ class StateTracker:
         self.enabled = bool(params.enabled)
         self.limits = params.limits(library)
         self._limit_list: list[float] = self.limits.tolist()
+        self.durations = np.array([m.stride_duration_s for m in library.modes])
+        self._duration_list: list[float] = self.durations.tolist()
         self._active = (np.asarray(channel_weights, dtype=np.float64) > 0).astype(np.float64)
         self._active_list: list[float] = self._active.tolist()
         self.names = reported_names(library.mode_names)
@@ -162,8 +198,9 @@ class StateTracker:
             return est if est.ready else est.in_state(NOT_READY, est.mode, est.phase)
         p = self.params
         state = state_step(self._mem, time_s, x[0], x[1], x[2], x[3], self._active_list, est.ready,
-                           est.fit_rms_deg, self._limit_list[est.mode_index], p.still_speed_dps, p.still_tau_s,
-                           p.stand_after_s, p.unknown_after_s)
+                           est.fit_rms_deg, self._limit_list[est.mode_index],
+                           est.phase_rate * self._duration_list[est.mode_index], p.max_cadence_ratio,
+                           p.still_speed_dps, p.fast_tau_s, p.slow_tau_s, p.stand_after_s, p.unknown_after_s)
         if state == WALKING:
             return est
         return est.in_state(state, self.names[int(name_index(state, est.mode_index, len(self.names)))], math.nan)
@@ -179,9 +216,10 @@ class StateTracker:
         state = np.empty(n, dtype=np.int64)
         mem = np.asarray(self._mem, dtype=np.float64)
         limit = self.limits[columns["mode_index"]] if n else np.zeros(0)
+        cadence = columns["phase_rate"] * self.durations[columns["mode_index"]] if n else np.zeros(0)
         _state_rows(mem, time_s, np.ascontiguousarray(x, dtype=np.float64), self._active, columns["ready"],
-                    columns["fit_rms_deg"], limit, p.still_speed_dps, p.still_tau_s, p.stand_after_s,
-                    p.unknown_after_s, state)
+                    columns["fit_rms_deg"], limit, cadence, p.max_cadence_ratio, p.still_speed_dps, p.fast_tau_s,
+                    p.slow_tau_s, p.stand_after_s, p.unknown_after_s, state)
         self._mem = mem.tolist()
         phase = np.where(state == WALKING, columns["phase"], math.nan)
         index = name_index(state, columns["mode_index"], len(self.names))
@@ -203,9 +241,9 @@ _state_step = compiled.njit(cache=True, nogil=True)(state_step)
 
 
 @compiled.njit(cache=True, nogil=True)
-def _state_rows(mem, time_s, x, active, ready, fit, limit, still_dps, tau, stand_after, unknown_after,
-                state):  # pragma: no cover - compiled
+def _state_rows(mem, time_s, x, active, ready, fit, limit, cadence, max_cadence, still_dps, fast_tau, slow_tau,
+                stand_after, unknown_after, state):  # pragma: no cover - compiled
     for g in range(time_s.shape[0]):
         state[g] = _state_step(mem, time_s[g], x[g, 0], x[g, 1], x[g, 2], x[g, 3], active, ready[g], fit[g],
-                               limit[g], still_dps, tau, stand_after, unknown_after)
+                               limit[g], cadence[g], max_cadence, still_dps, fast_tau, slow_tau, stand_after, unknown_after)
 
