@@ -24,8 +24,9 @@ Definitions (docs/training.md, "`evaluate`: definitions"):
 * Switches (``switch_metrics``): a change of the reported mode between consecutive ready rows
   (``stand`` and ``unknown`` included) is *false* when it falls on a labelled walking row (not
   ``stand``) and no truth label changed from ``SWITCH_WINDOW_S`` before it to ``SWITCH_LEAD_S``
-  after it (labels mark motion to a few tenths of a second); per minute of labelled walking. Delay: from a change of the truth label to the first ready row reporting a
-  mode accepted for the new label, within the window (else missed).
+  after it (labels mark motion to a few tenths of a second); per minute of labelled walking.
+  Delay: from a change of the truth label to the first ready row reporting a mode accepted for
+  the new label, within ``SWITCH_WINDOW_S`` (else missed).
 """
 
 from __future__ import annotations
