@@ -1,13 +1,15 @@
 """Whether a stream's angles can be degrees: the check that catches ``input_units`` set wrong.
 
 The estimator reads degrees (converted from the input's configured units). Segment angles of a
-person lie within +-180 deg, and walking swings the thigh and shank by tens of degrees. So, per
-block of ``BLOCK_S`` of input (a verdict within two blocks):
+person lie within +-180 deg, and walking swings the thigh and shank by tens of degrees. So, at
+the end of every ``BLOCK_S`` of input, over that block and the one before:
 
 * any |angle| above ``MAX_DEG``: these cannot be degrees (degrees read as radians give 57x);
-* every |angle| within ``RADIAN_BOUND`` while at least two channels move by ``RADIAN_RANGE`` or
-  more: radians read as degrees (walking in radians: thigh and shank ranges of 0.5-1.2). A
-  standing wearer (ranges below it) is never flagged, whatever the angles.
+* every |angle| within ``RADIAN_BOUND`` while one channel moves by ``RADIAN_RANGE`` or more and
+  another by half that: radians read as degrees (walking in radians: segment angles within
+  +-1.2, the shank's range about 1, the thigh's 0.7). A standing wearer sways by less (0.6 deg
+  in a second on Multispeed); one whose four angles all stay within +-1.6 deg while swaying more
+  than that would be flagged.
 
 ``UnitsCheck.observe`` is the one rule, O(1) per sample; the node warns (throttled) and its
 diagnostics say WARN, the offline commands print one warning line (``first_problem``).
@@ -20,10 +22,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-BLOCK_S = 1.0
+BLOCK_S = 0.5
 MAX_DEG = 360.0
-RADIAN_BOUND = math.pi * 1.05
-RADIAN_RANGE = 0.4
+RADIAN_BOUND = 1.6
+RADIAN_RANGE = 0.8
 
 
 class UnitsCheck:
@@ -38,6 +40,7 @@ class UnitsCheck:
         self._start: float | None = None
         self._low = [math.inf] * 4
         self._high = [-math.inf] * 4
+        self._before: tuple[list[float], list[float]] | None = None  # the previous block's low, high
 
     def observe(self, time_s: float, x: Sequence[float]) -> str | None:
         """Take one sample ``x`` (4 angles, degrees) at ``time_s`` (s); return a new verdict (a
@@ -53,7 +56,10 @@ class UnitsCheck:
             self._start = time_s
         if time_s - self._start < BLOCK_S or self.problem is not None:
             return None
-        verdict = block_verdict(low, high)
+        before = self._before or (low, high)
+        verdict = block_verdict([min(a, b) for a, b in zip(low, before[0], strict=True)],
+                                [max(a, b) for a, b in zip(high, before[1], strict=True)])
+        self._before = (low, high)
         self._start, self._low, self._high = None, [math.inf] * 4, [-math.inf] * 4
         if verdict is not None:
             self.problem = verdict
@@ -66,8 +72,8 @@ def block_verdict(low: Sequence[float], high: Sequence[float]) -> str | None:
     if peak > MAX_DEG:
         return (f"angles reach {peak:.0f} deg: not degrees (radians read as degrees give at most "
                 f"{MAX_DEG:.0f}); the input is likely in degrees read as radians")
-    moving = sum(1 for a, b in zip(low, high, strict=True) if b - a >= RADIAN_RANGE)
-    if peak <= RADIAN_BOUND and moving >= 2:
+    ranges = sorted(b - a for a, b in zip(low, high, strict=True))
+    if peak <= RADIAN_BOUND and ranges[-1] >= RADIAN_RANGE and ranges[-2] >= RADIAN_RANGE / 2:
         return (f"angles stay within +-{peak:.2f} deg while the segments move: the input is likely in "
                 "radians read as degrees")
     return None
