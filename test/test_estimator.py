@@ -252,7 +252,7 @@ def test_cli_process_with_options(tmp_path: Path, multispeed_csv: Path) -> None:
                      "--offset-tolerance-deg", "inf"])
     assert code == 0
     header = out.read_text().splitlines()[0].split(",")
-    assert header[-6:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio"]
+    assert header[-7:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio", "state"]
     assert cli_main(["process", str(multispeed_csv), "--min-confidence", "-1", "-q"]) == 2
     for removed in ("--window-fraction", "--subsample-phase", "--switch-evidence-deg2s", "--min-dwell-samples"):
         with pytest.raises(SystemExit) as exc:

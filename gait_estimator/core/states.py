@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -104,6 +104,7 @@ def fit_limit_deg(strides: np.ndarray, kernel: np.ndarray) -> float:
     return float(rms.max())
 
 
+NAN = math.nan
 MEMORY = 17
 """state_step's memory: known, last time, fast (4) and slow (4) angle averages, still since, over
 the limit since, unknown (1.0) or not, within the limit since; the last interval and its two
@@ -111,7 +112,7 @@ smoothing weights (resampled input repeats one interval)."""
 
 
 def state_step(mem, time_s: float, x0: float, x1: float, x2: float, x3: float, active, ready: bool,
-               fit: float, limit: float, cadence: float, max_cadence: float, still_dps: float, fast_tau: float,
+               fit: float, limit: float, cadence: float, max_cadence: float, still_deg: float, fast_tau: float,
                slow_tau: float, stand_after: float, unknown_after: float) -> int:
     """The state of one matcher sample at ``time_s`` (seconds), angles ``x0..x3`` (degrees),
     ``active`` (4,) 1.0 for matched channels; ``mem`` (MEMORY,) updated in place; ``fit`` and
@@ -120,50 +121,43 @@ def state_step(mem, time_s: float, x0: float, x1: float, x2: float, x3: float, a
 
     Stillness: each angle's fast and slow exponential averages (time constants ``fast_tau`` <
     ``slow_tau``, s) differ by speed x (slow_tau - fast_tau) for an angle moving at a steady speed,
-    and by little for sensor noise."""
+    and by little for sensor noise; ``still_deg`` = still_speed_dps x (slow_tau - fast_tau)."""
     if mem[0] == 0.0:
-        for c in range(4):
-            v = (x0, x1, x2, x3)[c]
-            mem[2 + c] = v
-            mem[6 + c] = v
-        mem[0], mem[10], mem[11], mem[12], mem[13], mem[14] = 1.0, time_s, math.nan, 0.0, math.nan, math.nan
+        mem[2], mem[3], mem[4], mem[5], mem[6], mem[7], mem[8], mem[9] = x0, x1, x2, x3, x0, x1, x2, x3
+        mem[0], mem[10], mem[11], mem[12], mem[13], mem[14] = 1.0, time_s, NAN, 0.0, NAN, NAN
     else:
         dt = time_s - mem[1]
         if dt != mem[14]:
             mem[14], mem[15], mem[16] = dt, 1.0 - math.exp(-dt / fast_tau), 1.0 - math.exp(-dt / slow_tau)
         kf, ks = mem[15], mem[16]
-        mem[2] += kf * (x0 - mem[2])
-        mem[3] += kf * (x1 - mem[3])
-        mem[4] += kf * (x2 - mem[4])
-        mem[5] += kf * (x3 - mem[5])
-        mem[6] += ks * (x0 - mem[6])
-        mem[7] += ks * (x1 - mem[7])
-        mem[8] += ks * (x2 - mem[8])
-        mem[9] += ks * (x3 - mem[9])
+        f0, f1, f2, f3 = mem[2] + kf * (x0 - mem[2]), mem[3] + kf * (x1 - mem[3]), mem[4] + kf * (x2 - mem[4]), \
+            mem[5] + kf * (x3 - mem[5])
+        s0, s1, s2, s3 = mem[6] + ks * (x0 - mem[6]), mem[7] + ks * (x1 - mem[7]), mem[8] + ks * (x2 - mem[8]), \
+            mem[9] + ks * (x3 - mem[9])
+        mem[2], mem[3], mem[4], mem[5], mem[6], mem[7], mem[8], mem[9] = f0, f1, f2, f3, s0, s1, s2, s3
+        if (active[0] * abs(f0 - s0) >= still_deg or active[1] * abs(f1 - s1) >= still_deg
+                or active[2] * abs(f2 - s2) >= still_deg or active[3] * abs(f3 - s3) >= still_deg):
+            mem[10] = time_s
     mem[1] = time_s
-    d = max(active[0] * abs(mem[2] - mem[6]), active[1] * abs(mem[3] - mem[7]), active[2] * abs(mem[4] - mem[8]),
-            active[3] * abs(mem[5] - mem[9]))
-    if d >= still_dps * (slow_tau - fast_tau):
-        mem[10] = time_s
     if not ready or time_s - mem[10] >= stand_after - 1e-9:
-        mem[11], mem[12], mem[13] = math.nan, 0.0, math.nan
+        mem[11], mem[12], mem[13] = NAN, 0.0, NAN
         return 0 if not ready else 2
     # unknown after unknown_after s beyond a limit, walking again after as long within them
     if fit > limit or cadence > max_cadence:
-        mem[13] = math.nan
+        mem[13] = NAN
         if math.isnan(mem[11]):
             mem[11] = time_s
         if mem[12] > 0.0 or time_s - mem[11] >= unknown_after - 1e-9:
             mem[12] = 1.0
             return 3
         return 1
-    mem[11] = math.nan
     if mem[12] > 0.0:
         if math.isnan(mem[13]):
             mem[13] = time_s
         if time_s - mem[13] < unknown_after - 1e-9:
             return 3
-        mem[12], mem[13] = 0.0, math.nan
+        mem[12], mem[13] = 0.0, NAN
+    mem[11] = NAN
     return 1
 
 
@@ -186,6 +180,8 @@ class StateTracker:
         self._active = (np.asarray(channel_weights, dtype=np.float64) > 0).astype(np.float64)
         self._active_list: list[float] = self._active.tolist()
         self.names = reported_names(library.mode_names)
+        self._thresholds = (params.max_cadence_ratio, params.still_speed_dps * (params.slow_tau_s - params.fast_tau_s),
+                            params.fast_tau_s, params.slow_tau_s, params.stand_after_s, params.unknown_after_s)
         self.reset()
 
     def reset(self) -> None:
@@ -196,14 +192,12 @@ class StateTracker:
         """``est`` (the supervisor's, for the sample ``x``, degrees) in its state."""
         if not self.enabled:
             return est if est.ready else est.in_state(NOT_READY, est.mode, est.phase)
-        p = self.params
-        state = state_step(self._mem, time_s, x[0], x[1], x[2], x[3], self._active_list, est.ready,
-                           est.fit_rms_deg, self._limit_list[est.mode_index],
-                           est.phase_rate * self._duration_list[est.mode_index], p.max_cadence_ratio,
-                           p.still_speed_dps, p.fast_tau_s, p.slow_tau_s, p.stand_after_s, p.unknown_after_s)
+        m = est.mode_index
+        state = state_step(self._mem, time_s, x[0], x[1], x[2], x[3], self._active_list, est.ready, est.fit_rms_deg,
+                           self._limit_list[m], est.phase_rate * self._duration_list[m], *self._thresholds)
         if state == WALKING:
             return est
-        return est.in_state(state, self.names[int(name_index(state, est.mode_index, len(self.names)))], math.nan)
+        return est.in_state(state, self.names[name_index(state, est.mode_index, len(self.names))], math.nan)
 
     def decide_many(self, time_s: np.ndarray, x: np.ndarray, columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The bulk form of ``step`` over the supervisor's ``columns`` for samples ``x`` (G, 4) at
@@ -211,15 +205,13 @@ class StateTracker:
         if not self.enabled:
             names = np.asarray(self.names, dtype=object)[columns["mode_index"]]
             return {**columns, "state": np.where(columns["ready"], WALKING, NOT_READY), "mode": names}
-        p = self.params
         n = time_s.shape[0]
         state = np.empty(n, dtype=np.int64)
         mem = np.asarray(self._mem, dtype=np.float64)
         limit = self.limits[columns["mode_index"]] if n else np.zeros(0)
         cadence = columns["phase_rate"] * self.durations[columns["mode_index"]] if n else np.zeros(0)
         _state_rows(mem, time_s, np.ascontiguousarray(x, dtype=np.float64), self._active, columns["ready"],
-                    columns["fit_rms_deg"], limit, cadence, p.max_cadence_ratio, p.still_speed_dps, p.fast_tau_s,
-                    p.slow_tau_s, p.stand_after_s, p.unknown_after_s, state)
+                    columns["fit_rms_deg"], limit, cadence, *self._thresholds, state)
         self._mem = mem.tolist()
         phase = np.where(state == WALKING, columns["phase"], math.nan)
         index = name_index(state, columns["mode_index"], len(self.names))
@@ -231,19 +223,20 @@ def reported_names(mode_names: list[str]) -> list[str]:
     return [*mode_names, NOT_READY_MODE, "", STAND, UNKNOWN]
 
 
-def name_index(state: int | np.ndarray, mode_index: int | np.ndarray, names: int) -> np.ndarray:
+def name_index(state: Any, mode_index: Any, names: int) -> Any:
     """Index in ``reported_names`` (``names`` long) of the ``mode`` reported in ``state`` with the
-    library mode ``mode_index`` (scalars or arrays)."""
-    return np.where(np.asarray(state) == WALKING, mode_index, names - 4 + np.asarray(state))
+    library mode ``mode_index`` (ints, or integer arrays)."""
+    walking = state == WALKING
+    return mode_index * walking + (names - 4 + state) * (1 - walking)
 
 
 _state_step = compiled.njit(cache=True, nogil=True)(state_step)
 
 
 @compiled.njit(cache=True, nogil=True)
-def _state_rows(mem, time_s, x, active, ready, fit, limit, cadence, max_cadence, still_dps, fast_tau, slow_tau,
+def _state_rows(mem, time_s, x, active, ready, fit, limit, cadence, max_cadence, still_deg, fast_tau, slow_tau,
                 stand_after, unknown_after, state):  # pragma: no cover - compiled
     for g in range(time_s.shape[0]):
         state[g] = _state_step(mem, time_s[g], x[g, 0], x[g, 1], x[g, 2], x[g, 3], active, ready[g], fit[g],
-                               limit[g], cadence[g], max_cadence, still_dps, fast_tau, slow_tau, stand_after, unknown_after)
+                               limit[g], cadence[g], max_cadence, still_deg, fast_tau, slow_tau, stand_after, unknown_after)
 
