@@ -51,7 +51,7 @@ sys.path.insert(0, str(REPO / "test"))
 from common import ROUTE, machine, md_table  # noqa: E402
 from synthetic import SyntheticConfig, generate, new_wearer, with_stops  # noqa: E402
 
-from gait_estimator.analysis.evaluate import SWITCH_WINDOW_S, switch_metrics  # noqa: E402
+from gait_estimator.analysis.evaluate import SWITCH_LEAD_S, SWITCH_WINDOW_S, switch_metrics  # noqa: E402
 from gait_estimator.analysis.labels import read_label_ranges, with_ranges  # noqa: E402
 from gait_estimator.analysis.train import TrainOptions, train_library  # noqa: E402
 from gait_estimator.core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator  # noqa: E402
@@ -546,13 +546,17 @@ def write_tables(r: dict[str, Any], out: Path) -> str:
                       f"{b['missed_changes']} → {a['missed_changes']}"])
     text = "\n".join([
         "# Controller contract", "",
+        "## Summary", "",
+        f"{COMMAND} (deterministic), AMD EPYC 2 vCPU host, {r['date']}; default preset, before = `states: false`.", "",
+        summary(r), "",
         f"Measured {r['date']} on an AMD EPYC 2 vCPU host ({r['machine']['processor']}); default preset, "
         "`states` off (before) and on (after).", "",
         "## Targets", "",
         md_table(["measure", "result", "target", "measured with"], rows), "",
         "## Switches", "",
-        f"A change of the reported mode (`stand`, `unknown` included) with no labelled change from {SWITCH_WINDOW_S:g} s "
-        f"before it is false; delay: labelled change → first row with its mode. {COMMAND}.", "",
+        "A change of the reported mode (`stand`, `unknown` included) with no labelled change from "
+        f"{SWITCH_WINDOW_S:g} s before it to {SWITCH_LEAD_S:g} s after it is false; delay: labelled change → "
+        f"first row with its mode. {COMMAND}.", "",
         md_table(["recording", "labelled min", "labelled changes", "false switches / min", "mean delay",
                   "changes missed"], srows), "",
         "### Dwell", "",
@@ -565,6 +569,45 @@ def write_tables(r: dict[str, Any], out: Path) -> str:
     out.mkdir(parents=True, exist_ok=True)
     (out / "tables.md").write_text(text, encoding="utf-8")
     return text
+
+
+def summary(r: dict[str, Any]) -> str:
+    """The short table of docs/controller.md."""
+    cm, ci, lg, st = r["camargo"]["mocap"], r["camargo"]["imu"], r["lg2"], r["stops"]
+    turn, still = lg["stop and standing turn 12.5-17.9 s"], lg["standing 3.0-4.9 s"]
+    ua, u = r["unknown_activities"], r["units"]
+    nw = r["new_wearers"]
+    worst_rad = max(v["deg_read_as_rad_s"] or math.inf for v in u.values())
+    worst_deg = max((v["rad_read_as_deg_s"] or math.inf) - v["moves_from_s"] for v in u.values())
+    sw = {k: v["switches"]["after"] for k, v in (("LG_2_Ramp", lg), ("new wearers", nw), ("camargo", cm))}
+    rows = [
+        ["camargo_ab06 `stand` rows (0.5 s after stopping) → `stand`, mocap / IMU",
+         f"{pct(cm['stand_reported_stand'])} / {pct(ci['stand_reported_stand'])}", "≥ 95 %"],
+        ["camargo_ab06 walking rows (turns too) → `stand`; `unknown`, mocap / IMU",
+         f"{pct(cm['walking_reported_stand'], 2)}; {pct(cm['walking_reported_unknown'])} / "
+         f"{pct(ci['walking_reported_stand'], 2)}; {pct(ci['walking_reported_unknown'])}", "≤ 0.5 %; ≤ 5 %"],
+        ["camargo_ab06 walking accuracy, before → after, mocap / IMU",
+         f"{pct(cm['accuracy_before'])} → {pct(cm['accuracy_after'])} / "
+         f"{pct(ci['accuracy_before'])} → {pct(ci['accuracy_after'])}", "no worse"],
+        ["camargo_ab06 phase error, before → after, mocap / IMU",
+         f"{pct(cm['phase_error_before'], 2)} → {pct(cm['phase_error_after'], 2)} / "
+         f"{pct(ci['phase_error_before'], 2)} → {pct(ci['phase_error_after'], 2)}", "no worse"],
+        ["LG_2_Ramp standing; stop and standing turn → `stand` or `unknown`",
+         f"{pct(still['stand_or_unknown'])}; {pct(turn['stand_or_unknown'])}", "≥ 90 %"],
+        ["LG_2_Ramp accuracy, before → after; without each start's first stride",
+         f"{pct(lg['accuracy_before'])} → {pct(lg['accuracy_after'])}; "
+         f"{pct(lg['accuracy_later_before'])} → {pct(lg['accuracy_later_after'])}", "no worse"],
+        [f"synthetic stops: rest → `stand`; start → walking (worst of {st['stops']})",
+         f"{st['to_stand_max_s']:.2f} s; {st['to_walk_max_s']:.2f} s (stride {st['stride_s_min']:.2f} s)",
+         "≤ 0.5 s; ≤ 1 stride"],
+        ["synthetic running-like; sit-to-stand → `unknown`",
+         f"{pct(ua['running-like strides']['unknown'])}; {pct(ua['sit-to-stand and back']['unknown'])}", "≥ 90 %"],
+        [f"units, {len(u)} recordings: false warnings; worst flag, deg as rad / rad as deg (from moving)",
+         f"{sum(v['false_warning'] for v in u.values())}; {worst_rad:.1f} s / {worst_deg:.1f} s", "0; ≤ 2 s"],
+        *[[f"{k}: false switches / min; mean delay", f"{v['false_per_minute']:.1f}; {_s(v['mean_delay_s'])}",
+           "< 2; ≤ 0.75 s"] for k, v in sw.items()],
+    ]
+    return md_table(["figure", "measured", "target"], rows)
 
 
 def _s(v: float | None) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,8 @@ from gait_estimator.core.states import FIT_LIMIT_KEY, NOT_READY, STANDING, UNKNO
 from gait_estimator.core.units import UnitsCheck, first_problem
 from gait_estimator.io.library_io import load_library, save_library
 from gait_estimator.io.readers import read_recording
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def test_stop_and_start_of_a_new_wearer(able_bodied) -> None:
@@ -104,3 +107,10 @@ def test_process_warns_once_about_a_bag_in_the_wrong_unit(multispeed_csv: Path, 
     assert len(err) == 1 and err[0].startswith(f"warning: {bag}: input_units rad: from ") and "degrees" in err[0]
     assert main(["process", str(bag), "--input-units", "deg", "--stop", "2000", "-q"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_the_controller_page_shows_the_tested_example() -> None:
+    """docs/controller.md quotes examples/impedance_controller.py (test_controller.py runs it)."""
+    doc = (REPO / "docs" / "controller.md").read_text(encoding="utf-8")
+    (code,) = re.findall(r"```python\n(.*?)```", doc, re.S)
+    assert code.strip() in (REPO / "examples" / "impedance_controller.py").read_text(encoding="utf-8")

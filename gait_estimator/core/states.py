@@ -83,7 +83,7 @@ class StateParams:
     stand_after_s: float = 0.2
     fit_limit_scale: float = 2.5
     default_fit_limit_deg: float = 12.0
-    max_cadence_ratio: float = 1.3
+    max_cadence_ratio: float = 1.25
     unknown_after_s: float = 0.2
 
     def limits(self, library: KernelLibrary) -> np.ndarray:
