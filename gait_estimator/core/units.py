@@ -46,12 +46,23 @@ class UnitsCheck:
         """Take one sample ``x`` (4 angles, degrees) at ``time_s`` (s); return a new verdict (a
         sentence) the first time the block it ends shows angles that cannot be degrees."""
         low, high = self._low, self._high
-        for c in range(4):
-            v = x[c]
-            if v < low[c]:
-                low[c] = v
-            if v > high[c]:
-                high[c] = v
+        x0, x1, x2, x3 = x
+        if x0 < low[0]:
+            low[0] = x0
+        if x0 > high[0]:
+            high[0] = x0
+        if x1 < low[1]:
+            low[1] = x1
+        if x1 > high[1]:
+            high[1] = x1
+        if x2 < low[2]:
+            low[2] = x2
+        if x2 > high[2]:
+            high[2] = x2
+        if x3 < low[3]:
+            low[3] = x3
+        if x3 > high[3]:
+            high[3] = x3
         if self._start is None:
             self._start = time_s
         if time_s - self._start < BLOCK_S or self.problem is not None:
