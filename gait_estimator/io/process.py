@@ -104,7 +104,7 @@ def segments(pred: Predictions) -> list[Segment]:
     ready = np.flatnonzero(tr.ready)
     if ready.size == 0:
         return out
-    names = tr.mode[ready]
+    names = np.asarray(tr.modes, dtype=object)[ready]
     breaks = np.flatnonzero((names[1:] != names[:-1]) | (np.diff(ready) != 1)) + 1
     for run in np.split(np.arange(ready.size), breaks):
         first, last = ready[run[0]], ready[run[-1]]
@@ -121,7 +121,7 @@ def format_summary(pred: Predictions, library: KernelLibrary, source: str) -> st
     filled = f"window full after {int(first[0]) + 1} samples" if first.size else "window never full"
     lines = [f"{source}: {n} samples, {ready} ready ({filled}); library '{library.name}' ({len(library)} modes)"]
     if ready:
-        names, counts = np.unique(tr.mode[tr.ready].astype(str), return_counts=True)
+        names, counts = np.unique(np.asarray(tr.modes, dtype=str)[tr.ready], return_counts=True)
         order = {m: i for i, m in enumerate([*tr.mode_names, "stand", "unknown"])}
         share = ", ".join(f"{m} {c / ready:.1%}" for m, c in sorted(zip(names, counts, strict=True),
                                                                       key=lambda mc: order.get(mc[0], len(order))))
