@@ -4,6 +4,8 @@ and the mode switches, measured. One command:
 
     python benchmarks/contract.py                # ~3 min: writes benchmarks/results/contract/contract.json, tables.md
     python benchmarks/contract.py --tables-only  # only tables.md, from the saved contract.json (make docs)
+    git worktree add /tmp/old 1d47482            # then, Estimator.update here and there, interleaved:
+    taskset -c 0 python benchmarks/contract.py --update-cost /tmp/old
 
 Default preset throughout, ``states`` on ("after") and off ("before", the estimator without states).
 
@@ -26,6 +28,9 @@ Default preset throughout, ``states`` on ("after") and off ("before", the estima
   labelled change came in the ``SWITCH_WINDOW_S`` before it (``evaluate.switch_metrics``); per
   minute of labelled walking; delay = from a labelled change to the first row reporting the new
   label's mode.
+* Update cost (``--update-cost``): ``Estimator.update`` per sample (default preset, able_bodied,
+  Multispeed stamped at 230 Hz) in this checkout and another, one process per round, alternating;
+  the median and p99 over all rounds and their ratios (printed, not saved: machine load).
 * Units: each bundled recording (and each camargo trial, mocap and IMU) fed in the right unit
   and in the wrong one (degrees read as radians, radians read as degrees) through ``UnitsCheck``.
 """
@@ -35,6 +40,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import subprocess
 import sys
 import tempfile
 from datetime import datetime, timezone
@@ -614,6 +621,49 @@ def _s(v: float | None) -> str:
     return "—" if v is None else f"{v:.2f} s"
 
 
+ROUND = r"""
+import json, sys, time
+import numpy as np
+from gait_estimator import Estimator, load_library
+from gait_estimator.io.readers import read_recording
+lib = load_library("able_bodied")
+rec = read_recording(sys.argv[1])
+t = np.arange(len(rec)) / 230.0
+rows = [tuple(r) for r in rec.angles_deg.tolist()]
+est = Estimator(lib)
+for i in range(2000):
+    est.update(float(t[i]), rows[i])
+est = Estimator(lib)
+out = []
+clock = time.perf_counter_ns
+for i in range(len(rows)):
+    a = clock()
+    est.update(float(t[i]), rows[i])
+    out.append(clock() - a)
+print(json.dumps(out))
+"""
+
+
+def one_round(src: Path) -> np.ndarray:
+    """One process running ROUND with ``src`` first on the path: per-sample times, us."""
+    env = {**os.environ, "PYTHONPATH": str(src)}
+    rec = REPO / "data" / "swge" / "recordings" / "Multispeed_Walk_AB.csv"
+    run = subprocess.run([sys.executable, "-c", ROUND, str(rec)], env=env, cwd=src, capture_output=True, text=True,
+                         check=True)
+    return np.asarray(json.loads(run.stdout), dtype=np.float64) / 1e3
+
+
+def update_cost(other: Path, rounds: int) -> None:
+    times: dict[str, list[np.ndarray]] = {"this": [], "other": []}
+    for _ in range(rounds):
+        for name, src in (("other", other.resolve()), ("this", REPO)):
+            times[name].append(one_round(src))
+    stats = {k: (float(np.median(np.concatenate(v))), float(np.percentile(np.concatenate(v), 99))) for k, v in times.items()}
+    for k, (med, p99) in stats.items():
+        print(f"{k:<6} median {med:7.2f} us  p99 {p99:7.2f} us")
+    print(f"this / other: median x{stats['this'][0] / stats['other'][0]:.3f}, p99 x{stats['this'][1] / stats['other'][1]:.3f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--tables-only", action="store_true")
@@ -621,7 +671,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tuning", default="{}", help="StateParams fields as JSON, to try other thresholds")
     ap.add_argument("--options", default="{}", help="estimator options as JSON on top of the default preset")
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--update-cost", type=Path, metavar="CHECKOUT", help="only time Estimator.update here and in CHECKOUT")
+    ap.add_argument("--rounds", type=int, default=6, help="--update-cost rounds (default 6)")
     args = ap.parse_args(argv)
+    if args.update_cost:
+        update_cost(args.update_cost, args.rounds)
+        return 0
     path = args.out / "contract.json"
     OPTIONS.update(json.loads(args.options))
     if not args.tables_only:
