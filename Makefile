@@ -71,6 +71,7 @@ docs: venv
 	$(BIN)/python benchmarks/accuracy.py --tables-only
 	$(BIN)/python benchmarks/teach.py --tables-only
 	$(BIN)/python benchmarks/imu.py --tables-only
+	$(BIN)/python benchmarks/contract.py --tables-only
 	$(BIN)/python -m benchmarks.common --update-docs
 
 docs-check: venv

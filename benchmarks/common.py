@@ -132,13 +132,13 @@ DATASETS: dict[str, Dataset] = {}  # filled in main() before the worker pool for
 
 
 def prediction_table(trace: EstimateTrace, source: str) -> PredictionTable:
-    modes = np.asarray(trace.mode_names, dtype=object)[trace.mode_index]
-    return PredictionTable(trace.time_s, trace.sample, modes, trace.phase, trace.ready, trace.sse, list(trace.mode_names), source)
+    return PredictionTable(trace.time_s, trace.sample, trace.mode, trace.phase, trace.ready, trace.sse,
+                           list(trace.mode_names), source)
 
 
 def switches(trace: EstimateTrace) -> int:
     """Changes of the reported mode between consecutive ready rows."""
-    m = trace.mode_index[trace.ready]
+    m = trace.mode[trace.ready]
     return int(np.count_nonzero(m[1:] != m[:-1]))
 
 

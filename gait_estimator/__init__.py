@@ -26,6 +26,7 @@ from .core.estimator import EstimateTrace, Estimator
 from .core.kernels import KernelLibrary, KernelMode
 from .core.matcher import IncrementalMatcher, StepResult
 from .core.options import EstimatorConfig
+from .core.states import EstimateState
 from .core.supervisor import Estimate
 from .io.library_io import load_library, save_library
 from .io.process import run_recording
@@ -36,6 +37,7 @@ __version__ = "0.1.0"
 __all__ = [
     "CHANNELS",
     "Estimate",
+    "EstimateState",
     "EstimateTrace",
     "Estimator",
     "EstimatorConfig",

@@ -189,10 +189,11 @@ def test_out_bag_round_trip(tmp_path, ramp, csv_pred, storage, capsys):
     np.testing.assert_array_equal(tail[:, 2], tr.held.astype(float))
     np.testing.assert_allclose(tail[:, 3], tr.phase_rate, rtol=1e-9)  # nan until known, in both; stamps are ns
     np.testing.assert_array_equal(tail[:, 4], tr.raw_mode_index)
+    np.testing.assert_array_equal(tail[:, 6], tr.state)
     # mode, phase, sse: only once ready, as the node publishes them
     for topic in ("/mode", "/phase", "/sse"):
         assert [log for log, _ in got[topic]] == stamps[ready].tolist(), topic
-    assert [msg.data for _, msg in got["/mode"]] == [tr.mode_names[i] for i in tr.mode_index[ready]]
+    assert [msg.data for _, msg in got["/mode"]] == tr.mode[ready].tolist()
     np.testing.assert_allclose([msg.data for _, msg in got["/phase"]], tr.phase[ready], rtol=0, atol=1e-9)
     sse = got["/sse"]
     assert all(mode_names_from_sse_label(msg.layout.dim[0].label) == tr.mode_names for _, msg in sse)

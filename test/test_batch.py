@@ -67,6 +67,7 @@ def test_bulk_equals_streaming_on_the_bundled_recordings(swge: Path, able_bodied
     assert_same_state(a, b)
     if preset == "default":
         assert b.calibration.strides >= 3 and b.matcher.recency_half_life > 0  # the calibrations acted
+        assert set(ref.state.tolist()) == {0, 1, 2, 3}  # every state, decided alike (states.py)
 
 
 def test_bulk_continues_a_stream_and_restarts_at_gaps(multispeed_csv: Path, able_bodied) -> None:

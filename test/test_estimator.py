@@ -172,8 +172,8 @@ def test_tuples_and_arrays_give_the_same_estimates(able_bodied) -> None:
     a, b = Estimator(able_bodied), Estimator(able_bodied)
     for i in range(len(x)):
         ea, eb = a.update(t[i], x[i]), b.update(float(t[i]), tuple(x[i].tolist()))
-        fields = ("mode_index", "phase", "confidence", "cadence_ratio", "phase_rate", "held")
-        assert [getattr(ea, f) for f in fields] == [getattr(eb, f) for f in fields]
+        fields = ("mode_index", "mode", "state", "phase", "confidence", "cadence_ratio", "phase_rate", "held")
+        np.testing.assert_equal([getattr(ea, f) for f in fields], [getattr(eb, f) for f in fields])
         np.testing.assert_array_equal(ea.sse, eb.sse)
 
 
@@ -252,7 +252,7 @@ def test_cli_process_with_options(tmp_path: Path, multispeed_csv: Path) -> None:
                      "--offset-tolerance-deg", "inf"])
     assert code == 0
     header = out.read_text().splitlines()[0].split(",")
-    assert header[-6:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio"]
+    assert header[-7:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio", "state"]
     assert cli_main(["process", str(multispeed_csv), "--min-confidence", "-1", "-q"]) == 2
     for removed in ("--window-fraction", "--subsample-phase", "--switch-evidence-deg2s", "--min-dwell-samples"):
         with pytest.raises(SystemExit) as exc:

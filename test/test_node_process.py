@@ -274,7 +274,8 @@ def _gait_estimator(*args: str, timeout: float = 120) -> subprocess.CompletedPro
 
 
 def test_demo_command_streams_the_bundled_recording() -> None:
-    proc = _gait_estimator("demo", "--stop", "800", "--speed", "4", "--domain-id", "27",
+    """Samples 4500-5300: walking (the recording starts standing, which reads stand)."""
+    proc = _gait_estimator("demo", "--start", "4500", "--stop", "5300", "--speed", "4", "--domain-id", "27",
                            "--echo-every", "40")
     out = proc.stdout
     assert proc.returncode == 0, out + proc.stderr

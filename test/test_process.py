@@ -80,7 +80,7 @@ def test_prediction_csv_columns_and_times(tmp_path: Path, multispeed_csv: Path) 
     header = out.read_text().splitlines()[0].split(",")
     assert header[:12] == ["time_s", "sample", "mode", "phase", "ready",
                           "sse_Slow", "sse_Med", "sse_Fast", "sse_RA", "sse_RD", "sse_SA", "sse_SD"]
-    assert header[12:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio"]
+    assert header[12:] == ["confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio", "state"]
     pred = read_predictions(out)
     np.testing.assert_allclose(pred["time_s"].astype(float), np.arange(100, 150) / 230.0, atol=1e-6)
 

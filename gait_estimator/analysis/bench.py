@@ -205,7 +205,8 @@ def process_throughput(library: KernelLibrary, m: int, samples: int) -> list[dic
         ests = [one.update(float(t[i]), x[i]) for i in range(len(x))]
         stream_s = time.perf_counter() - t0
         same = bool(np.array_equal(trace.mode_index, [e.mode_index for e in ests])
-                    and np.array_equal(trace.phase, [e.phase for e in ests]))
+                    and np.array_equal(trace.state, [e.state for e in ests])
+                    and np.array_equal(trace.phase, [e.phase for e in ests], equal_nan=True))
         rows.append({"modes": m, "impl": "process", "preset": preset, "samples": len(x),
                      "bulk": batch_supported(bulk), "samples_per_s": len(x) / bulk_s,
                      "streaming_samples_per_s": len(x) / stream_s, "speedup": stream_s / bulk_s, "same_estimates": same})

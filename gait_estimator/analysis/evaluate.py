@@ -12,7 +12,7 @@ Definitions (docs/training.md, "`evaluate`: definitions"):
   ``strides`` (0.6-2.5 s), elsewhere none.
 * Phase error is circular, ``min(|a - b|, 1 - |a - b|)``, a fraction of a stride (0-0.5);
   ``phase_error_*`` use correctly classified evaluated rows with phase truth (as the paper),
-  ``phase_error_all_*`` every evaluated row with phase truth.
+  ``phase_error_all_*`` every evaluated row with phase truth and a phase (not stand or unknown).
 * ``steady``: the same over rows at least one matcher window (``settle_s``, the time the
   predictions took to become ready) after the start of their run of identical truth labels, i.e.
   once the whole window holds data of the current mode (the paper evaluates steady-state trials).
@@ -21,6 +21,12 @@ Definitions (docs/training.md, "`evaluate`: definitions"):
   prediction accepted for it, searching from the end of the previous run; negative when the
   estimator switched inside an unlabelled gap (whose length is reported); "missed" when it never
   switches within the new run.
+* Switches (``switch_metrics``): a change of the reported mode between consecutive ready rows
+  (``stand`` and ``unknown`` included) is *false* when it falls on a labelled walking row (not
+  ``stand``) and no truth label changed from ``SWITCH_WINDOW_S`` before it to ``SWITCH_LEAD_S``
+  after it (labels mark motion to a few tenths of a second); per minute of labelled walking.
+  Delay: from a change of the truth label to the first ready row reporting a mode accepted for
+  the new label, within ``SWITCH_WINDOW_S`` (else missed).
 """
 
 from __future__ import annotations
@@ -234,7 +240,7 @@ def evaluate(
     evaluated = matched & pred.ready & (labels != "")
     al = Aligned(t, pred.mode, pred.phase, pred.ready, pred.sse, pred.sse_modes, labels, correct, ph_true, evaluated, hs)
     err = circular_error(pred.phase, np.nan_to_num(ph_true))
-    has_phase = evaluated & np.isfinite(ph_true)
+    has_phase = evaluated & np.isfinite(ph_true) & np.isfinite(pred.phase)
     good = has_phase & correct
     names, matrix = _confusion(pred, labels, evaluated)
     settle = settle_time(pred)
@@ -261,6 +267,8 @@ def evaluate(
             **_stats(err[good & steady], "phase_error"),
         },
         "transitions": transitions(al, accepted),
+        "switches": {k: v for k, v in switch_metrics(t, pred.mode, pred.ready & matched, np.array(
+            ["|".join(accepted.get(x, (x,))) if x else "" for x in labels], dtype=object)).items() if k != "delays_s"},
         "samples": {
             "predictions": len(t),
             "matched": int(matched.sum()),
@@ -455,4 +463,46 @@ def format_metrics(m: Mapping[str, Any]) -> str:
     tr = m["transitions"]
     delay = "n/a" if tr["mean_delay_s"] is None else f"{tr['mean_delay_s']:.2f} s"
     lines.append(f"transitions: {tr['count']} ({tr['missed']} missed), mean delay {delay}")
+    sw = m.get("switches")
+    if sw:
+        lines.append(f"switches: {sw['false_switches']} false in {sw['labelled_minutes']:.2f} min of labelled walking "
+                     f"({sw['false_per_minute']:.2f} / min)")
     return "\n".join(lines)
+
+
+SWITCH_WINDOW_S = 2.0
+"""A reported change of mode within this long after a labelled change is explained by it: walking
+is reported from the first whole stride after a start (up to ~1.7 s)."""
+SWITCH_LEAD_S = 0.5
+"""... or this long before it."""
+
+
+def switch_metrics(time_s: np.ndarray, mode: np.ndarray, ready: np.ndarray, labels: np.ndarray,
+                   window_s: float = SWITCH_WINDOW_S) -> dict[str, Any]:
+    """False switches and delays (module docstring) of the reported ``mode`` (T,) against the
+    truth ``labels`` (T,): '' = unlabelled, else the accepted modes joined by ``|``."""
+    t = np.asarray(time_s, dtype=np.float64)
+    mode, labels = np.asarray(mode).astype(str), np.asarray(labels).astype(str)
+    ready = np.asarray(ready, dtype=bool)
+    changed = np.flatnonzero(labels[1:] != labels[:-1]) + 1
+    change_t = t[changed]
+    rows = np.flatnonzero(ready[1:] & ready[:-1] & (mode[1:] != mode[:-1])) + 1
+    walking = (labels != "") & (labels != "stand")
+    k = np.searchsorted(change_t, t[rows] + SWITCH_LEAD_S, side="right") - 1
+    explained = (k >= 0) & (t[rows] - change_t[np.maximum(k, 0)] <= window_s)
+    false = int(np.count_nonzero(~explained & walking[rows]))
+    dt = np.diff(t, append=t[-1]) if t.size else t
+    minutes = float(dt[walking].sum() / 60.0)
+    delays, missed = [], 0
+    for i in changed:
+        if labels[i] == "":
+            continue
+        accepted = labels[i].split("|")
+        j = i + np.flatnonzero(ready[i:] & np.isin(mode[i:], accepted) & (t[i:] <= t[i] + window_s))[:1]
+        if j.size:
+            delays.append(float(t[j[0]] - t[i]))
+        else:
+            missed += 1
+    return {"false_switches": false, "labelled_minutes": minutes, "false_per_minute": false / minutes if minutes else 0.0,
+            "labelled_changes": len(delays) + missed, "missed_changes": missed, "delays_s": delays,
+            "mean_delay_s": float(np.mean(delays)) if delays else None}

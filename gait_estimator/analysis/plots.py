@@ -130,7 +130,7 @@ def plot_timeseries(al: Aligned, path: str | Path, title: str = "", window: tupl
             names.append(m)
     level = {n: i for i, n in enumerate(names)}
     truth_y = np.array([level.get(x, np.nan) if x else np.nan for x in al.truth[keep]], dtype=np.float64)
-    pred_y = np.array([level[x] for x in al.pred[keep]], dtype=np.float64)
+    pred_y = np.array([level.get(x, np.nan) for x in al.pred[keep]], dtype=np.float64)  # '': not ready
     pred_ready = np.where(al.ready[keep], pred_y, np.nan)
     pred_wait = np.where(~al.ready[keep], pred_y, np.nan)
     tb, yb = _break_changes(t, truth_y)

@@ -79,7 +79,7 @@ def cmd_kernels_convert(args: argparse.Namespace) -> int:
 def cmd_process(args: argparse.Namespace) -> int:
     from ..io.process import format_summary, predict, write_predictions_csv
     from ..io.readers import read_recording
-    from .bag_commands import finish_process
+    from .bag_commands import finish_process, warn_units
     from .estimator_args import config_from_args
 
     lib = load_library(args.kernels)
@@ -95,6 +95,7 @@ def cmd_process(args: argparse.Namespace) -> int:
     rec = rec.slice(args.start, args.stop)
     if len(rec) == 0:
         raise GaitEstimatorError(f"{args.recording}: no samples in the selected range")
+    warn_units(rec, args.recording, options.get("input_units", "rad"))
     if args.save_adapted:
         if config.adapt_rate <= 0:
             raise GaitEstimatorError("--save-adapted needs personalisation on: --adapt-rate > 0")

@@ -11,6 +11,7 @@ import argparse
 import json
 import signal
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -18,6 +19,7 @@ from typing import Any
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import GaitEstimatorError
+from ..core.units import first_problem
 from ..io.bag import (
     DEFAULT_MAX_GAP_S,
     DEFAULT_TOPIC,
@@ -91,6 +93,15 @@ def add_process_options(proc: argparse.ArgumentParser) -> None:
     proc.set_defaults(reader_options=None)
 
 
+def warn_units(rec: Recording, source: str | Path, units: str) -> None:
+    """One warning line (stderr) if ``rec``'s angles cannot be degrees as read (core/units.py);
+    ``units``: the ``--input-units`` a bag of angles is read with."""
+    found = first_problem(rec.time_s, rec.angles_deg)
+    if found is not None:
+        given = f"input_units {units}" if isinstance(rec, BagRecording) else "angle units"
+        print(f"warning: {source}: {given}: from {found[0] - rec.time_s[0]:.1f} s {found[1]}", file=sys.stderr)
+
+
 def finish_process(args: argparse.Namespace, rec: Recording, pred: Predictions) -> list[str]:
     """After ``process`` predicted: write ``--out-bag``; return notes for the summary."""
     from ..io.bag_write import output_stamps, write_output_bag
@@ -121,6 +132,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     if bool(args.out_bag) == bool(args.out):
         raise GaitEstimatorError("give exactly one of --out-bag DIR (write a bag) or --out CSV (write a CSV)")
     rec = _read_source(args)
+    warn_units(rec, args.source, args.units)
     if args.out_bag:
         start_ns = None if args.start_time is None else round(args.start_time * 1e9)
         write_input_bag(

@@ -5,7 +5,8 @@ The streaming path hands every sample through Python (gap check, resampler, matc
 supervisor, calibrations, an ``Estimate`` object). Here each stage runs its bulk form, in the
 order of ``update``: ``GapCheck.admit_many`` and ``UniformResampler.push_many`` for the whole
 recording, ``IncrementalMatcher.run_steps`` for many steps per compiled call, then
-``Supervisor.decide_many`` (the same decision as ``decide``) for those steps. A run of steps ends
+``Supervisor.decide_many`` (the same decision as ``decide``) for those steps and
+``StateTracker.decide_many`` (``step``'s rule, compiled) for the states. A run of steps ends
 where the streaming path would do more than that: at a heel strike that ends a whole stride
 (``WalkingCalibration.observe`` reads it), at the matcher's resynchronisation steps, and at gaps
 (``Estimator.on_gap``). Used by ``run_estimator`` when the options allow it
@@ -98,7 +99,7 @@ def _match(estimator: Estimator, grid_t: np.ndarray, grid_x: np.ndarray) -> dict
     d, sq = mt.weighted_samples(grid_x)
     steps = StepBlock.empty(estimator.mode_names, mt.n_scales, grid_t.size)
     if grid_t.size == 0:
-        return estimator.supervisor.decide_many(grid_t, steps)
+        return estimator.states.decide_many(grid_t, grid_x, estimator.supervisor.decide_many(grid_t, steps))
     chunk = max(1, CHUNK_VALUES // max(mt.n_modes, 1))
     parts = []
     g = 0
@@ -113,4 +114,4 @@ def _match(estimator: Estimator, grid_t: np.ndarray, grid_x: np.ndarray) -> dict
             cal.observe(Estimate.from_columns(parts[-1], -1, estimator.mode_names), steps.result(done - 1))
         g = done
     columns = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k not in SHARED}
-    return {**columns, "sse": steps.sse, "phases": steps.phases}
+    return estimator.states.decide_many(grid_t, grid_x, {**columns, "sse": steps.sse, "phases": steps.phases})

@@ -4,9 +4,10 @@
       -> UniformResampler            onto the library's clock (none, one or several grid samples)
       -> IncrementalMatcher          error of every mode at every shift (matcher.py)
       -> Supervisor.decide           THE decision: reported mode and phase (supervisor.py)
+      -> StateTracker.step           not ready, walking, stand or unknown (states.py)
       -> WalkingCalibration          learns sensor offsets and cadence from the decision
       -> Personaliser                (adapt_rate > 0) pulls the reported mode's kernel to the wearer
-      -> Estimate
+      -> Estimate                    the supervisor's, in its state (the learning stages see it before)
 
 ``EstimatorConfig`` (options.py) holds the options, ``PipelineParams`` (pipeline.py) each stage's
 parameters derived from them.
@@ -37,6 +38,7 @@ from .options import (  # noqa: F401  (re-exported: the options live beside the 
 )
 from .pipeline import PipelineParams
 from .resample import UniformResampler
+from .states import StateTracker
 from .supervisor import Estimate, Supervisor
 
 
@@ -72,6 +74,7 @@ class Estimator:
                                      normalized=p.match.normalize, time_scales=self.matcher.time_scales)
         self.calibration = WalkingCalibration(library, self.matcher, p.calibration, np.asarray(p.match.channel_weights))
         self.personaliser = Personaliser(library, p.adapt, self.matcher) if p.adapt.rate > 0 else None
+        self.states = StateTracker(library, p.states, np.asarray(p.match.channel_weights))
         self.resets = 0
         """Window restarts caused by gaps longer than ``max_gap_s``."""
         self.calibration_resets = 0
@@ -137,7 +140,7 @@ class Estimator:
             self.calibration.observe(est, result)
         if self.personaliser is not None:
             self.personaliser.observe(x, est, result)
-        return est
+        return self.states.step(time_s, x, est)
 
     # -----------------------------------------------------------------------------------------
     # Restarts and option changes
@@ -150,6 +153,7 @@ class Estimator:
     def _restart_window(self) -> None:
         self.matcher.reset()
         self.supervisor.reset()
+        self.states.reset()
         if self.resampler is not None:
             self.resampler.reset()
         if self.personaliser is not None:
@@ -203,8 +207,8 @@ class EstimateTrace:
     mode_names: list[str]
     time_s: np.ndarray  # (T,) seconds
     sample: np.ndarray  # (T,) source index of the latest input sample at or before time_s
-    mode_index: np.ndarray  # (T,)
-    phase: np.ndarray  # (T,)
+    mode_index: np.ndarray  # (T,) the supervisor's library mode, whatever the state
+    phase: np.ndarray  # (T,) nan unless walking (states on)
     ready: np.ndarray  # (T,) bool
     sse: np.ndarray  # (T, M) deg^2 (per window sample with normalize_error)
     phases: np.ndarray  # (T, M)
@@ -214,13 +218,16 @@ class EstimateTrace:
     held: np.ndarray  # (T,) bool
     phase_rate: np.ndarray  # (T,) strides/s
     cadence_ratio: np.ndarray  # (T,) wearer cadence / kernel cadence of the reported mode (nan: one scale)
+    state: np.ndarray  # (T,) EstimateState values (states.py)
+    mode: np.ndarray  # (T,) object: the reported mode (a library mode, stand, unknown or '')
 
     def __len__(self) -> int:
         return int(self.time_s.shape[0])
 
     @property
     def modes(self) -> list[str]:
-        return [self.mode_names[i] for i in self.mode_index]
+        """The reported modes (``mode``) as a list."""
+        return [str(m) for m in self.mode]
 
 
 def run_estimator(
@@ -262,4 +269,6 @@ def trace_from_estimates(mode_names: Sequence[str], rows: Sequence[tuple[int, Es
         held=col("held", bool),
         phase_rate=col("phase_rate"),
         cadence_ratio=col("cadence_ratio"),
+        state=col("state", np.int64),
+        mode=col("mode", object),
     )

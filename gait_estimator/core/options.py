@@ -86,6 +86,8 @@ class EstimatorConfig:
                               "'' = any")
     adapt_rate: float = option(0.0, "online personalisation: weight of one confident stride in its mode's kernel, "
                                "[0, 1]; 0 = off")
+    states: bool = option(True, "report stand (segments still) and unknown (no kernel fits) as the mode, no mode "
+                          "or phase while not ready (docs/controller.md); false = a library mode always", False)
     max_gap_s: float = option(0.5, "a longer gap (s) between samples restarts the window; 0 = never")
     calibration_reset_gap_s: float = option(5.0, "a longer gap (s) between samples also forgets the learnt sensor "
                                             "offsets and cadence (sensors may have been re-donned); 0 = never", 0.0)

@@ -2,7 +2,7 @@
 
 Each stage takes its own frozen dataclass: ``GapParams`` (gaps.py), ``MatchParams`` (here: the
 matcher belongs to the hot path), ``SupervisorParams`` (supervisor.py), ``CalibrationParams``
-(calibration.py), ``AdaptParams`` (adapt.py). Their tuning fields (not options) keep their
+(calibration.py), ``AdaptParams`` (adapt.py), ``StateParams`` (states.py). Their tuning fields (not options) keep their
 defaults unless ``PipelineParams.from_config`` is given overrides, e.g. for an experiment::
 
     PipelineParams.from_config(config, calibration={"near_copy_rms_deg": 0.0})
@@ -20,6 +20,7 @@ from .gaps import GapParams
 from .kernels import KernelLibrary
 from .matcher import IncrementalMatcher
 from .options import EstimatorConfig
+from .states import StateParams
 from .supervisor import SupervisorParams
 
 
@@ -59,6 +60,7 @@ class PipelineParams:
     supervisor: SupervisorParams
     calibration: CalibrationParams
     adapt: AdaptParams
+    states: StateParams
 
     @classmethod
     def from_config(cls, config: EstimatorConfig, **tuning: Mapping[str, Any]) -> PipelineParams:
@@ -73,8 +75,9 @@ class PipelineParams:
             supervisor=SupervisorParams(c.min_confidence, c.min_dwell_s, c.transitions, c.phase_rate_tau_s),
             calibration=CalibrationParams(c.offset_calibration_rate, c.cadence_calibration_rate, c.cadence_tolerance),
             adapt=AdaptParams(c.adapt_rate, c.adapt_min_confidence, c.adapt_max_step_deg),
+            states=StateParams(enabled=bool(c.states)),
         )
-        unknown = set(tuning) - {"gaps", "match", "supervisor", "calibration", "adapt"}
+        unknown = set(tuning) - {"gaps", "match", "supervisor", "calibration", "adapt", "states"}
         if unknown:
             raise ValueError(f"unknown estimator stage(s): {', '.join(sorted(unknown))}")
         return replace(params, **{stage: replace(getattr(params, stage), **v) for stage, v in tuning.items()})

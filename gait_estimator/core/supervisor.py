@@ -42,9 +42,12 @@ class Estimate:
 
     Attributes:
         time_s: Time of the sample, seconds (the input stamp, or the resampling grid time).
-        mode_index: Reported mode (index into the library's modes).
-        mode: Reported mode name.
-        phase: Gait phase of the reported mode, [0, 1), 0 = right heel strike.
+        mode_index: The supervisor's library mode (index into the library's modes), whatever
+            the state.
+        mode: Reported mode: the library mode's name while walking, else ``stand``, ``unknown``
+            or ``""`` (not ready) (states.py).
+        phase: Gait phase of the reported mode, [0, 1), 0 = right heel strike; NaN in every state
+            but walking (states on).
         ready: The matcher's windows are full.
         sse: Per-mode minimum SSE, deg^2 (weighted by channel weights), shape (M,).
         phases: Per-mode phase at the best shift, shape (M,).
@@ -56,6 +59,7 @@ class Estimate:
         phase_rate: Smoothed phase velocity, strides per second; nan until known.
         cadence_ratio: Wearer cadence / kernel cadence of the reported mode: 1 / the time scale
             of its best kernel variant; nan when the matcher has one scale.
+        state: ``EstimateState`` value (states.py): 0 not ready, 1 walking, 2 stand, 3 unknown.
     """
 
     time_s: float
@@ -71,6 +75,7 @@ class Estimate:
     held: bool
     phase_rate: float
     cadence_ratio: float = math.nan
+    state: int = 1
 
     def at(self, time_s: float) -> Estimate:
         """This estimate carried forward to a later ``time_s`` (seconds): the phase advanced by the
@@ -88,15 +93,24 @@ class Estimate:
         several times slower, and this runs for every input sample between grid points)."""
         return Estimate(time_s, self.mode_index, self.mode, phase, self.ready, self.sse, self.phases,
                         self.raw_mode_index, self.confidence, self.fit_rms_deg, self.held, self.phase_rate,
-                        self.cadence_ratio)
+                        self.cadence_ratio, self.state)
+
+    def in_state(self, state: int, mode: str, phase: float) -> Estimate:
+        """This estimate in ``state`` (states.py) reporting ``mode`` and ``phase``."""
+        return Estimate(self.time_s, self.mode_index, mode, phase, self.ready, self.sse, self.phases,
+                        self.raw_mode_index, self.confidence, self.fit_rms_deg, self.held, self.phase_rate,
+                        self.cadence_ratio, state)
 
     @classmethod
     def from_columns(cls, columns: Mapping[str, np.ndarray], g: int, mode_names: Sequence[str]) -> Estimate:
-        """Row ``g`` of the columns ``Supervisor.decide_many`` gives."""
+        """Row ``g`` of the columns ``Supervisor.decide_many`` gives, or of those the state stage
+        leaves (with ``state`` and ``mode``)."""
         c, m = columns, int(columns["mode_index"][g])
-        return cls(float(c["time_s"][g]), m, mode_names[m], float(c["phase"][g]), bool(c["ready"][g]), c["sse"][g],
+        state = int(c["state"][g]) if "state" in c else 1
+        mode = str(c["mode"][g]) if "mode" in c else mode_names[m]
+        return cls(float(c["time_s"][g]), m, mode, float(c["phase"][g]), bool(c["ready"][g]), c["sse"][g],
                    c["phases"][g], int(c["raw_mode_index"][g]), float(c["confidence"][g]), float(c["fit_rms_deg"][g]),
-                   bool(c["held"][g]), float(c["phase_rate"][g]), float(c["cadence_ratio"][g]))
+                   bool(c["held"][g]), float(c["phase_rate"][g]), float(c["cadence_ratio"][g]), state)
 
 
 def carry_forward(columns: Mapping[str, np.ndarray], time_s: np.ndarray) -> dict[str, np.ndarray]:

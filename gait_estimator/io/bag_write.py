@@ -277,7 +277,7 @@ def write_output_bag(
     )
     sse = _ArrayTemplate(lambda i: serialize(multi_array_msg(ts, label, tr.sse[i]), FLOAT64_MULTI_ARRAY), tr.sse, tail=0)
     phase = _ArrayTemplate(lambda i: serialize(t[FLOAT64](data=float(tr.phase[i])), FLOAT64), tr.phase[:, None], tail=0)
-    modes = [bytes(serialize(t[STRING](data=name), STRING)) for name in tr.mode_names]
+    modes = {name: bytes(serialize(t[STRING](data=name), STRING)) for name in set(tr.modes)}
     counts = dict.fromkeys(OUTPUT_MSGTYPES, 0)
     with staged_writer(path, storage) as writer:
         conns = {
@@ -289,7 +289,7 @@ def write_output_bag(
             log = int(logs[i])
             write(conns[ESTIMATE_TOPIC], log, estimate.message(i, int(stamps[i])))
             if tr.ready[i]:
-                write(conns[MODE_TOPIC], log, modes[int(tr.mode_index[i])])
+                write(conns[MODE_TOPIC], log, modes[tr.mode[i]])
                 write(conns[PHASE_TOPIC], log, phase.message(i))
                 write(conns[SSE_TOPIC], log, sse.message(i))
         counts[ESTIMATE_TOPIC] = n

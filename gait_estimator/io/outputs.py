@@ -8,8 +8,8 @@ Topics (relative names, so namespaces and remapping apply):
 ``mode``, ``phase`` and ``sse`` are published once the matcher is ready, ``estimate`` for every
 estimate (with ``ready`` = 0 while the window fills):
 
-* ``mode``  std_msgs/String: name of the estimated mode;
-* ``phase`` std_msgs/Float64: gait phase in [0, 1), 0 = right heel strike;
+* ``mode``  std_msgs/String: name of the estimated mode, ``stand`` or ``unknown`` (states.py);
+* ``phase`` std_msgs/Float64: gait phase in [0, 1), 0 = right heel strike; NaN unless walking;
 * ``sse``   std_msgs/Float64MultiArray: per-mode match error in library order: minimum SSE
   (deg^2) in the paper preset, mean squared error per window sample (deg^2) with
   ``normalize_error`` (the default);
@@ -62,7 +62,7 @@ def mode_names_from_sse_label(label: str) -> list[str]:
 
 
 ESTIMATE_HEAD = ("mode_index", "phase", "ready")
-ESTIMATE_TAIL = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode_index", "cadence_ratio")
+ESTIMATE_TAIL = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode_index", "cadence_ratio", "state")
 
 
 def estimate_names(mode_names: Sequence[str]) -> list[str]:
@@ -74,7 +74,8 @@ def estimate_names(mode_names: Sequence[str]) -> list[str]:
     ``fit_rms_deg`` (RMS error per sample and channel, degrees), ``held`` (1.0 while the reported
     mode is held), ``phase_rate`` (strides/s, nan until known), ``raw_mode_index`` (the
     matcher's own choice before supervision) and ``cadence_ratio`` (wearer cadence / kernel
-    cadence of the reported mode from its best time-scaled kernel variant; nan with one scale).
+    cadence of the reported mode from its best time-scaled kernel variant; nan with one scale),
+    ``state`` (``EstimateState``: 0 not ready, 1 walking, 2 stand, 3 unknown; docs/controller.md).
     """
     return [*ESTIMATE_HEAD, *(f"sse/{m}" for m in mode_names), *(f"phase/{m}" for m in mode_names), *ESTIMATE_TAIL]
 

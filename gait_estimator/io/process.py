@@ -61,13 +61,14 @@ def run_recording(source: str | Path | Recording, kernels: str | Path | KernelLi
 
 PREDICTION_COLUMNS = ("time_s", "sample", "mode", "phase", "ready")
 """First columns of the predictions CSV; then sse_<mode> per mode, then EXTRA_COLUMNS."""
-EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio")
+EXTRA_COLUMNS = ("confidence", "fit_rms_deg", "held", "phase_rate", "raw_mode", "cadence_ratio", "state")
 
 
 def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
     """Write ``time_s, sample, mode, phase, ready, sse_<mode>..., confidence, fit_rms_deg, held,
-    phase_rate, raw_mode, cadence_ratio`` (match error in deg^2, or deg^2 per sample with
-    ``normalize_error``; fit in deg; phase rate in strides/s; cadence ratio nan with one time scale),
+    phase_rate, raw_mode, cadence_ratio, state`` (mode: the reported mode, ``stand``, ``unknown``
+    or empty; match error in deg^2, or deg^2 per sample with ``normalize_error``; fit in deg;
+    phase rate in strides/s; cadence ratio nan with one time scale; state: ``EstimateState``),
     atomically (the old file or the new one, never a part)."""
     p = Path(path)
     tr = pred.trace
@@ -80,7 +81,7 @@ def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
                 [
                     f"{pred.time_s[i]:.6f}",
                     int(pred.sample[i]),
-                    names[tr.mode_index[i]],
+                    tr.mode[i],
                     f"{tr.phase[i]:.9f}",
                     int(tr.ready[i]),
                     *(f"{v:.9g}" for v in tr.sse[i]),
@@ -90,6 +91,7 @@ def write_predictions_csv(pred: Predictions, path: str | Path) -> Path:
                     f"{tr.phase_rate[i]:.6g}",
                     names[tr.raw_mode_index[i]],
                     f"{tr.cadence_ratio[i]:.6g}",
+                    int(tr.state[i]),
                 ]
             )
     return p
@@ -102,11 +104,11 @@ def segments(pred: Predictions) -> list[Segment]:
     ready = np.flatnonzero(tr.ready)
     if ready.size == 0:
         return out
-    idx = tr.mode_index[ready]
-    breaks = np.flatnonzero((np.diff(idx) != 0) | (np.diff(ready) != 1)) + 1
+    names = np.asarray(tr.modes, dtype=object)[ready]
+    breaks = np.flatnonzero((names[1:] != names[:-1]) | (np.diff(ready) != 1)) + 1
     for run in np.split(np.arange(ready.size), breaks):
         first, last = ready[run[0]], ready[run[-1]]
-        out.append(Segment(tr.mode_names[idx[run[0]]], float(pred.time_s[first]), float(pred.time_s[last]), run.size))
+        out.append(Segment(str(names[run[0]]), float(pred.time_s[first]), float(pred.time_s[last]), run.size))
     return out
 
 
@@ -119,8 +121,10 @@ def format_summary(pred: Predictions, library: KernelLibrary, source: str) -> st
     filled = f"window full after {int(first[0]) + 1} samples" if first.size else "window never full"
     lines = [f"{source}: {n} samples, {ready} ready ({filled}); library '{library.name}' ({len(library)} modes)"]
     if ready:
-        counts = np.bincount(tr.mode_index[tr.ready], minlength=len(library))
-        share = ", ".join(f"{m} {c / ready:.1%}" for m, c in zip(tr.mode_names, counts, strict=True) if c)
+        names, counts = np.unique(np.asarray(tr.modes, dtype=str)[tr.ready], return_counts=True)
+        order = {m: i for i, m in enumerate([*tr.mode_names, "stand", "unknown"])}
+        share = ", ".join(f"{m} {c / ready:.1%}" for m, c in sorted(zip(names, counts, strict=True),
+                                                                      key=lambda mc: order.get(mc[0], len(order))))
         lines.append(f"predicted modes (ready samples): {share}")
     lines.append("segments:")
     for s in segments(pred):

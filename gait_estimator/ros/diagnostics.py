@@ -76,6 +76,7 @@ class NodeDiagnostics:
             "input_topic": self._input_topics,
             "input_type": self._input_type,
             "input_units": self._units,
+            "state": str(e.state) if e is not None else "",
             "input_rate_hz": f"{input_rate:.1f}",
             "stamp_rate_hz": "" if math.isnan(stamp_rate) else f"{stamp_rate:.1f}",
             "processing_time_mean_ms": f"{mean_ms:.4f}",
@@ -129,6 +130,8 @@ class NodeDiagnostics:
                 f"input stamp rate {stamp_rate:.0f} Hz differs from the library's {lib.sample_rate_hz:g} Hz "
                 "(set resample: on)"
             )
+        if self._units_check.problem is not None:
+            problems.append(f"input_units {self._units}: {self._units_check.problem}")
         if self._imu is not None:
             imu_values, imu_problems = self._imu.diagnostics()
             values.update(imu_values)

@@ -8,7 +8,8 @@ every message to the shared estimator pipeline (``estimator.Estimator``: gap che
 resampling, incremental matcher, supervisor; the same code as ``gait-estimator process``) and
 publishes (reliable, keep last 10):
 
-* ``mode`` (std_msgs/String) and ``phase`` (std_msgs/Float64, [0, 1)) once the window is full;
+* ``mode`` (std_msgs/String: a library mode, ``stand`` or ``unknown``) and ``phase``
+  (std_msgs/Float64, [0, 1), NaN unless walking) once the window is full (docs/controller.md);
 * ``sse`` (std_msgs/Float64MultiArray, per-mode minimum SSE in deg^2, the layout names the
   modes) once the window is full;
 * ``estimate`` (sensor_msgs/JointState as stamped key/values, see ``outputs.py``) for every
@@ -68,6 +69,7 @@ from ..core.errors import GaitEstimatorError
 from ..core.estimator import Estimator, EstimatorConfig
 from ..core.kernels import KernelLibrary
 from ..core.supervisor import Estimate
+from ..core.units import UnitsCheck
 from ..io.cdr import CdrError, Stamp, read_joint_state
 from ..io.library_io import save_library
 from ..io.outputs import (
@@ -137,6 +139,7 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         self._units: str = self.get_parameter("input_units").value
         self._input_type: str = self.get_parameter("input_type").value
         self._extract = AngleExtractor(self._joint_names, self._units)
+        self._units_check = UnitsCheck()  # angles that cannot be degrees once converted (input_units wrong)
         # Stamp checks, jump-back restarts and rejection counts; gaps (forward) are the Estimator's.
         self._guard = StreamGuard(max_gap_s=0.0, restart_back_s=restart_threshold(self._config.max_gap_s))
         self._resets_before = 0  # gap restarts of estimators replaced by parameter changes
@@ -362,6 +365,9 @@ class EstimatorNode(NodeParameters, NodeDiagnostics, Node):
         if restart:
             est.reset()
             self._log_restart("back", f"input stamps jumped back by {(prev or t) - t:.3f} s (> {guard.restart_back_s:g} s)")
+        units = self._units_check
+        if units.problem is None and self._imu is None and units.observe(t, angles_deg) is not None:
+            self.get_logger().warning(f"input_units {self._units}: {units.problem}")
         resets, recalibrations = est.resets, est.calibration_resets
         estimate = est.update(t, angles_deg)
         if est.resets != resets:

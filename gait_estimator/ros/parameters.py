@@ -277,6 +277,7 @@ class NodeParameters:
                 self._set_priority(p.value)
         if {p.name for p in params} & {"joint_names", "input_units"}:
             self._extract = AngleExtractor(self._joint_names, self._units)
+            self._units_check.reset()
 
     def _set_priority(self, priority: int) -> None:
         """Apply ``thread_priority`` to every thread of the process; a refusal is a warning (the

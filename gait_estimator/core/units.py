@@ -1,0 +1,100 @@
+"""Whether a stream's angles can be degrees: the check that catches ``input_units`` set wrong.
+
+The estimator reads degrees (converted from the input's configured units). Segment angles of a
+person lie within +-180 deg, and walking swings the thigh and shank by tens of degrees. So, at
+the end of every ``BLOCK_S`` of input, over that block and the one before:
+
+* any |angle| above ``MAX_DEG``: these cannot be degrees (degrees read as radians give 57x);
+* every |angle| within ``RADIAN_BOUND`` while one channel moves by ``RADIAN_RANGE`` or more and
+  another by half that: radians read as degrees (walking in radians: segment angles within
+  +-1.2, the shank's range about 1, the thigh's 0.7). A standing wearer sways by less (0.6 deg
+  in a second on Multispeed); one whose four angles all stay within +-1.6 deg while swaying more
+  than that would be flagged.
+
+``UnitsCheck.observe`` is the one rule, O(1) per sample; the node warns (throttled) and its
+diagnostics say WARN, the offline commands print one warning line (``first_problem``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+BLOCK_S = 0.5
+MAX_DEG = 360.0
+RADIAN_BOUND = 1.6
+RADIAN_RANGE = 0.8
+
+
+class UnitsCheck:
+    """Watches a stream of angles (degrees, as converted from ``input_units``) and says when they
+    cannot be degrees. ``problem`` keeps the first verdict until ``reset``."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.problem: str | None = None
+        self._start: float | None = None
+        self._low = [math.inf] * 4
+        self._high = [-math.inf] * 4
+        self._before: tuple[list[float], list[float]] | None = None  # the previous block's low, high
+
+    def observe(self, time_s: float, x: Sequence[float]) -> str | None:
+        """Take one sample ``x`` (4 angles, degrees) at ``time_s`` (s); return a new verdict (a
+        sentence) the first time the block it ends shows angles that cannot be degrees."""
+        low, high = self._low, self._high
+        x0, x1, x2, x3 = x
+        if x0 < low[0]:
+            low[0] = x0
+        if x0 > high[0]:
+            high[0] = x0
+        if x1 < low[1]:
+            low[1] = x1
+        if x1 > high[1]:
+            high[1] = x1
+        if x2 < low[2]:
+            low[2] = x2
+        if x2 > high[2]:
+            high[2] = x2
+        if x3 < low[3]:
+            low[3] = x3
+        if x3 > high[3]:
+            high[3] = x3
+        if self._start is None:
+            self._start = time_s
+        if time_s - self._start < BLOCK_S or self.problem is not None:
+            return None
+        before = self._before or (low, high)
+        verdict = block_verdict([min(a, b) for a, b in zip(low, before[0], strict=True)],
+                                [max(a, b) for a, b in zip(high, before[1], strict=True)])
+        self._before = (low, high)
+        self._start, self._low, self._high = None, [math.inf] * 4, [-math.inf] * 4
+        if verdict is not None:
+            self.problem = verdict
+        return verdict
+
+
+def block_verdict(low: Sequence[float], high: Sequence[float]) -> str | None:
+    """The verdict on a block whose angles (degrees) ranged from ``low`` to ``high`` per channel."""
+    peak = max(max(abs(v) for v in low), max(abs(v) for v in high))
+    if peak > MAX_DEG:
+        return (f"angles reach {peak:.0f} deg: not degrees (radians read as degrees give at most "
+                f"{MAX_DEG:.0f}); the input is likely in degrees read as radians")
+    ranges = sorted(b - a for a, b in zip(low, high, strict=True))
+    if peak <= RADIAN_BOUND and ranges[-1] >= RADIAN_RANGE and ranges[-2] >= RADIAN_RANGE / 2:
+        return (f"angles stay within +-{peak:.2f} deg while the segments move: the input is likely in "
+                "radians read as degrees")
+    return None
+
+
+def first_problem(time_s: np.ndarray, angles_deg: np.ndarray) -> tuple[float, str] | None:
+    """``UnitsCheck`` over a whole recording: (time of the verdict, s; the verdict), or None."""
+    check = UnitsCheck()
+    for t, row in zip(np.asarray(time_s).tolist(), np.asarray(angles_deg).tolist(), strict=True):
+        verdict = check.observe(t, row)
+        if verdict is not None:
+            return t, verdict
+    return None

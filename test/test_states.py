@@ -1,0 +1,116 @@
+"""The states beside the mode (core/states.py) and the units check (core/units.py)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+from synthetic import generate, new_wearer, with_stops
+
+from gait_estimator.analysis.train import TrainOptions, train_library
+from gait_estimator.cli import main
+from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
+from gait_estimator.core.states import FIT_LIMIT_KEY, NOT_READY, STANDING, UNKNOWN_STATE, WALKING, StateParams
+from gait_estimator.core.units import UnitsCheck, first_problem
+from gait_estimator.io.library_io import load_library, save_library
+from gait_estimator.io.readers import read_recording
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_stop_and_start_of_a_new_wearer(able_bodied) -> None:
+    """A new wearer stops twice for 4 s: ``stand`` within 0.5 s of the segments coming to rest,
+    walking again within one stride of the first movement; never a phase unless walking."""
+    syn = generate(able_bodied, [("Med", 10)], new_wearer(3), seed=5)
+    stand_pose = able_bodied.mode("Med").samples[0]
+    fade = 0.6
+    rec = with_stops(syn.recording, {3: 4.0, 6: 4.0}, stand_pose, seed=1, fade_s=fade)
+    tr = run_estimator(Estimator(able_bodied), rec.time_s, rec.angles_deg)
+    t = rec.time_s
+    stopped = rec.labels == ""
+    edges = np.flatnonzero(np.diff(stopped.astype(int)))
+    assert len(edges) == 4
+    stride = float(np.median(syn.stride_durations_s))
+    for a, b in zip(edges[::2] + 1, edges[1::2], strict=True):
+        rest, go = t[a] + fade, t[b] - fade
+        first_stand = t[(t >= rest) & (tr.state == STANDING)][0]
+        assert first_stand - rest <= 0.5
+        assert (tr.state[(t >= first_stand) & (t < go)] == STANDING).all()
+        assert t[(t >= go) & (tr.state == WALKING)][0] - go <= stride
+    assert set(tr.mode[tr.state == STANDING]) == {"stand"}
+    assert np.isnan(tr.phase[tr.state != WALKING]).all()
+    assert np.isfinite(tr.phase[tr.state == WALKING]).all()
+    assert (tr.state[~tr.ready] == NOT_READY).all() and set(tr.mode[~tr.ready]) == {""}
+
+
+def test_the_paper_preset_reports_library_modes_only(able_bodied, multispeed_csv: Path) -> None:
+    """states off: mode and phase as the paper's (the best of a partial window too), state 0/1."""
+    rec = read_recording(multispeed_csv).slice(0, 3000)  # standing, then walking
+    on = run_estimator(Estimator(able_bodied), rec.time_s, rec.angles_deg)
+    off = run_estimator(Estimator(able_bodied, EstimatorConfig(states=False)), rec.time_s, rec.angles_deg)
+    assert (on.state == STANDING).any()
+    np.testing.assert_array_equal(off.state, off.ready.astype(int))
+    np.testing.assert_array_equal(off.mode, np.asarray(able_bodied.mode_names, dtype=object)[off.mode_index])
+    assert np.isfinite(off.phase).all()
+    np.testing.assert_array_equal(on.mode_index, off.mode_index)
+    assert not EstimatorConfig.preset("paper").states
+
+
+def test_running_like_strides_are_unknown(able_bodied) -> None:
+    """Strides 0.7 as long as the Fast kernel's with 1.6x its knee flexion match no mode."""
+    fast = able_bodied.mode("Fast").samples
+    knee = (fast[:, 2:] - fast[:, :2]) - (fast[:, 2:] - fast[:, :2]).mean(axis=0)
+    run = fast.copy()
+    run[:, 2:] += 0.6 * knee
+    n = round(len(run) * 0.7)
+    src = np.linspace(0, 1, len(run), endpoint=False)
+    stride = np.stack([np.interp(np.linspace(0, 1, n, endpoint=False), src, run[:, c], period=1.0) for c in range(4)], 1)
+    x = np.tile(stride, (12, 1))
+    t = np.arange(len(x)) / able_bodied.sample_rate_hz
+    tr = run_estimator(Estimator(able_bodied), t, x)
+    assert np.mean(tr.state[tr.ready] == UNKNOWN_STATE) >= 0.9
+
+
+def test_train_stores_each_modes_fit_limit_and_old_files_load(able_bodied, tmp_path: Path) -> None:
+    syn = generate(able_bodied, [("Slow", 8), ("Fast", 8)], new_wearer(1), seed=2).recording
+    lib = train_library([syn], "taught", TrainOptions(heel_strikes="column")).library
+    limits = [m.info[FIT_LIMIT_KEY] for m in lib.modes]
+    assert all(0 < v < 10 for v in limits)
+    back = load_library(save_library(lib, tmp_path / "lib.yaml"))
+    assert [m.info[FIT_LIMIT_KEY] for m in back.modes] == limits
+    params = StateParams()
+    np.testing.assert_allclose(params.limits(back), params.fit_limit_scale * np.array(limits))
+    np.testing.assert_array_equal(params.limits(able_bodied), params.default_fit_limit_deg)  # the paper's files
+
+
+def test_units_check_flags_the_wrong_unit_and_nothing_else(swge: Path) -> None:
+    for name in ("Multispeed_Walk_AB.csv", "LG_2_Ramp_AB_Sample.csv"):
+        rec = read_recording(swge / "recordings" / name)
+        t = rec.time_s - rec.time_s[0]
+        assert first_problem(t, rec.angles_deg) is None
+        when, why = first_problem(t, np.degrees(rec.angles_deg))
+        assert when <= 2.0 and "degrees read as radians" in why
+        walk = rec.slice(5000, 6000) if name.startswith("Multi") else rec
+        when, why = first_problem(walk.time_s - walk.time_s[0], np.radians(walk.angles_deg))
+        assert when <= 2.0 and "radians read as degrees" in why
+    check = UnitsCheck()
+    assert all(check.observe(i / 100, [0.0, 0.0, 0.0, 0.0]) is None for i in range(500))  # still: no verdict
+
+
+def test_process_warns_once_about_a_bag_in_the_wrong_unit(multispeed_csv: Path, tmp_path: Path, capsys) -> None:
+    bag = tmp_path / "deg_bag"
+    assert main(["convert", str(multispeed_csv), "--out-bag", str(bag), "--units", "deg"]) == 0
+    capsys.readouterr()
+    assert main(["process", str(bag), "--stop", "2000", "-q"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"warning: {bag}: input_units rad: from ") and "degrees" in err[0]
+    assert main(["process", str(bag), "--input-units", "deg", "--stop", "2000", "-q"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_the_controller_page_shows_the_tested_example() -> None:
+    """docs/controller.md quotes examples/impedance_controller.py (test_controller.py runs it)."""
+    doc = (REPO / "docs" / "controller.md").read_text(encoding="utf-8")
+    (code,) = re.findall(r"```python\n(.*?)```", doc, re.S)
+    assert code.strip() in (REPO / "examples" / "impedance_controller.py").read_text(encoding="utf-8")
