@@ -28,11 +28,7 @@ reordered or duplicated sample (dropped), unless it jumps back by more than ``ma
 while the gap check is off): then the publisher or its clock restarted, and the window restarts
 with that sample (``stream_restarts`` in the diagnostics). Bad input is dropped, counted and
 reported (throttled warning naming the problem) without touching the estimator state.
-
-``main`` spins the node with rclpy's EventsExecutor (parameter ``executor``, default ``events``)
-or the SingleThreadedExecutor (``single_threaded``).
-
-This module needs rclpy at import time; the offline tools (``gait-estimator``) do not.
+``main`` spins the node with the ``executor`` parameter's executor. Needs rclpy at import time.
 """
 
 from __future__ import annotations
