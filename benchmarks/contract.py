@@ -19,7 +19,7 @@ Default preset throughout, ``states`` on ("after") and off ("before", the estima
   next (``between_stops``: the first stride after starting and the last before stopping are
   transitions).
 * LG_2_Ramp (bundled able_bodied kernels): the standing 3.0-4.9 s and the stop and standing turn
-  12.5-17.9 s; accuracy on benchmarks/lg2_ramp_labels.csv (level = Slow, Med or Fast).
+  12.5-17.9 s; accuracy on data/swge/recordings/LG_2_Ramp_AB_Sample.labels.csv (level = Slow, Med or Fast).
 * Multispeed (able_bodied): the standing before the belt starts and after it stops.
 * Synthetic (test/synthetic.py, able_bodied): new wearers walking with stops (``with_stops``);
   running-like strides (knee flexion x1.6 over 0.7 of the stride time), sit-to-stand and back,
@@ -74,7 +74,7 @@ OUT = REPO / "benchmarks" / "results" / "contract"
 CAMARGO = REPO / "data" / "camargo_ab06"
 LG2 = REPO / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.csv"
 MULTISPEED = REPO / "data" / "swge" / "recordings" / "Multispeed_Walk_AB.csv"
-LG2_LABELS = REPO / "benchmarks" / "lg2_ramp_labels.csv"
+LG2_LABELS = REPO / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.labels.csv"
 COMMAND = "`python benchmarks/contract.py`"
 GRACE_S = 0.5
 LEVEL = ("Slow", "Med", "Fast")
