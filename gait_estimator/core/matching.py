@@ -151,6 +151,7 @@ class _MatcherBase:
         # Rows are scale-major: row s * M + m is mode m at time scale s (the rows of one scale, which
         # the compiled step updates once the cadence is learnt, lie next to each other in memory).
         self.lengths = np.maximum(2, np.rint(np.outer(self.time_scales, base))).astype(np.int64).reshape(-1)
+        self._base_lengths = np.asarray(base, dtype=np.int64)
         self.windows = self.lengths  # every row compares its whole stride
         self.n_rows = int(self.lengths.size)
         self.max_length = int(self.lengths.max())
@@ -201,11 +202,12 @@ class _MatcherBase:
 
     def _length_groups(self, rows: np.ndarray) -> list[np.ndarray]:
         """``rows`` grouped by their length and their modes' kernel length."""
-        keys = self.lengths[rows] * (1 << 20) + self.library.lengths[rows % self.n_modes]
+        keys = self.lengths[rows] * (1 << 20) + self._base_lengths[rows % self.n_modes]
         return [rows[keys == key] for key in np.unique(keys)]
 
     def _build(self, rows: np.ndarray) -> None:
         """Fill the row tables' slots of ``rows`` from their modes' kernels."""
+        weights = self._weights(self._means_half_life)
         for group in self._length_groups(rows):
             p = self._slots.slot[group]
             n = int(self.lengths[group[0]])
@@ -214,7 +216,7 @@ class _MatcherBase:
             self._kernels[p, :, :n] = k.transpose(0, 2, 1)
             self._mu[p] = k.mean(axis=1)
             if self._mu_seg.shape[2] > 1:
-                self._set_shift_means(p, self._shift_means(k, group))
+                self._set_shift_means(p, self._shift_means(k, group, weights))
 
     def _set_rows(self, mode: int, samples: np.ndarray) -> None:
         """Use ``samples`` (N_m, 4), degrees, as the kernel of ``mode``: rebuild its rows in the tables."""
@@ -261,10 +263,11 @@ class _MatcherBase:
         self._set_weights(h)
         if h > 0 and h != self._means_half_life:  # mu_seg: the means of the weights in use
             self._means_half_life = h
+            weights = self._weights(h)
             for group in self._length_groups(self._slots.held()):
                 p, n = self._slots.slot[group], int(self.lengths[group[0]])
                 self._set_shift_means(p, self._shift_means(self._kernels[p, :, :n].transpose(0, 2, 1).astype(np.float64),
-                                                           group))
+                                                           group, weights))
         self._reweighted()
 
     def start_uniform(self) -> None:
@@ -295,13 +298,14 @@ class _MatcherBase:
         self._mu_seg_blocks[p, :, :, : starts.size] = np.stack(
             [np.minimum.reduceat(means, starts, axis=2), np.maximum.reduceat(means, starts, axis=2)], axis=1)
 
-    def _shift_means(self, k: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    def _shift_means(self, k: np.ndarray, rows: np.ndarray, weights: tuple[np.ndarray, ...]) -> np.ndarray:
         """Per column j, the (weighted) mean of the kernel part the window of each of ``rows`` (one
         length) is compared with at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (g, 4, n) (a_t = 1
-        without recency weighting); ``k`` (g, n, 4)."""
+        without recency weighting); ``k`` (g, n, 4); ``weights``: ``_weights`` of the means'
+        half-life."""
         r = int(rows[0])
         n, w = k.shape[1], int(self.windows[r])
-        lam, _, wsum = self._weights(self._means_half_life)
+        lam, _, wsum = weights
         if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
             c = np.cumsum(np.concatenate([k, k], axis=1), axis=1)
             j = np.arange(n) + n
