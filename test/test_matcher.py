@@ -604,6 +604,32 @@ def test_searched_modes_are_read_at_every_scale(multispeed_csv, able_bodied) -> 
 
 
 @pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")
+def test_the_row_tables_hold_only_the_rows_in_use(multispeed_csv, able_bodied) -> None:
+    """With a scale band the compiled step's matcher keeps kernels and sums for the band's rows
+    (and one mode's rows besides), every row again with the whole band; its row scores and steps
+    are those of a matcher with a wider band (to the rounding of rows rebuilt from the window)."""
+    x = read_recording(multispeed_csv).angles_deg[2000:2900]
+    opts = {"time_scales": (0.88, 0.94, 1.0, 1.06, 1.12), "offset_tolerance_deg": 2.0, "recency_half_life": 0.3}
+    pooled, kept = IncrementalMatcher(able_bodied, **opts), IncrementalMatcher(able_bodied, **opts)
+    full = pooled.state_bytes()
+    bands = {0: [False, False, True, False, False], 300: [False, False, False, True, False], 600: None}
+    wide = {0: [False, True, True, True, False], 300: [False, True, True, True, False], 600: None}
+    for i, d in enumerate(x):
+        if i in bands:
+            pooled.set_scale_band(bands[i])
+            kept.set_scale_band(wide[i])  # its rows stay in the tables: the pooled ones are rebuilt
+        if i == 10:
+            assert pooled.state_bytes() < 0.5 * full
+        if i < 600 and i % 100 == 50:
+            np.testing.assert_allclose(pooled.mode_row_scores(3), kept.mode_row_scores(3), rtol=1e-12)
+        a, b = pooled.step(d), kept.step(d)
+        if i >= 600:
+            assert a.mode_index == b.mode_index
+            np.testing.assert_allclose(a.sse, b.sse, rtol=1e-9)
+    assert pooled.state_bytes() == full
+
+
+@pytest.mark.skipif(NUMBA_OFF, reason="GAIT_ESTIMATOR_NO_NUMBA")
 def test_rows_outside_the_band_are_rebuilt_when_they_are_needed(multispeed_csv, able_bodied) -> None:
     """The compiled step updates only the band's rows; a row outside it is rebuilt from the window
     when it re-enters the band or is read (mode_row_scores), also across the switch from the

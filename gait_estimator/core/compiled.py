@@ -61,7 +61,7 @@ def step_rows(
     decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
     offset: bool, mu: np.ndarray, mu_seg: np.ndarray, mu_range: np.ndarray, mu_blocks: np.ndarray,
     tau: np.ndarray,
-    normalize: bool, n_scales: int, readable: np.ndarray, active: np.ndarray,
+    normalize: bool, n_scales: int, readable: np.ndarray, active: np.ndarray, slot: np.ndarray,
     out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
     out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
@@ -82,7 +82,9 @@ def step_rows(
     for W and the sums);
     normalize: divide by the window's weight;
     readable (R,) bool: the rows a mode may be read at (at least one per mode); active: the rows
-    updated and read out (the readable ones, or all); the others keep their sums.
+    updated and read out (the readable ones, or all); the others keep their sums. slot (R,): the
+    row of e, kern, ksq, wsums, mu, mu_seg, mu_range and mu_blocks that holds a row (the row
+    tables; every active row has one); lens, lam, lam_w, wsum, out_col and out_score are per row.
     Writes per active row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
     wmax = ring.shape[0]
@@ -90,6 +92,7 @@ def step_rows(
     p0, p1, p2, p3 = psum[0] + d0, psum[1] + d1, psum[2] + d2, psum[3] + d3
     for a in prange(active.shape[0]):  # rows are independent (threads in step_rows_parallel)
         r = active[a]
+        p = slot[r]
         n = lens[r]
         full = i >= n
         r0 = r1 = r2 = r3 = rsq = 0.0
@@ -99,8 +102,8 @@ def step_rows(
         lw = lam_w[r]  # weight of the sample leaving the window (1 without decay)
         o0, o1, o2, o3, osq = r0 * lw, r1 * lw, r2 * lw, r3 * lw, rsq * lw
         base = dsq - osq
-        er = e[r]
-        k0, k1, k2, k3 = kern[r, 0], kern[r, 1], kern[r, 2], kern[r, 3]
+        er = e[p]
+        k0, k1, k2, k3 = kern[p, 0], kern[p, 1], kern[p, 2], kern[p, 3]
         last = er[n - 1]
         # In place, from the last column down: e[j] takes the old e[j-1] before it is overwritten.
         aged = decay and lam[r] < 1.0  # age weights in effect (lam = 1: uniform, the paper's update)
@@ -111,18 +114,18 @@ def step_rows(
                 er[j] = er[j - 1] + base + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
             er[0] = last + base + c0 * k0[0] + c1 * k1[0] + c2 * k2[0] + c3 * k3[0]
         elif full:
-            _aged_update(er, n, lam[r], lw, base, d0 - o0, d1 - o1, d2 - o2, d3 - o3, k0, k1, k2, k3, ksq[r])
+            _aged_update(er, n, lam[r], lw, base, d0 - o0, d1 - o1, d2 - o2, d3 - o3, k0, k1, k2, k3, ksq[p])
         else:
             # filling: nothing leaves the window; e[j] = lam e[j-1] + ||d - k_j||^2   (lam = 1 without decay)
             c0, c1, c2, c3 = -2.0 * d0, -2.0 * d1, -2.0 * d2, -2.0 * d3
             g = lam[r]
-            kq = ksq[r]
+            kq = ksq[p]
             for j in range(n - 1, -1, -1):
                 prev = er[j - 1] if j > 0 else last
                 er[j] = g * prev + base + kq[j] + c0 * k0[j] + c1 * k1[j] + c2 * k2[j] + c3 * k3[j]
 
         if decay:  # the weighted window sums age too: S = lam S + d - lam^N old
-            _age_sums(wsums, r, lam[r], d0 - o0, d1 - o1, d2 - o2, d3 - o3)
+            _age_sums(wsums, p, lam[r], d0 - o0, d1 - o1, d2 - o2, d3 - o3)
 
         # Read-out of row r: score = (e - offset penalty) / window weight, its argmin over j.
         filled = i + 1 >= n
@@ -134,15 +137,15 @@ def step_rows(
         use_offset = offset and filled
         s0 = s1 = s2 = s3 = 0.0
         if use_offset:
-            s0, s1, s2, s3 = _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, n)
+            s0, s1, s2, s3 = _row_sums(decay, wsums, p, p0, p1, p2, p3, psum_ring, i, n)
         per_shift = use_offset and aged  # the kernel part's weighted mean depends on the shift
         wp = wsum[r]
         const = 0.0
         if use_offset and not per_shift:
-            const = _offset_penalty(s0, s1, s2, s3, wp, mu[r, 0], mu[r, 1], mu[r, 2], mu[r, 3], tau)
+            const = _offset_penalty(s0, s1, s2, s3, wp, mu[p, 0], mu[p, 1], mu[p, 2], mu[p, 3], tau)
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
-            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[r], mu_range[r],
-                                         mu_blocks[r], out_col[r] + 1)
+            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[p], mu_range[p],
+                                         mu_blocks[p], out_col[r] + 1)
         else:
             best, bj = _argmin(er, n)
             best -= const
@@ -309,7 +312,7 @@ def _age_sums(ws, r, a, x0, x1, x2, x3):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, inline="always")
 def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no cover - compiled
-    """The window sums of row r after this sample (p: prefix sums including it): the age-weighted
+    """The window sums of the row (slot r of wsums) after this sample (p: prefix sums including it): the age-weighted
     sums with decay, else a difference of two prefix sums."""
     if decay:
         return wsums[r, 0], wsums[r, 1], wsums[r, 2], wsums[r, 3]
@@ -326,7 +329,7 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
 def run_steps(  # pragma: no cover - compiled
     e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
     decay, lam, lam_w, wsum, wsums,
-    offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize, n_scales, readable, active, out_col, out_score,
+    offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize, n_scales, readable, active, slot, out_col, out_score,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
@@ -346,7 +349,7 @@ def run_steps(  # pragma: no cover - compiled
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
         b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
                  decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize,
-                 n_scales, readable, active, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
+                 n_scales, readable, active, slot, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
         best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
         if track.shape[0] == 0:
             continue

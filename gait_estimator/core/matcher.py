@@ -9,16 +9,14 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
 
 import numpy as np
 
 from . import compiled
 from .channels import N_CHANNELS
 from .kernels import KernelLibrary
+from .match_results import MatchTrace, StepBlock, StepResult
 from .matching import (
-    MatchTrace,
-    StepResult,
     _MatcherBase,
     check_channel_weights,
     check_offset_tolerance,
@@ -38,45 +36,6 @@ PARALLEL_MIN_ROWS = 64
 """From this many rows (modes x time scales) on, the compiled step reads the kernels as float32
 (the same values: every path uses float32-representable kernel values) and spreads the rows over
 threads (numba's ``parallel``) when the process may use more than one CPU."""
-
-
-@dataclass(frozen=True)
-class StepBlock:
-    """The results of a run of matcher steps in bulk (``IncrementalMatcher.run_steps``; G steps,
-    M modes): what ``StepResult`` holds per step, with the variant, column and window of the best
-    mode only."""
-
-    mode_names: list[str]
-    n_scales: int
-    sse: np.ndarray  # (G, M) every mode's score
-    phases: np.ndarray  # (G, M) every mode's phase
-    best: np.ndarray  # (G,) int64: the best mode
-    variant: np.ndarray  # (G,) int64: its best time scale (index)
-    column: np.ndarray  # (G,) int64: its best kernel column
-    window: np.ndarray  # (G,) int64: its window's samples so far
-    ready: np.ndarray  # (G,) bool
-
-    @classmethod
-    def empty(cls, mode_names: Sequence[str], n_scales: int, steps: int) -> StepBlock:
-        """Room for ``steps`` steps."""
-        best, variant, column, window = np.empty((4, steps), dtype=np.int64)
-        m = len(mode_names)
-        return cls(list(mode_names), n_scales, np.empty((steps, m)), np.empty((steps, m)), best, variant, column,
-                   window, np.empty(steps, dtype=bool))
-
-    def rows(self, start: int, stop: int) -> StepBlock:
-        """Steps ``start`` .. ``stop`` - 1 (views)."""
-        s = slice(start, stop)
-        return replace(self, sse=self.sse[s], phases=self.phases[s], best=self.best[s], variant=self.variant[s],
-                       column=self.column[s], window=self.window[s], ready=self.ready[s])
-
-    def result(self, g: int) -> StepResult:
-        """Step ``g`` as a ``StepResult`` (the other modes' variant, column and window are 0)."""
-        b = int(self.best[g])
-        variant, column, window = np.zeros((3, len(self.mode_names)), dtype=np.int64)
-        variant[b], column[b], window[b] = self.variant[g], self.column[g], self.window[g]
-        return StepResult(b, self.mode_names[b], float(self.phases[g, b]), self.sse[g], self.phases[g],
-                          bool(self.ready[g]), window, variant if self.n_scales > 1 else None, column)
 
 
 class NaiveMatcher(_MatcherBase):
@@ -99,7 +58,7 @@ class NaiveMatcher(_MatcherBase):
         return result
 
     def state_bytes(self) -> int:
-        return self._kernels.nbytes + self._ring.nbytes + self._valid.nbytes
+        return self._kernels.nbytes + self._ring.nbytes
 
 
 
@@ -119,6 +78,11 @@ class IncrementalMatcher(_MatcherBase):
     (``set_scale_band``); a row outside it keeps the sums of the sample it left the band at and is
     rebuilt exactly from the window (FFT) when it is needed again: when it re-enters the band, or
     when ``mode_row_scores`` reads it. The numpy step updates every row.
+
+    Row tables: with more than one time scale the compiled step keeps kernels, per-shift means and
+    running sums only for the rows in use (the band's, and one mode's rows more), each in a slot
+    (``RowSlots``); a row that needs one again takes a free slot and is built from its mode's
+    kernel, with the numbers it had.
 
     Resynchronisation: rounding errors of the running sums are bounded by recomputing
     ``resync_block`` entries from the window every few steps, so that every entry is recomputed
@@ -164,10 +128,13 @@ class IncrementalMatcher(_MatcherBase):
         self._ring_sq = np.zeros(self.max_window)
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
         self._psum = np.zeros(N_CHANNELS)
-        self._wsums = np.zeros((r, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
-        self._e = np.empty((r, n))
-        self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
-        self._update_row_constants()
+        self._allocate_state(r)
+        if self.backend == "numpy":
+            self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
+        self._update_row_constants(self._rows)
+        # The compiled step with a scale band keeps only the rows in use in the row tables
+        # (``_claim``); the numpy step updates every row.
+        self._pooled = self.backend == "numba" and self.n_scales > 1
         self._pad_rows = np.flatnonzero(self.lengths < n)
         self._pad_cols = self.lengths[self._pad_rows]
         self._last = self.lengths - 1
@@ -197,17 +164,60 @@ class IncrementalMatcher(_MatcherBase):
         # Both steps read out only the rows in the scale band: score this mode's rows now.
         rows = self.mode_rows(mode)
         self._sync_rows(rows)
+        p = self._slots.at(rows)
         sums = None
         if self._offset:
-            sums = self._wsums[rows] if self._decay else self.window_sums()[rows]
-        score = self._scores(self._e[rows].astype(np.float64), sums, rows)
-        return np.where(self._valid[rows], score, np.inf).min(axis=1)
+            sums = self._wsums[p] if self._decay else self.window_sums()[rows]
+        score = self._scores(self._e[p].astype(np.float64), sums, rows)
+        valid = np.arange(self.max_length)[None, :] < self.lengths[rows][:, None]
+        return np.where(valid, score, np.inf).min(axis=1)
+
+    def _table_arrays(self) -> tuple[str, ...]:
+        return (*super()._table_arrays(), "_ksq", "_e", "_wsums")
+
+    def _allocate_state(self, slots: int) -> None:
+        """Empty running state for ``slots`` rows of the row tables."""
+        self._ksq = np.zeros((slots, self.max_length))  # ||k_j||^2
+        self._wsums = np.zeros((slots, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
+        self._e = np.full((slots, self.max_length), np.inf)
+
+    def _build(self, rows: np.ndarray) -> None:
+        super()._build(rows)
+        if hasattr(self, "_ksq"):  # not while the base class builds the first tables
+            self._update_row_constants(rows)
+
+    def _resize(self, keep: np.ndarray, slots: int) -> None:
+        """Row tables with room for ``slots`` rows, holding the rows ``keep`` (which have slots) in
+        the first ones; every other row loses its slot."""
+        old = {name: getattr(self, name) for name in self._table_arrays()}
+        src = self._slots.slot[keep]
+        self._allocate(slots, self._kernels.dtype)
+        self._allocate_state(slots)
+        for name, a in old.items():
+            getattr(self, name)[: keep.size] = a[src]
+        self._slots.repack(keep, slots)
+
+    def _claim(self, rows: np.ndarray, pinned: np.ndarray) -> None:
+        """Give those of ``rows`` without one a slot in the row tables, built from their kernels
+        (their sums then need a rebuild), taking none from the ``pinned`` rows ((R,) bool)."""
+        rows = rows[self._slots.slot[rows] < 0]
+        if rows.size == 0:
+            return
+        slots = self._slots.spare(pinned, self._synced == self._count, rows.size)
+        if slots is None:  # make room
+            held = self._slots.held()
+            self._resize(held, held.size + rows.size)
+            slots = np.arange(held.size, held.size + rows.size)
+        self._slots.assign(rows, slots)
+        self._synced[rows] = -1
+        self._build(rows)
 
     def _reweighted(self) -> None:
         # The compiled step rebuilds the rows of the scale band; the others when they are needed.
         rows = self._active if self.backend == "numba" else self._rows
-        self._e[rows] = self._rows_sse_fft(rows, self._lam)
-        self._wsums[rows] = self.age_weighted_sums(rows)
+        p = self._slots.at(rows)
+        self._e[p] = self._rows_sse_fft(rows, self._lam)
+        self._wsums[p] = self.age_weighted_sums(rows)
         self._synced[:] = -1
         self._synced[rows] = self._count
 
@@ -220,6 +230,12 @@ class IncrementalMatcher(_MatcherBase):
         active = self._rows if now.all() else self._band.rows
         self._synced[was & ~now] = self._count  # rows leaving the band are exact now
         self._active = active
+        if self._pooled:
+            self._claim(active, now)
+            room = active.size + self.n_scales  # and one mode's rows for mode_row_scores
+            if self._slots.owner.size > room + room // 4:
+                held = self._slots.held()
+                self._resize(np.concatenate([held[now[held]], held[~now[held]]])[:room], room)
         self._choose_step()
         self._rebuild(np.flatnonzero(now & ~was))
 
@@ -231,11 +247,15 @@ class IncrementalMatcher(_MatcherBase):
 
     def _sync_rows(self, rows: np.ndarray) -> None:
         """Bring those of ``rows`` outside the scale band (which the compiled step does not
-        update) up to date, before they are read."""
+        update) into the row tables and up to date, before they are read."""
         if self.backend != "numba" or self._active is self._rows:
             return
         inside = np.zeros(self.n_rows, dtype=np.bool_)
         inside[self._active] = True
+        if self._pooled:
+            pinned = inside.copy()
+            pinned[rows] = True
+            self._claim(rows, pinned)
         self._rebuild(rows[~inside[rows]])
 
     def _rebuild(self, rows: np.ndarray) -> None:
@@ -244,17 +264,16 @@ class IncrementalMatcher(_MatcherBase):
         rows = rows[self._synced[rows] != self._count]
         if rows.size == 0:
             return
-        self._e[rows] = self._rows_sse_fft(rows, self._lam)
-        self._wsums[rows] = self.age_weighted_sums(rows)
+        p = self._slots.at(rows)
+        self._e[p] = self._rows_sse_fft(rows, self._lam)
+        self._wsums[p] = self.age_weighted_sums(rows)
         self._synced[rows] = self._count
 
-    def _update_row_constants(self, rows: np.ndarray | None = None) -> None:
-        """||k_j||^2 of ``rows`` (default: all) after their kernels changed."""
-        if rows is None:
-            rows = self._rows
-            self._ksq = np.empty((self.n_rows, self.max_length))
-        k = self._kernels[rows].astype(np.float64)
-        self._ksq[rows] = np.einsum("rcj,rcj->rj", k, k)  # ||k_j||^2, (R, Nmax)
+    def _update_row_constants(self, rows: np.ndarray) -> None:
+        """||k_j||^2 of ``rows`` after their kernels changed."""
+        p = self._slots.at(rows)
+        k = self._kernels[p].astype(np.float64)
+        self._ksq[p] = np.einsum("rcj,rcj->rj", k, k)  # ||k_j||^2, (r, Nmax)
 
     def reset(self) -> None:
         super().reset()
@@ -262,7 +281,9 @@ class IncrementalMatcher(_MatcherBase):
         self._psum_ring[:] = 0.0
         self._psum[:] = 0.0
         self._wsums[:] = 0.0
-        self._e[:] = np.where(self._valid, 0.0, np.inf)
+        held = self._slots.owner >= 0
+        self._e[:] = np.inf
+        self._e[held] = np.where(self._valid[self._slots.held()], 0.0, np.inf)
         self._resync_cursor = 0
         self._synced[:] = 0
 
@@ -313,7 +334,7 @@ class IncrementalMatcher(_MatcherBase):
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
             self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
             self.n_scales,
-            self._band.readable, self._active, self._out_col, self._out_score,
+            self._band.readable, self._active, self._slots.slot, self._out_col, self._out_score,
             out.sse, out.phases, out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
             track, near, mid_stride[0], mid_stride[1], self.max_window,
         )
@@ -334,7 +355,7 @@ class IncrementalMatcher(_MatcherBase):
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
             self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
-            self.n_scales, self._band.readable, self._active,
+            self.n_scales, self._band.readable, self._active, self._slots.slot,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
         self._count += 1
@@ -417,17 +438,18 @@ class IncrementalMatcher(_MatcherBase):
         # Errors travel with the diagonal e[r, j] -> e[r, j + 1], so the sweep runs over the
         # diagonals q = (j - steps) mod n, which stay put, not over the columns j.
         lo = self._resync_cursor
-        hi = min(lo + self._resync_block, self._valid.size)
-        flat = lo + np.flatnonzero(self._valid.ravel()[lo:hi])
-        rows, diag = np.divmod(flat, self.max_length)
+        size = self.n_rows * self.max_length
+        hi = min(lo + self._resync_block, size)
+        rows, diag = np.divmod(np.arange(lo, hi), self.max_length)
+        rows, diag = rows[diag < self.lengths[rows]], diag[diag < self.lengths[rows]]
         if self._active is not self._rows:  # rows the compiled step leaves are rebuilt when they come back
             inside = np.zeros(self.n_rows, dtype=np.bool_)
             inside[self._active] = True
             rows, diag = rows[inside[rows]], diag[inside[rows]]
         if rows.size:
             cols = (diag + self._count) % self.lengths[rows]
-            self._e[rows, cols] = self._window_sse(rows, cols)
-        if hi >= self._valid.size:
+            self._e[self._slots.at(rows), cols] = self._window_sse(rows, cols)
+        if hi >= size:
             self._resync_cursor = 0
             if self._count > self.max_window:  # every window sum is then a difference of two
                 self._rebase_prefix_sums()
@@ -445,15 +467,20 @@ class IncrementalMatcher(_MatcherBase):
         with at ``column`` (4,), degrees, both age-weighted with recency weighting (the means the
         offset penalty compares): the sensor offset under the hypothesis that the wearer walks that
         row's mode and time scale. Valid once the row's window is full."""
+        self._sync_rows(np.array([row]))
+        p = int(self._slots.slot[row])
         if self.recency_half_life > 0:
-            return (self._wsums[row] / self._wsum[row] - self._mu_seg[row, :, column]) * self._unscale
+            return (self._wsums[p] / self._wsum[row] - self._mu_seg[p, :, column]) * self._unscale
         w = int(self.windows[row])
         s = self.window_sums()[row]  # not from the prefix-sum ring: the longest window's start slot is overwritten
-        return (s / w - self._mu[row]) * self._unscale
+        return (s / w - self._mu[p]) * self._unscale
 
     def running_sse(self) -> np.ndarray:
-        """The running e[r, j] (R, Nmax), padding inf; a copy."""
-        return self._e.copy()
+        """The running e[r, j] (R, Nmax), padding inf (and rows not in the row tables); a copy."""
+        out = np.full((self.n_rows, self.max_length), np.inf)
+        held = self._slots.owner >= 0
+        out[self._slots.held()] = self._e[held]
+        return out
 
     def set_kernel(self, mode: int, samples: np.ndarray) -> None:
         """Replace the kernel of ``mode`` (N_m, 4), degrees, keeping the window: the running
@@ -466,8 +493,8 @@ class IncrementalMatcher(_MatcherBase):
                              f"{self.library.modes[mode].samples.shape}, got {k.shape}")
         self._set_rows(mode, k)
         rows = self.mode_rows(mode)
-        self._update_row_constants(rows)
-        self._e[rows] = self._rows_sse_fft(rows, self._lam)
+        rows = rows[self._slots.slot[rows] >= 0]  # the others are built from the new kernel when they are needed
+        self._e[self._slots.at(rows)] = self._rows_sse_fft(rows, self._lam)
         if self._active is not self._rows:  # outside the band: the age-weighted sums too
             self._sync_rows(rows)
 
@@ -494,7 +521,7 @@ class IncrementalMatcher(_MatcherBase):
             age[:w] = lam[r0] ** np.arange(w)
             x = np.zeros((n, N_CHANNELS))
             x[:w] = data[:w]
-            k = self._kernels[rows[sel], :, :n].astype(np.float64)  # (g, 4, n)
+            k = self._kernels[self._slots.at(rows[sel]), :, :n].astype(np.float64)  # (g, 4, n)
             fx = np.fft.rfft(x.T * age, n=n)  # (4, n // 2 + 1)
             cross = np.fft.irfft((fx[None] * np.fft.rfft(k, n=n)).sum(axis=1), n=n)
             ksq = np.fft.irfft(np.fft.rfft(age)[None] * np.fft.rfft((k * k).sum(axis=1), n=n), n=n)
@@ -503,6 +530,8 @@ class IncrementalMatcher(_MatcherBase):
 
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
-        arrays = [self._kernels, self._ksq, self._ring, self._ring_sq, self._e, self._next, self._valid,
-                  self._psum_ring, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._wsums]
+        arrays = [self._ring, self._ring_sq, self._psum_ring, self._slots.slot, self._slots.owner, self._synced,
+                  *(getattr(self, name) for name in self._table_arrays()), *self._samples.values()]
+        if self.backend == "numpy":
+            arrays.append(self._next)
         return int(sum(a.nbytes for a in arrays))

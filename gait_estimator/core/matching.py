@@ -54,62 +54,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from .channels import N_CHANNELS, Sample, sample_values
 from .kernels import KernelLibrary, resample_stride
+from .match_results import MatchTrace, StepResult
+from .row_slots import RowSlots
 from .scale_band import ScaleBand
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
 SHIFT_BLOCK = 16
 """Shifts per block of the compiled per-shift read-out's bounds (``compiled._argmin_per_shift``)."""
-
-@dataclass(frozen=True)
-class StepResult:
-    """The estimate after one sample.
-
-    Attributes:
-        mode_index: Index of the best mode in the library.
-        mode: Name of the best mode.
-        phase: Gait phase of the best mode, [0, 1), 0 = right heel strike.
-        sse: Per-mode match error (the score of the mode's best row and shift), shape (M,): SSE
-            in deg^2 (the paper), or deg^2 per window sample with ``normalize``; channel-weighted.
-        phases: Per-mode phase at that mode's best shift, shape (M,).
-        ready: True once the window of every row is full.
-        window: Samples in each mode's comparison window so far (of its best row), shape (M,).
-        variant: Per mode, index of the best time scale in ``matcher.time_scales``, shape (M,);
-            None when the matcher has only one scale.
-        column: Per mode, the best kernel column j* of that row, shape (M,); None if not kept.
-    """
-
-    mode_index: int
-    mode: str
-    phase: float
-    sse: np.ndarray
-    phases: np.ndarray
-    ready: bool
-    window: np.ndarray
-    variant: np.ndarray | None = None
-    column: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class MatchTrace:
-    """Step results for a whole sequence of samples (T steps, M modes)."""
-
-    mode_names: list[str]
-    mode_index: np.ndarray  # (T,) int64
-    phase: np.ndarray  # (T,) float64
-    sse: np.ndarray  # (T, M) float64, deg^2 (per window sample with normalize)
-    phases: np.ndarray  # (T, M) float64
-    ready: np.ndarray  # (T,) bool
-
-    @property
-    def modes(self) -> list[str]:
-        return [self.mode_names[i] for i in self.mode_index]
-
 
 def check_channel_weights(value: Sequence[float] | None) -> np.ndarray:
     """Validate ``channel_weights``: 4 finite numbers >= 0, not all 0 (None = all 1)."""
@@ -195,6 +151,7 @@ class _MatcherBase:
         # Rows are scale-major: row s * M + m is mode m at time scale s (the rows of one scale, which
         # the compiled step updates once the cadence is learnt, lie next to each other in memory).
         self.lengths = np.maximum(2, np.rint(np.outer(self.time_scales, base))).astype(np.int64).reshape(-1)
+        self._base_lengths = np.asarray(base, dtype=np.int64)
         self.windows = self.lengths  # every row compares its whole stride
         self.n_rows = int(self.lengths.size)
         self.max_length = int(self.lengths.max())
@@ -205,36 +162,72 @@ class _MatcherBase:
         self._per_shift = self._decay  # the kernel part's weighted mean depends on the shift
         self._rows = np.arange(self.n_rows)
         self._all = np.arange(self.n_modes)
-        self._valid = np.arange(self.max_length)[None, :] < self.lengths[:, None]  # (R, Nmax)
         self._band = ScaleBand(self.n_modes, self.n_scales)  # the rows read out
         self._row_score = np.zeros(self.n_rows)  # per row: its best score of the last step
-        self._kernels = np.zeros((self.n_rows, N_CHANNELS, self.max_length))  # channel-major rows
-        self._mu = np.zeros((self.n_rows, N_CHANNELS))
-        # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
-        self._mu_seg = np.zeros((self.n_rows, N_CHANNELS, self.max_length if self._per_shift else 1))
-        self._mu_seg_range = np.zeros((self.n_rows, 2, N_CHANNELS))  # per row: min and max of mu_seg over shifts
-        blocks = -(-self._mu_seg.shape[2] // SHIFT_BLOCK)
-        self._mu_seg_blocks = np.zeros((self.n_rows, 2, N_CHANNELS, blocks))  # the same per block of shifts
-        for m in range(self.n_modes):
-            self._set_rows(m, library.modes[m].samples)
+        self._samples: dict[int, np.ndarray] = {}  # kernels that replace the library's (set_kernel)
+        self._slots = RowSlots(self.n_rows)  # the slot of the row tables that holds each row
+        self._allocate(self.n_rows)
+        self._build(self._rows)
         self._ring = np.zeros((self.max_window, N_CHANNELS))
         self._count = 0
 
     # -----------------------------------------------------------------------------------------
     # Rows
 
-    def _set_rows(self, mode: int, samples: np.ndarray) -> None:
-        """(Re)build the rows of ``mode`` from its kernel ``samples`` (N_m, 4), degrees."""
-        for r in self.mode_rows(mode):
-            n = int(self.lengths[r])
-            # float32-representable values: the compiled step streams a float32 copy (half the
-            # memory traffic); every path computes with exactly these values, in float64
-            k = (resample_stride(samples, n) * self._scale).astype(np.float32).astype(np.float64)  # (n, 4)
-            self._kernels[r] = 0.0
-            self._kernels[r, :, :n] = k.T
-            self._mu[r] = k.mean(axis=0)
+    def _table_arrays(self) -> tuple[str, ...]:
+        """The row tables: arrays indexed by slot."""
+        return "_kernels", "_mu", "_mu_seg", "_mu_seg_range", "_mu_seg_blocks"
+
+    def _allocate(self, slots: int, dtype: type = np.float64) -> None:
+        """Empty row tables with room for ``slots`` rows (``dtype``: the kernels')."""
+        self._kernels = np.zeros((slots, N_CHANNELS, self.max_length), dtype=dtype)  # channel-major rows
+        self._mu = np.zeros((slots, N_CHANNELS))
+        # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
+        self._mu_seg = np.zeros((slots, N_CHANNELS, self.max_length if self._per_shift else 1))
+        self._mu_seg_range = np.zeros((slots, 2, N_CHANNELS))  # per row: min and max of mu_seg over shifts
+        blocks = -(-self._mu_seg.shape[2] // SHIFT_BLOCK)
+        self._mu_seg_blocks = np.zeros((slots, 2, N_CHANNELS, blocks))  # the same per block of shifts
+
+    def _kernel_samples(self, mode: int) -> np.ndarray:
+        return self._samples.get(mode, self.library.modes[mode].samples)
+
+    def _row_kernel_values(self, rows: np.ndarray) -> np.ndarray:
+        """The kernels of ``rows`` (one length, of modes of one length) (g, n, 4), weighted:
+        float32-representable values (the compiled step streams a float32 copy, half the memory
+        traffic); every path computes with exactly these values, in float64."""
+        n = int(self.lengths[rows[0]])
+        stacked = np.concatenate([self._kernel_samples(int(m)) for m in rows % self.n_modes], axis=1)  # (N, 4g)
+        k = resample_stride(stacked, n).reshape(n, rows.size, N_CHANNELS).transpose(1, 0, 2) * self._scale
+        return np.ascontiguousarray(k.astype(np.float32).astype(np.float64))
+
+    def _length_groups(self, rows: np.ndarray) -> list[np.ndarray]:
+        """``rows`` grouped by their length and their modes' kernel length."""
+        keys = self.lengths[rows] * (1 << 20) + self._base_lengths[rows % self.n_modes]
+        return [rows[keys == key] for key in np.unique(keys)]
+
+    def _build(self, rows: np.ndarray) -> None:
+        """Fill the row tables' slots of ``rows`` from their modes' kernels."""
+        weights = self._weights(self._means_half_life)
+        for group in self._length_groups(rows):
+            p = self._slots.slot[group]
+            n = int(self.lengths[group[0]])
+            k = self._row_kernel_values(group)
+            self._kernels[p] = 0.0
+            self._kernels[p, :, :n] = k.transpose(0, 2, 1)
+            self._mu[p] = k.mean(axis=1)
             if self._mu_seg.shape[2] > 1:
-                self._set_shift_means(r, self._shift_means(k, r))
+                self._set_shift_means(p, self._shift_means(k, group, weights))
+
+    def _set_rows(self, mode: int, samples: np.ndarray) -> None:
+        """Use ``samples`` (N_m, 4), degrees, as the kernel of ``mode``: rebuild its rows in the tables."""
+        self._samples[mode] = np.array(samples, dtype=np.float64)
+        rows = self.mode_rows(mode)
+        self._build(rows[self._slots.slot[rows] >= 0])
+
+    @property
+    def _valid(self) -> np.ndarray:
+        """Per row and column, whether the column is in the row, (R, Nmax)."""
+        return np.arange(self.max_length)[None, :] < self.lengths[:, None]
 
     def row_of(self, mode: int, scale: int) -> int:
         """The row of ``mode`` at time scale index ``scale``."""
@@ -270,9 +263,11 @@ class _MatcherBase:
         self._set_weights(h)
         if h > 0 and h != self._means_half_life:  # mu_seg: the means of the weights in use
             self._means_half_life = h
-            for r in range(self.n_rows):
-                n = int(self.lengths[r])
-                self._set_shift_means(r, self._shift_means(self._kernels[r, :, :n].T.astype(np.float64), r))
+            weights = self._weights(h)
+            for group in self._length_groups(self._slots.held()):
+                p, n = self._slots.slot[group], int(self.lengths[group[0]])
+                self._set_shift_means(p, self._shift_means(self._kernels[p, :, :n].transpose(0, 2, 1).astype(np.float64),
+                                                           group, weights))
         self._reweighted()
 
     def start_uniform(self) -> None:
@@ -293,29 +288,31 @@ class _MatcherBase:
     def _reweighted(self) -> None:
         """Bring the running state in line with new age weights (nothing to do for the naive matcher)."""
 
-    def _set_shift_means(self, r: int, means: np.ndarray) -> None:
-        """Row ``r``'s per-shift kernel means (4, n) and their range over all shifts and over each
-        block of SHIFT_BLOCK shifts."""
-        n = means.shape[1]
-        self._mu_seg[r, :, :n] = means
-        self._mu_seg_range[r] = means.min(axis=1), means.max(axis=1)
+    def _set_shift_means(self, p: np.ndarray, means: np.ndarray) -> None:
+        """Slots ``p``' per-shift kernel means (g, 4, n) and their range over all shifts and over
+        each block of SHIFT_BLOCK shifts."""
+        n = means.shape[2]
+        self._mu_seg[p, :, :n] = means
+        self._mu_seg_range[p] = np.stack([means.min(axis=2), means.max(axis=2)], axis=1)
         starts = np.arange(0, n, SHIFT_BLOCK)
-        self._mu_seg_blocks[r, :, :, : starts.size] = np.minimum.reduceat(means, starts, axis=1), np.maximum.reduceat(
-            means, starts, axis=1)
+        self._mu_seg_blocks[p, :, :, : starts.size] = np.stack(
+            [np.minimum.reduceat(means, starts, axis=2), np.maximum.reduceat(means, starts, axis=2)], axis=1)
 
-    def _shift_means(self, k: np.ndarray, r: int) -> np.ndarray:
-        """Per column j, the (weighted) mean of the kernel part row ``r``'s window is compared with
-        at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (4, n) (a_t = 1 without recency weighting); ``k``
-        (n, 4)."""
-        n, w = k.shape[0], int(self.windows[r])
-        lam, _, wsum = self._weights(self._means_half_life)
+    def _shift_means(self, k: np.ndarray, rows: np.ndarray, weights: tuple[np.ndarray, ...]) -> np.ndarray:
+        """Per column j, the (weighted) mean of the kernel part the window of each of ``rows`` (one
+        length) is compared with at j: sum_{t<W} a_t k_{(j-t) mod n} / W_a, (g, 4, n) (a_t = 1
+        without recency weighting); ``k`` (g, n, 4); ``weights``: ``_weights`` of the means'
+        half-life."""
+        r = int(rows[0])
+        n, w = k.shape[1], int(self.windows[r])
+        lam, _, wsum = weights
         if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
-            c = np.cumsum(np.concatenate([k, k]), axis=0)
+            c = np.cumsum(np.concatenate([k, k], axis=1), axis=1)
             j = np.arange(n) + n
-            return ((c[j] - c[j - w]) / w).T
+            return ((c[:, j] - c[:, j - w]) / w).transpose(0, 2, 1)
         weights = np.zeros(n)
         weights[:w] = lam[r] ** np.arange(w)
-        conv = np.fft.irfft(np.fft.rfft(k.T, n=n) * np.fft.rfft(weights), n=n)  # circular: sum_t w_t k_{j-t}
+        conv = np.fft.irfft(np.fft.rfft(k.transpose(0, 2, 1), n=n) * np.fft.rfft(weights), n=n)  # sum_t w_t k_{j-t}
         return conv / wsum[r]
 
     @property
@@ -462,11 +459,11 @@ class _MatcherBase:
             w = self._wsum[rows]
             per_shift = self.recency_half_life > 0  # mu_seg: the active weights' means
             if per_shift:
-                x = sums[:, :, None] / w[:, None, None] - self._mu_seg[rows]  # (r, 4, Nmax)
+                x = sums[:, :, None] / w[:, None, None] - self._mu_seg[self._slots.at(rows)]  # (r, 4, Nmax)
                 w_ = w[:, None]
                 tol, off = self._tau[0, :, None], self._tau[1, :, None]
             else:
-                x = sums / w[:, None] - self._mu[rows]  # (r, 4)
+                x = sums / w[:, None] - self._mu[self._slots.at(rows)]  # (r, 4)
                 w_ = w
                 tol, off = self._tau
             excess = np.maximum(np.abs(x - off) - tol, 0.0)
@@ -506,7 +503,7 @@ class _MatcherBase:
         t = np.arange(w)
         data = self._window_data()  # (Wmax, 4): d_{i-t}
         lens = self.lengths[rows][:, None]
-        diff = data[None, :, :] - self._kernels[rows[:, None], :, (cols[:, None] - t[None, :]) % lens]
+        diff = data[None, :, :] - self._kernels[self._slots.at(rows)[:, None], :, (cols[:, None] - t[None, :]) % lens]
         sq = np.einsum("btc,btc->bt", diff, diff)
         sq[t[None, :] >= np.minimum(self._count, self.windows[rows][:, None])] = 0.0
         if self._decay:
@@ -514,8 +511,9 @@ class _MatcherBase:
         return sq.sum(axis=1)
 
     def full_sse(self) -> np.ndarray:
-        """e[r, j] recomputed from the buffered samples (the naive sum), (R, Nmax); padding inf."""
-        rows, cols = np.nonzero(self._valid)
+        """e[r, j] recomputed from the buffered samples (the naive sum), (R, Nmax); padding inf, and
+        inf for rows not in the row tables."""
+        rows, cols = np.nonzero(self._valid & (self._slots.slot >= 0)[:, None])
         out = np.full(self._valid.shape, np.inf)
         for lo in range(0, rows.size, _CHUNK):
             r, c = rows[lo : lo + _CHUNK], cols[lo : lo + _CHUNK]

@@ -1,0 +1,94 @@
+"""What the matchers return: one step's estimate (``StepResult``), a run of steps in bulk
+(``StepBlock``) and a whole sequence (``MatchTrace``)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """The estimate after one sample.
+
+    Attributes:
+        mode_index: Index of the best mode in the library.
+        mode: Name of the best mode.
+        phase: Gait phase of the best mode, [0, 1), 0 = right heel strike.
+        sse: Per-mode match error (the score of the mode's best row and shift), shape (M,): SSE
+            in deg^2 (the paper), or deg^2 per window sample with ``normalize``; channel-weighted.
+        phases: Per-mode phase at that mode's best shift, shape (M,).
+        ready: True once the window of every row is full.
+        window: Samples in each mode's comparison window so far (of its best row), shape (M,).
+        variant: Per mode, index of the best time scale in ``matcher.time_scales``, shape (M,);
+            None when the matcher has only one scale.
+        column: Per mode, the best kernel column j* of that row, shape (M,); None if not kept.
+    """
+
+    mode_index: int
+    mode: str
+    phase: float
+    sse: np.ndarray
+    phases: np.ndarray
+    ready: bool
+    window: np.ndarray
+    variant: np.ndarray | None = None
+    column: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class MatchTrace:
+    """Step results for a whole sequence of samples (T steps, M modes)."""
+
+    mode_names: list[str]
+    mode_index: np.ndarray  # (T,) int64
+    phase: np.ndarray  # (T,) float64
+    sse: np.ndarray  # (T, M) float64, deg^2 (per window sample with normalize)
+    phases: np.ndarray  # (T, M) float64
+    ready: np.ndarray  # (T,) bool
+
+    @property
+    def modes(self) -> list[str]:
+        return [self.mode_names[i] for i in self.mode_index]
+
+
+
+@dataclass(frozen=True)
+class StepBlock:
+    """The results of a run of matcher steps in bulk (``IncrementalMatcher.run_steps``; G steps,
+    M modes): what ``StepResult`` holds per step, with the variant, column and window of the best
+    mode only."""
+
+    mode_names: list[str]
+    n_scales: int
+    sse: np.ndarray  # (G, M) every mode's score
+    phases: np.ndarray  # (G, M) every mode's phase
+    best: np.ndarray  # (G,) int64: the best mode
+    variant: np.ndarray  # (G,) int64: its best time scale (index)
+    column: np.ndarray  # (G,) int64: its best kernel column
+    window: np.ndarray  # (G,) int64: its window's samples so far
+    ready: np.ndarray  # (G,) bool
+
+    @classmethod
+    def empty(cls, mode_names: Sequence[str], n_scales: int, steps: int) -> StepBlock:
+        """Room for ``steps`` steps."""
+        best, variant, column, window = np.empty((4, steps), dtype=np.int64)
+        m = len(mode_names)
+        return cls(list(mode_names), n_scales, np.empty((steps, m)), np.empty((steps, m)), best, variant, column,
+                   window, np.empty(steps, dtype=bool))
+
+    def rows(self, start: int, stop: int) -> StepBlock:
+        """Steps ``start`` .. ``stop`` - 1 (views)."""
+        s = slice(start, stop)
+        return replace(self, sse=self.sse[s], phases=self.phases[s], best=self.best[s], variant=self.variant[s],
+                       column=self.column[s], window=self.window[s], ready=self.ready[s])
+
+    def result(self, g: int) -> StepResult:
+        """Step ``g`` as a ``StepResult`` (the other modes' variant, column and window are 0)."""
+        b = int(self.best[g])
+        variant, column, window = np.zeros((3, len(self.mode_names)), dtype=np.int64)
+        variant[b], column[b], window[b] = self.variant[g], self.column[g], self.window[g]
+        return StepResult(b, self.mode_names[b], float(self.phases[g, b]), self.sse[g], self.phases[g],
+                          bool(self.ready[g]), window, variant if self.n_scales > 1 else None, column)
