@@ -11,6 +11,7 @@ from synthetic import generate, new_wearer, with_stops
 from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.cli import main
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
+from gait_estimator.core.pipeline import PipelineParams
 from gait_estimator.core.states import FIT_LIMIT_KEY, NOT_READY, STANDING, UNKNOWN_STATE, WALKING, StateParams
 from gait_estimator.core.units import UnitsCheck, first_problem
 from gait_estimator.io.library_io import load_library, save_library
@@ -70,6 +71,18 @@ def test_running_like_strides_are_unknown(able_bodied) -> None:
     t = np.arange(len(x)) / able_bodied.sample_rate_hz
     tr = run_estimator(Estimator(able_bodied), t, x)
     assert np.mean(tr.state[tr.ready] == UNKNOWN_STATE) >= 0.9
+
+
+def test_walking_from_the_first_stride_after_a_stop(able_bodied, swge: Path) -> None:
+    """LG_2_Ramp stands 3.0-4.9 s; the window still holds the standing samples in the first
+    stride (labelled level from 5.5 s), whose fit is beyond the limit: judged one stride later."""
+    rec = read_recording(swge / "recordings" / "LG_2_Ramp_AB_Sample.csv")
+    t, first = rec.time_s, (rec.time_s >= 5.5) & (rec.time_s < 6.0)
+    tr = run_estimator(Estimator(able_bodied), t, rec.angles_deg)
+    assert np.all(tr.state[(t >= 4.2) & (t < 4.9)] == STANDING) and np.all(tr.state[first] == WALKING)
+    config = EstimatorConfig()
+    judged = Estimator(able_bodied, config, params=PipelineParams.from_config(config, states={"start_strides": 0.0}))
+    assert np.mean(run_estimator(judged, t, rec.angles_deg).state[first] == UNKNOWN_STATE) > 0.5
 
 
 def test_train_stores_each_modes_fit_limit_and_old_files_load(able_bodied, tmp_path: Path) -> None:
