@@ -11,6 +11,7 @@ from synthetic import generate, new_wearer, with_stops
 from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.cli import main
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
+from gait_estimator.core.pipeline import PipelineParams
 from gait_estimator.core.states import FIT_LIMIT_KEY, NOT_READY, STANDING, UNKNOWN_STATE, WALKING, StateParams
 from gait_estimator.core.units import UnitsCheck, first_problem
 from gait_estimator.io.library_io import load_library, save_library
@@ -70,6 +71,32 @@ def test_running_like_strides_are_unknown(able_bodied) -> None:
     t = np.arange(len(x)) / able_bodied.sample_rate_hz
     tr = run_estimator(Estimator(able_bodied), t, x)
     assert np.mean(tr.state[tr.ready] == UNKNOWN_STATE) >= 0.9
+
+
+def lg2_states(library, swge: Path, **states: float) -> tuple[np.ndarray, np.ndarray]:
+    """LG_2_Ramp's time and states with ``states`` (StateParams fields) on the default preset."""
+    rec = read_recording(swge / "recordings" / "LG_2_Ramp_AB_Sample.csv")
+    config = EstimatorConfig()
+    est = Estimator(library, config, params=PipelineParams.from_config(config, states=states))
+    return rec.time_s, run_estimator(est, rec.time_s, rec.angles_deg).state
+
+
+def test_walking_from_the_first_stride_after_a_stop(able_bodied, swge: Path) -> None:
+    """LG_2_Ramp stands 3.0-4.9 s; the window still holds the standing samples in the first
+    stride (labelled level from 5.5 s), whose fit is beyond the limit: judged one stride later."""
+    t, state = lg2_states(able_bodied, swge)
+    first = (t >= 5.5) & (t < 6.0)
+    assert np.all(state[(t >= 4.2) & (t < 4.9)] == STANDING) and np.all(state[first] == WALKING)
+    assert np.mean(lg2_states(able_bodied, swge, start_strides=0.0)[1][first] == UNKNOWN_STATE) > 0.5
+
+
+def test_slowing_to_a_stop_is_unknown(able_bodied, swge: Path) -> None:
+    """After its last stride (to 13.6 s) LG_2_Ramp's legs drift to a halt; the fit stays within
+    the limit to 14.3 s."""
+    t, state = lg2_states(able_bodied, swge)
+    slowing = (t >= 14.2) & (t < 14.4)
+    assert np.all(state[slowing] == UNKNOWN_STATE)
+    assert np.all(lg2_states(able_bodied, swge, slow_speed_dps=0.0)[1][slowing] == WALKING)
 
 
 def test_train_stores_each_modes_fit_limit_and_old_files_load(able_bodied, tmp_path: Path) -> None:

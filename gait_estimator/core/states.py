@@ -7,8 +7,9 @@ sample, from the angles it matched and the supervisor's estimate:
 * ``stand``: the segments have been still for ``stand_after_s``: every matched channel's smoothed
   angular speed (``state_step``) below ``still_speed_dps``. Ends at the first sample that moves
   faster;
-* ``unknown``: the reported mode's fit (``fit_rms_deg``) has been beyond that mode's fit limit, or
-  the stride rate (``phase_rate``) above ``max_cadence_ratio`` times its kernel's, for
+* ``unknown``: the reported mode's fit (``fit_rms_deg``) has been beyond that mode's fit limit
+  (judged from ``start_strides`` after ``stand``), the stride rate (``phase_rate``) above
+  ``max_cadence_ratio`` times its kernel's, or every segment slower than ``slow_speed_dps``, for
   ``unknown_after_s`` (and stays until it has been within it as long): a library taught or
   trained here stores each mode's limit (``fit_limit_deg`` in its ``info``, ``fit_limit_deg``
   here) times ``fit_limit_scale``; others get ``default_fit_limit_deg``;
@@ -74,6 +75,10 @@ class StateParams:
             turns and first steps).
         unknown_after_s: Seconds beyond the fit limit before ``unknown``, and within it before
             walking again.
+        start_strides: Strides (the reported mode's kernel's) after ``stand`` during which the
+            fit is not judged: the window still holds the standing samples.
+        slow_speed_dps: Smoothed angular speed (deg/s) below which every matched segment moving
+            counts as beyond a limit (slowing to a stop, shuffling; walking swings faster).
     """
 
     enabled: bool = True
@@ -85,6 +90,8 @@ class StateParams:
     default_fit_limit_deg: float = 12.0
     max_cadence_ratio: float = 1.25
     unknown_after_s: float = 0.2
+    start_strides: float = 1.0
+    slow_speed_dps: float = 40.0
 
     def limits(self, library: KernelLibrary) -> np.ndarray:
         """Each mode's fit limit, degrees RMS, (M,)."""
@@ -105,26 +112,29 @@ def fit_limit_deg(strides: np.ndarray, kernel: np.ndarray) -> float:
 
 
 NAN = math.nan
-MEMORY = 17
+MEMORY = 18
 """state_step's memory: known, last time, fast (4) and slow (4) angle averages, still since, over
 the limit since, unknown (1.0) or not, within the limit since; the last interval and its two
-smoothing weights (resampled input repeats one interval)."""
+smoothing weights (resampled input repeats one interval); the last ``stand`` sample's time."""
 
 
 def state_step(mem, time_s: float, x0: float, x1: float, x2: float, x3: float, active, ready: bool,
-               fit: float, limit: float, cadence: float, max_cadence: float, still_deg: float, fast_tau: float,
-               slow_tau: float, stand_after: float, unknown_after: float) -> int:
+               fit: float, limit: float, cadence: float, start: float, max_cadence: float, still_deg: float,
+               slow_deg: float, fast_tau: float, slow_tau: float, stand_after: float, unknown_after: float) -> int:
     """The state of one matcher sample at ``time_s`` (seconds), angles ``x0..x3`` (degrees),
     ``active`` (4,) 1.0 for matched channels; ``mem`` (MEMORY,) updated in place; ``fit`` and
     ``limit``: the reported mode's fit and its limit, degrees; ``cadence``: the wearer's stride
-    rate over the reported mode's kernel's (nan unknown), ``max_cadence`` its upper limit.
+    rate over the reported mode's kernel's (nan unknown), ``max_cadence`` its upper limit;
+    ``start``: seconds after ``stand`` during which the fit is not judged.
 
     Stillness: each angle's fast and slow exponential averages (time constants ``fast_tau`` <
     ``slow_tau``, s) differ by speed x (slow_tau - fast_tau) for an angle moving at a steady speed,
-    and by little for sensor noise; ``still_deg`` = still_speed_dps x (slow_tau - fast_tau)."""
+    and by little for sensor noise; ``still_deg`` (``slow_deg``) = still_speed_dps (slow_speed_dps)
+    x (slow_tau - fast_tau)."""
+    slow = False
     if mem[0] == 0.0:
         mem[2], mem[3], mem[4], mem[5], mem[6], mem[7], mem[8], mem[9] = x0, x1, x2, x3, x0, x1, x2, x3
-        mem[0], mem[10], mem[11], mem[12], mem[13], mem[14] = 1.0, time_s, NAN, 0.0, NAN, NAN
+        mem[0], mem[10], mem[11], mem[12], mem[13], mem[14], mem[17] = 1.0, time_s, NAN, 0.0, NAN, NAN, NAN
     else:
         dt = time_s - mem[1]
         if dt != mem[14]:
@@ -138,12 +148,17 @@ def state_step(mem, time_s: float, x0: float, x1: float, x2: float, x3: float, a
         if (active[0] * abs(f0 - s0) >= still_deg or active[1] * abs(f1 - s1) >= still_deg
                 or active[2] * abs(f2 - s2) >= still_deg or active[3] * abs(f3 - s3) >= still_deg):
             mem[10] = time_s
+        slow = (active[0] * abs(f0 - s0) < slow_deg and active[1] * abs(f1 - s1) < slow_deg
+                and active[2] * abs(f2 - s2) < slow_deg and active[3] * abs(f3 - s3) < slow_deg)
     mem[1] = time_s
     if not ready or time_s - mem[10] >= stand_after - 1e-9:
         mem[11], mem[12], mem[13] = NAN, 0.0, NAN
-        return 0 if not ready else 2
+        if not ready:
+            return 0
+        mem[17] = time_s
+        return 2
     # unknown after unknown_after s beyond a limit, walking again after as long within them
-    if fit > limit or cadence > max_cadence:
+    if (fit > limit and not time_s - mem[17] < start) or cadence > max_cadence or slow:
         mem[13] = NAN
         if math.isnan(mem[11]):
             mem[11] = time_s
@@ -177,10 +192,12 @@ class StateTracker:
         self._limit_list: list[float] = self.limits.tolist()
         self.durations = np.array([m.stride_duration_s for m in library.modes])
         self._duration_list: list[float] = self.durations.tolist()
+        self._start_list: list[float] = (params.start_strides * self.durations).tolist()
         self._active = (np.asarray(channel_weights, dtype=np.float64) > 0).astype(np.float64)
         self._active_list: list[float] = self._active.tolist()
         self.names = reported_names(library.mode_names)
         self._thresholds = (params.max_cadence_ratio, params.still_speed_dps * (params.slow_tau_s - params.fast_tau_s),
+                            params.slow_speed_dps * (params.slow_tau_s - params.fast_tau_s),
                             params.fast_tau_s, params.slow_tau_s, params.stand_after_s, params.unknown_after_s)
         self.reset()
 
@@ -194,7 +211,8 @@ class StateTracker:
             return est if est.ready else est.in_state(NOT_READY, est.mode, est.phase)
         m = est.mode_index
         state = state_step(self._mem, time_s, x[0], x[1], x[2], x[3], self._active_list, est.ready, est.fit_rms_deg,
-                           self._limit_list[m], est.phase_rate * self._duration_list[m], *self._thresholds)
+                           self._limit_list[m], est.phase_rate * self._duration_list[m], self._start_list[m],
+                           *self._thresholds)
         if state == WALKING:
             return est
         return est.in_state(state, self.names[name_index(state, est.mode_index, len(self.names))], math.nan)
@@ -209,9 +227,10 @@ class StateTracker:
         state = np.empty(n, dtype=np.int64)
         mem = np.asarray(self._mem, dtype=np.float64)
         limit = self.limits[columns["mode_index"]] if n else np.zeros(0)
-        cadence = columns["phase_rate"] * self.durations[columns["mode_index"]] if n else np.zeros(0)
+        duration = self.durations[columns["mode_index"]] if n else np.zeros(0)
         _state_rows(mem, time_s, np.ascontiguousarray(x, dtype=np.float64), self._active, columns["ready"],
-                    columns["fit_rms_deg"], limit, cadence, *self._thresholds, state)
+                    columns["fit_rms_deg"], limit, columns["phase_rate"] * duration,
+                    self.params.start_strides * duration, *self._thresholds, state)
         self._mem = mem.tolist()
         phase = np.where(state == WALKING, columns["phase"], math.nan)
         index = name_index(state, columns["mode_index"], len(self.names))
@@ -234,9 +253,10 @@ _state_step = compiled.njit(cache=True, nogil=True)(state_step)
 
 
 @compiled.njit(cache=True, nogil=True)
-def _state_rows(mem, time_s, x, active, ready, fit, limit, cadence, max_cadence, still_deg, fast_tau, slow_tau,
-                stand_after, unknown_after, state):  # pragma: no cover - compiled
+def _state_rows(mem, time_s, x, active, ready, fit, limit, cadence, start, max_cadence, still_deg, slow_deg,
+                fast_tau, slow_tau, stand_after, unknown_after, state):  # pragma: no cover - compiled
     for g in range(time_s.shape[0]):
         state[g] = _state_step(mem, time_s[g], x[g, 0], x[g, 1], x[g, 2], x[g, 3], active, ready[g], fit[g],
-                               limit[g], cadence[g], max_cadence, still_deg, fast_tau, slow_tau, stand_after, unknown_after)
+                               limit[g], cadence[g], start[g], max_cadence, still_deg, slow_deg, fast_tau, slow_tau,
+                               stand_after, unknown_after)
 
