@@ -29,16 +29,14 @@ def stiffness(state: int, mode: str, phase: float) -> float:
 class ImpedanceController(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("impedance_controller", **kwargs)
-        self.modes: list[str] = []
         self.command = HOLD
         self.create_subscription(JointState, "estimate", self.on_estimate, 10)
 
     def on_estimate(self, msg: JointState) -> None:
         v = dict(zip(msg.name, msg.position, strict=True))
-        if not self.modes:  # the library's modes, in mode_index order
-            self.modes = [k[4:] for k in msg.name if k.startswith("sse/")]
+        modes = [k[4:] for k in msg.name if k.startswith("sse/")]  # in mode_index order; a taught mode adds one
         state = int(v["state"])
-        mode = self.modes[int(v["mode_index"])] if state == WALKING else ""
+        mode = modes[int(v["mode_index"])] if state == WALKING else ""
         self.command = stiffness(state, mode, v["phase"])  # phase is NaN unless walking
         # ... send self.command to the knee here
 

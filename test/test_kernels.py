@@ -128,6 +128,8 @@ def _write_doc(tmp_path: Path, mutate) -> Path:
         (lambda d: d["modes"][0].update(samples=[[1, 2, 3]] * 5, length=5), "shape"),
         (lambda d: d["modes"][0]["samples"][2].__setitem__(1, float("nan")), "non-finite value at sample 2"),
         (lambda d: d["modes"][1].update(name="A"), "duplicate mode name 'A'"),
+        (lambda d: d["modes"][1].update(name="stand"), "mode name 'stand' is reserved"),
+        (lambda d: d["modes"][0].update(name="unknown"), "mode name 'unknown' is reserved"),
         (lambda d: d["modes"][1].update(samples=[[1, 2, 3, 4]], length=1), "need at least 2"),
         (lambda d: d.pop("channels"), "missing metadata key 'channels'"),
         (lambda d: d["modes"][0].pop("sample_rate_hz"), "missing 'sample_rate_hz'"),

@@ -20,6 +20,16 @@ from ..core.errors import GaitEstimatorError
 from ..ros import require_ros
 from .args import add_target_node_options, positive_float
 
+MAX_RATE_HZ = 60.0
+"""Most page updates per second: each page's frames cost the leg's computer."""
+
+
+def frame_rate(text: str) -> float:
+    v = positive_float(text)
+    if v > MAX_RATE_HZ:
+        raise argparse.ArgumentTypeError(f"at most {MAX_RATE_HZ:g} updates per second, got {text}")
+    return v
+
 
 def port_number(text: str) -> int:
     try:
@@ -89,7 +99,7 @@ def add_arguments(p: Any) -> None:
     p.add_argument("--token", help="the token the page asks for (default: $GAIT_DASHBOARD_TOKEN, else a new one "
                    "printed with the URL when --host is not loopback; given, it is asked on loopback too)")
     p.add_argument("--read-only", action="store_true", help="show the node only: no teaching, no saving")
-    p.add_argument("--rate", type=positive_float, default=30.0, help="page updates per second (default %(default)s)")
+    p.add_argument("--rate", type=frame_rate, default=30.0, help="page updates per second, at most 60 (default %(default)s)")
     add_target_node_options(p)
     p.set_defaults(func=cmd_dashboard)
 

@@ -21,6 +21,7 @@ from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
 from .args import add_imu_reading_options, domain_id, imu_reader_options, positive_float
+from .dashboard_command import port_number
 
 DEMO_DOMAIN_ID = 77
 """``demo``'s ROS domain when neither ``--domain-id`` nor ``ROS_DOMAIN_ID`` is set."""
@@ -246,5 +247,5 @@ def add_commands(sub: Any) -> None:
     d.add_argument("--node-cmd", help="estimator_node executable (default: python -m gait_estimator.ros.node)")
     d.add_argument("--dashboard", action="store_true", help="also serve the live web view (gait-estimator dashboard) "
                    "at the printed URL; needs the 'dashboard' extra")
-    d.add_argument("--dashboard-port", type=int, default=8080, help="its port (default %(default)s)")
+    d.add_argument("--dashboard-port", type=port_number, default=8080, help="its port (default %(default)s)")
     d.set_defaults(func=cmd_demo)

@@ -19,6 +19,18 @@ REFERENCE_MODE_IDS = {"Slow": 1, "Med": 2, "Fast": 3, "RA": 4, "RD": 5, "SA": 6,
 """Mode IDs of the paper's seven modes, as in the reference CSVs and output."""
 
 
+STAND = "stand"
+UNKNOWN = "unknown"
+RESERVED_MODE_NAMES = (STAND, UNKNOWN)
+"""What ``mode`` reads when the wearer is still or no kernel fits (``core/states.py``): no library
+mode may take these names."""
+
+
+def reserved_name(name: str) -> str:
+    """Why ``name`` cannot name a mode (one of ``RESERVED_MODE_NAMES``)."""
+    return f"mode name {name!r} is reserved: the estimator reports it when no library mode applies"
+
+
 @dataclass(frozen=True)
 class KernelMode:
     """One locomotion mode's kernel.
@@ -131,6 +143,8 @@ def validate_library(lib: KernelLibrary) -> None:
     for m in lib.modes:
         if not isinstance(m.name, str) or not m.name:
             raise LibraryError(f"{where}: a mode has no name")
+        if m.name in RESERVED_MODE_NAMES:
+            raise LibraryError(f"{where}: {reserved_name(m.name)}")
         if m.name in seen:
             raise LibraryError(f"{where}: duplicate mode name {m.name!r}")
         seen.add(m.name)

@@ -33,13 +33,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import compiled
-from .kernels import KernelLibrary
+from .kernels import STAND, UNKNOWN, KernelLibrary
 
 if TYPE_CHECKING:
     from .supervisor import Estimate
 
-STAND = "stand"
-UNKNOWN = "unknown"
 NOT_READY_MODE = ""
 FIT_LIMIT_KEY = "fit_limit_deg"
 """Key of a mode's fit limit (degrees) in its ``info``, written by ``fit_limit_deg``'s callers."""
@@ -118,7 +116,7 @@ the limit since, unknown (1.0) or not, within the limit since; the last interval
 smoothing weights (resampled input repeats one interval); the last ``stand`` sample's time."""
 
 
-def state_step(mem, time_s: float, x0: float, x1: float, x2: float, x3: float, active, ready: bool,
+def state_step(mem: np.ndarray, time_s: float, x0: float, x1: float, x2: float, x3: float, active: np.ndarray, ready: bool,
                fit: float, limit: float, cadence: float, start: float, max_cadence: float, still_deg: float,
                slow_deg: float, fast_tau: float, slow_tau: float, stand_after: float, unknown_after: float) -> int:
     """The state of one matcher sample at ``time_s`` (seconds), angles ``x0..x3`` (degrees),

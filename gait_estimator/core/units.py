@@ -7,9 +7,8 @@ the end of every ``BLOCK_S`` of input, over that block and the one before:
 * any |angle| above ``MAX_DEG``: these cannot be degrees (degrees read as radians give 57x);
 * every |angle| within ``RADIAN_BOUND`` while one channel moves by ``RADIAN_RANGE`` or more and
   another by half that: radians read as degrees (walking in radians: segment angles within
-  +-1.2, the shank's range about 1, the thigh's 0.7). A standing wearer sways by less (0.6 deg
-  in a second on Multispeed); one whose four angles all stay within +-1.6 deg while swaying more
-  than that would be flagged.
+  +-1.2, the shank's range about 1, the thigh's 0.7). A wearer whose four angles all stay within
+  +-1.6 deg while swaying by ``RADIAN_RANGE`` or more would be flagged.
 
 ``UnitsCheck.observe`` is the one rule, O(1) per sample; the node warns (throttled) and its
 diagnostics say WARN, the offline commands print one warning line (``first_problem``).

@@ -12,6 +12,7 @@ import re
 from dataclasses import dataclass
 
 from ..core.errors import GaitEstimatorError
+from ..core.kernels import RESERVED_MODE_NAMES
 from ..core.teach import check_teach_strides
 
 MAX_MESSAGE_BYTES = 1024
@@ -50,7 +51,7 @@ def parse_command(text: str | bytes) -> Command:
     if op != "teach":
         return Command(op)
     mode, strides = msg.get("mode"), msg.get("strides")
-    if not isinstance(mode, str) or not MODE_NAME.match(mode) or mode in ("stand", "unknown"):
+    if not isinstance(mode, str) or not MODE_NAME.match(mode) or mode in RESERVED_MODE_NAMES:
         raise CommandRefused("teach: mode must be 1-40 letters, digits or _.+- (not stand/unknown)")
     try:
         check_teach_strides(strides)

@@ -3,7 +3,9 @@ the node's state at ``rate_hz`` and takes the page's teach/cancel/save commands.
 
 Who may steer: with a token, the page and the socket answer 401 without one and 403 with a wrong
 one (query ``?token=`` or ``Authorization: Bearer``); a socket opened from another site's page
-(``Origin`` not this server) is refused; ``read_only`` refuses every command. A refused message
+(``Origin`` not this server) is refused; without a token, so on loopback, a request whose ``Host``
+is not a loopback name is refused (DNS rebinding); ``read_only`` refuses every command; at most
+``MAX_SOCKETS`` pages at once. A refused message
 is logged (at most once a second per reason) and answered; it never reaches the node.
 """
 
@@ -30,6 +32,7 @@ log = logging.getLogger("gait_estimator.dashboard")
 STATIC = resources.files("gait_estimator.dashboard") / "static"
 TOKEN_ENV = "GAIT_DASHBOARD_TOKEN"
 MAX_COMMANDS_PER_S = 5.0
+MAX_SOCKETS = 4
 
 
 @dataclass(frozen=True)
@@ -78,12 +81,17 @@ class Dashboard:
         self.link = link
         self.options = options
         self.refusals = _Throttled()
+        self.sockets = 0
 
     # -- access
 
     def _denied(self, request: web.Request) -> web.Response | None:
         token = self.options.token
-        if token is None:
+        if token is None:  # loopback only: a page that reached it by a rebound name is another site's
+            if not is_loopback(urlsplit(f"//{request.host}").hostname or ""):
+                log.warning("refused %s %s from %s: Host %r is not loopback", request.method, request.path,
+                            request.remote, request.host)
+                return web.Response(status=403, text="403: open this dashboard as 127.0.0.1 or localhost\n")
             return None
         given = request.query.get("token")
         auth = request.headers.get("Authorization", "")
@@ -124,15 +132,20 @@ class Dashboard:
         if origin and urlsplit(origin).netloc != request.host:
             log.warning("refused a socket from %s: Origin %s is not this server", request.remote, origin)
             return web.Response(status=403, text="403: cross-site socket\n")
-        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=10.0)
-        await ws.prepare(request)
+        if self.sockets >= MAX_SOCKETS:
+            log.warning("refused a socket from %s: %d pages already open", request.remote, self.sockets)
+            return web.Response(status=503, text=f"503: at most {MAX_SOCKETS} pages at once\n")
+        self.sockets += 1
+        sender: asyncio.Task[None] | None = None
         peer = str(request.remote)
-        log.info("page connected from %s", peer)
-        await ws.send_json({"type": "hello", "node": self.link.target, "read_only": self.options.read_only,
-                            "rate_hz": self.options.rate_hz})
-        sender = asyncio.create_task(self._send_frames(ws))
-        budget, refill = MAX_COMMANDS_PER_S, time.monotonic()
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=10.0)
         try:
+            await ws.prepare(request)
+            log.info("page connected from %s", peer)
+            await ws.send_json({"type": "hello", "node": self.link.target, "read_only": self.options.read_only,
+                                "rate_hz": self.options.rate_hz})
+            sender = asyncio.create_task(self._send_frames(ws))
+            budget, refill = MAX_COMMANDS_PER_S, time.monotonic()
             async for msg in ws:
                 if msg.type == WSMsgType.ERROR:  # e.g. a message over MAX_MESSAGE_BYTES: aiohttp closes the socket
                     self.refusals.warn(f"socket closed: {ws.exception()}", peer)
@@ -147,7 +160,9 @@ class Dashboard:
                 budget -= 1.0
                 await self._command(ws, peer, msg.data if msg.type == WSMsgType.TEXT else b"")
         finally:
-            sender.cancel()
+            self.sockets -= 1
+            if sender is not None:
+                sender.cancel()
             log.info("page from %s disconnected", peer)
         return ws
 

@@ -11,24 +11,21 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from ..core.kernels import KernelLibrary
+from ..core.states import STAND, UNKNOWN, EstimateState
 
-STATES = ("not_ready", "walking", "stand", "unknown")
-"""The ``state`` key of ``estimate``: 0 not ready, 1 walking (a library mode), 2 stand, 3 unknown."""
+STATES = tuple(s.name for s in EstimateState)
+"""The page's names of the ``state`` key of ``estimate`` (``core/states.py``)."""
 STALE_AFTER_S = 3.0
 """Diagnostics older than this (s; they come every second) mean the node is not answering."""
 QUIET_AFTER_S = 1.0
 """No estimate for this long (s) while the node is there: it has no input."""
 
 
-def gait_state(values: Mapping[str, float], mode: str | None) -> str:
-    """One of ``STATES``: from the ``state`` key when the node sends it, else from ``ready``
-    and the mode name (``stand`` and ``unknown`` are what the ``mode`` topic reads then)."""
-    state = values.get("state")
-    if state is not None and math.isfinite(state) and int(state) in range(len(STATES)):
-        return STATES[int(state)]
-    if not values.get("ready", 0.0):
-        return "not_ready"
-    return mode if mode in ("stand", "unknown") else "walking"
+def gait_state(values: Mapping[str, float]) -> str:
+    """One of ``STATES``, from the ``state`` key; a message without a valid one is not trusted:
+    ``not_ready``."""
+    state = values.get("state", math.nan)
+    return STATES[int(state)] if math.isfinite(state) and int(state) in range(len(STATES)) else "not_ready"
 
 
 def _number(v: Any) -> float | None:
@@ -41,12 +38,12 @@ def estimate_view(names: Sequence[str], values: Sequence[float]) -> dict[str, An
     modes = [k[4:] for k in names if k.startswith("sse/")]
     index = v.get("mode_index", math.nan)
     mode = modes[int(index)] if math.isfinite(index) and 0 <= int(index) < len(modes) else None
-    state = gait_state(v, mode)
-    shown = {"walking": mode, "stand": "stand", "unknown": "unknown", "not_ready": None}[state]
+    state = gait_state(v)
+    shown = {"walking": mode, "stand": STAND, "unknown": UNKNOWN, "not_ready": None}[state]
     return {
         "state": state,
         "mode": shown,
-        "phase": _number(v.get("phase")) if state in ("walking", "stand") else None,
+        "phase": _number(v.get("phase")) if state == "walking" else None,
         "confidence": _number(v.get("confidence")),
         "phase_rate": _number(v.get("phase_rate")),
         "fit_rms_deg": _number(v.get("fit_rms_deg")),

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..core.errors import missing_extra
 from ..core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator
-from ..core.kernels import KernelLibrary
+from ..core.kernels import RESERVED_MODE_NAMES, KernelLibrary
 from .atomic import atomic_open
 from .library_io import load_library
 from .outputs import Predictions
@@ -122,7 +122,7 @@ def format_summary(pred: Predictions, library: KernelLibrary, source: str) -> st
     lines = [f"{source}: {n} samples, {ready} ready ({filled}); library '{library.name}' ({len(library)} modes)"]
     if ready:
         names, counts = np.unique(np.asarray(tr.modes, dtype=str)[tr.ready], return_counts=True)
-        order = {m: i for i, m in enumerate([*tr.mode_names, "stand", "unknown"])}
+        order = {m: i for i, m in enumerate([*tr.mode_names, *RESERVED_MODE_NAMES])}
         share = ", ".join(f"{m} {c / ready:.1%}" for m, c in sorted(zip(names, counts, strict=True),
                                                                       key=lambda mc: order.get(mc[0], len(order))))
         lines.append(f"predicted modes (ready samples): {share}")

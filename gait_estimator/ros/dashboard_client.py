@@ -246,12 +246,12 @@ class DashboardLink:
         """The node's latest state, with the angle rows and log lines after the cursors."""
         with self.lock:
             s = self._shared
-            data = s.estimate
-        names, values = parse_estimate(data)
+            data, estimates, source_ns, at = s.estimate, s.estimates, s.estimate_source_ns, s.estimate_at
+        names, values = parse_estimate(data)  # outside the lock: the ROS thread goes on meanwhile
         with self.lock:
             return Snapshot(
-                present=s.present, ever_seen=s.ever_seen, estimates=s.estimates, names=names, values=values,
-                estimate_source_ns=s.estimate_source_ns, estimate_at=s.estimate_at, diagnostics=s.diagnostics,
+                present=s.present, ever_seen=s.ever_seen, estimates=estimates, names=names, values=values,
+                estimate_source_ns=source_ns, estimate_at=at, diagnostics=s.diagnostics,
                 level=s.level, message=s.message, diagnostics_at=s.diagnostics_at,
                 angles=_tail(s.angles, s.angles_total, angles_cursor), angles_cursor=s.angles_total,
                 log=_tail(s.log, s.log_total, log_cursor), log_cursor=s.log_total,

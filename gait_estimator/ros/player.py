@@ -36,7 +36,7 @@ from ..core.channels import CHANNELS
 from ..core.errors import GaitEstimatorError, RecordingError
 from ..io.bag import format_topics, is_bag_path, normalize_topic, open_bag, typestore
 from ..io.bag_write import serialize_inputs
-from ..io.outputs import INPUT_TOPIC, OUTPUT_TOPICS
+from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, OUTPUT_TOPICS
 from ..io.recording import Recording
 
 HEADER_TYPE = "std_msgs/msg/Header"
@@ -116,7 +116,8 @@ def playlist_from_bag(path: str | Path, topics: Sequence[str] | None = None) -> 
 
                 raise GaitEstimatorError(f"{p}: no topic {', '.join(missing)}; {format_topics(bag_topics(reader))}")
         names = wanted or sorted(infos)
-        outputs = [n for n in names if n.rsplit("/", 1)[-1] in OUTPUT_TOPICS]
+        spaces = {n.rsplit("/", 1)[0] for n in names if n.rsplit("/", 1)[-1] == ESTIMATE_TOPIC}  # an estimator's
+        outputs = [n for n in names if n.rsplit("/", 1)[-1] in OUTPUT_TOPICS and n.rsplit("/", 1)[0] in spaces]
         if outputs and not wanted:  # RecordingError: open_bag passes it on as it is
             raise RecordingError(
                 f"{p}: holds estimator output ({', '.join(outputs)}): not played unless chosen, as it would "

@@ -32,7 +32,7 @@ from rclpy.parameter import Parameter
 
 from ..core.channels import CHANNELS, Sample
 from ..core.errors import GaitEstimatorError
-from ..core.kernels import KernelLibrary, make_mode
+from ..core.kernels import RESERVED_MODE_NAMES, KernelLibrary, make_mode, reserved_name
 from ..core.strides import MAX_STRIDE_S
 from ..core.teach import (
     HEEL_STRIKE_CHANNEL,
@@ -113,6 +113,8 @@ class NodeTeacher:
                 reason = f"must be one of {', '.join(CHANNELS)}, got {p.value!r}"
             elif p.name == "teach_mode" and p.value != p.value.strip():
                 reason = f"mode names have no leading or trailing spaces, got {p.value!r}"
+            elif p.name == "teach_mode" and p.value in RESERVED_MODE_NAMES:
+                reason = reserved_name(p.value)
             elif p.name == "kernels" and isinstance(p.value, str) and not p.value.strip() and self.node._library:
                 reason = "an empty value ('' = no library) is allowed only at start"
             if reason:

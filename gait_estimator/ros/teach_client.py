@@ -89,6 +89,7 @@ class TeachClient(ToolNode):
         self.node.create_subscription(Log, "/rosout", self._on_log, 1000)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.params = AsyncParameterClient(self.node, self.target)
+        self._save_client: Any = None
         if timeout_s is not None and not self.params.wait_for_services(timeout_s):
             raise self.not_found(timeout_s, "answered")
 
@@ -172,7 +173,9 @@ class TeachClient(ToolNode):
         the node's answer; a failure raises with it."""
         if path:
             self.set(adapted_library_path=path)
-        client = self.node.create_client(Trigger, f"{self.target}/save_library")
+        if self._save_client is None:  # one client for the tool's life (the dashboard saves many times)
+            self._save_client = self.node.create_client(Trigger, f"{self.target}/save_library")
+        client = self._save_client
         if not client.wait_for_service(timeout_sec=5.0):
             raise GaitEstimatorError(f"{self.target}/save_library is not available")
         answer = self._wait(client.call_async(Trigger.Request()), "save_library", 30.0)
