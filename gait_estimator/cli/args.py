@@ -44,6 +44,17 @@ def prepare_output(path: str, option: str) -> None:
         raise GaitEstimatorError(f"{option} {path}: {exc.strerror or exc}") from None
 
 
+def port_number(text: str) -> int:
+    """A TCP port, 0..65535 (0: any free one)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a TCP port, got {text!r}") from None
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"TCP ports are 0..65535, got {text}")
+    return v
+
+
 def positive_float(text: str) -> float:
     """A finite number > 0."""
     try:

@@ -18,7 +18,7 @@ from typing import Any
 
 from ..core.errors import GaitEstimatorError
 from ..ros import require_ros
-from .args import add_target_node_options, positive_float
+from .args import add_target_node_options, port_number, positive_float
 
 MAX_RATE_HZ = 60.0
 """Most page updates per second: each page's frames cost the leg's computer."""
@@ -28,16 +28,6 @@ def frame_rate(text: str) -> float:
     v = positive_float(text)
     if v > MAX_RATE_HZ:
         raise argparse.ArgumentTypeError(f"at most {MAX_RATE_HZ:g} updates per second, got {text}")
-    return v
-
-
-def port_number(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a TCP port, got {text!r}") from None
-    if not 0 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"TCP ports are 0..65535, got {text}")
     return v
 
 

@@ -20,8 +20,7 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import add_imu_reading_options, domain_id, imu_reader_options, positive_float
-from .dashboard_command import port_number
+from .args import add_imu_reading_options, domain_id, imu_reader_options, port_number, positive_float
 
 DEMO_DOMAIN_ID = 77
 """``demo``'s ROS domain when neither ``--domain-id`` nor ``ROS_DOMAIN_ID`` is set."""
