@@ -1,7 +1,7 @@
 """The node's optional ``~/angles`` output, for the dashboard: every accepted sample's stamp and
 the four angles as the matcher saw them (degrees, the learnt sensor offsets removed), sent in
-blocks about ``PERIOD_S`` apart. A sample costs the node a list append; the block is published
-only while something subscribes to the topic."""
+blocks about ``PERIOD_S`` apart. Rows are kept only while something subscribes (asked once a
+block); otherwise a sample costs the node one clock read."""
 
 from __future__ import annotations
 
@@ -30,19 +30,22 @@ class AnglesOutput:
         self._msg = Float64MultiArray()
         self._rows: list[float] = []
         self._due = 0.0
+        self._listening = False  # a subscriber at the last block's end: rows are kept for the next
 
     def add(self, stamp: Any, angles_deg: Any, offset_deg: np.ndarray) -> None:
         """One sample (``stamp``: sec/nanosec; ``angles_deg``: 4 values, CHANNELS order)."""
         rows = self._rows
-        rows.append(stamp.sec + stamp.nanosec * 1e-9)
-        rows.extend(float(x) - o for x, o in zip(angles_deg, offset_deg.tolist(), strict=True))
+        if self._listening:
+            rows.append(stamp.sec + stamp.nanosec * 1e-9)
+            rows.extend(float(x) - o for x, o in zip(angles_deg, offset_deg.tolist(), strict=True))
         now = time.monotonic()
         if now >= self._due or len(rows) >= 5 * MAX_ROWS:
             self._due = now + PERIOD_S
-            if self._pub.get_subscription_count():
+            if rows:
                 n = len(rows) // 5
                 self._msg.layout.dim = [MultiArrayDimension(label="samples", size=n, stride=5 * n),
                                         MultiArrayDimension(label=ANGLES_LABEL, size=5, stride=5)]
                 self._msg.data = rows
                 self._pub.publish(self._msg)
-            self._rows = []
+                self._rows = []
+            self._listening = self._pub.get_subscription_count() > 0

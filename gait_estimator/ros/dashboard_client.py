@@ -19,6 +19,7 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, field
+from itertools import islice
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -113,7 +114,7 @@ def parse_estimate(data: bytes) -> tuple[list[str], list[float]]:
 def _tail(rows: deque, total: int, cursor: int) -> list:
     """The rows of ``rows`` (the last of ``total`` appended) after ``cursor`` appended ones."""
     new = min(total - cursor, len(rows))
-    return list(rows)[len(rows) - new:] if new > 0 else []
+    return list(islice(rows, len(rows) - new, None)) if new > 0 else []
 
 
 class DashboardLink:
