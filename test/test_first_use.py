@@ -117,3 +117,13 @@ def test_docs_sample_output_is_what_the_command_prints_now() -> None:
     assert check.returncode == 0, check.stderr
     tables = (REPO / "benchmarks" / "results" / "samples" / "tables.md").read_text(encoding="utf-8")
     assert block.strip() in tables
+
+
+def test_demo_summary_counts_the_states() -> None:
+    """Multispeed's first 4 s are standing: the demo's summary says ``stand``, as the node published."""
+    proc = _gait_estimator("demo", "--stop", "900", "--speed", "4", "--echo-every", "1000", "--reliable",
+                           env=local_ros_environment(180))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    lines = proc.stdout.splitlines()
+    assert "predicted modes (ready samples): stand 100.0%" in lines, proc.stdout
+    assert any(re.fullmatch(r" +[\d.]+ s - +[\d.]+ s  stand +\(\d+ samples\)", line) for line in lines), proc.stdout

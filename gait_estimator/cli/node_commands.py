@@ -127,7 +127,7 @@ def _demo_summary(client: Any, path: Path, lib: Any, rec: Any, stamps: np.ndarra
     )
     answered = Recording(time_s=rec.time_s[idx], angles_deg=rec.angles_deg[idx], index=np.asarray(rec.index)[idx])
     offline = predict(answered, lib).trace
-    same = int((offline.mode_index == live.trace.mode_index).sum())
+    same = int(((offline.mode_index == live.trace.mode_index) & (offline.mode == live.trace.mode)).sum())
     print(f"same mode as offline 'gait-estimator process' on the same samples: {same}/{idx.size}")
     if idx.size < len(rec):
         missing = np.setdiff1d(np.arange(len(rec)), idx)

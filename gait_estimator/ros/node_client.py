@@ -27,11 +27,12 @@ from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from ..core.channels import CHANNELS
+from ..core.estimator import EstimateTrace
 from ..core.kernels import KernelLibrary
-from ..core.matcher import MatchTrace
+from ..core.states import name_index, reported_names
 from ..io.cdr import read_stamp
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
-from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
+from ..io.outputs import ESTIMATE_TAIL, ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
 from .node_process import (  # noqa: F401 - re-exported: the node client's users start nodes too
     NODE_MODULE,
     NodeProcess,
@@ -80,17 +81,19 @@ class Received:
         """Received estimate values, (K, len(estimate_names))."""
         return np.array(self.estimate_values) if self.estimate_values else np.empty((0, 0))
 
-    def trace(self, mode_names: Sequence[str]) -> MatchTrace:
-        """The received estimates as a MatchTrace (as offline ``predict`` returns)."""
+    def trace(self, mode_names: Sequence[str]) -> EstimateTrace:
+        """The received estimates as an EstimateTrace (as offline ``run_estimator`` returns; time:
+        the stamps, s; sample: the arrival order), ``mode`` from each estimate's ``state``."""
         m = len(mode_names)
         v = self.estimates().reshape(-1, len(estimate_names(mode_names)))
-        return MatchTrace(
-            list(mode_names),
-            v[:, 0].astype(np.int64),
-            v[:, 1].copy(),
-            v[:, 3 : 3 + m].copy(),
-            v[:, 3 + m : 3 + 2 * m].copy(),
-            v[:, 2] > 0.5,
+        tail = dict(zip(ESTIMATE_TAIL, v[:, 3 + 2 * m:].T, strict=True))
+        mode_index, state = v[:, 0].astype(np.int64), tail.pop("state").astype(np.int64)
+        names = np.asarray(reported_names(list(mode_names)), dtype=object)
+        return EstimateTrace(
+            list(mode_names), np.asarray(self.estimate_stamp_ns, dtype=np.float64) / 1e9, np.arange(len(v)),
+            mode_index, v[:, 1].copy(), v[:, 2] > 0.5, v[:, 3 : 3 + m].copy(), v[:, 3 + m : 3 + 2 * m].copy(),
+            tail.pop("raw_mode_index").astype(np.int64), held=tail.pop("held") > 0.5, state=state,
+            mode=names[name_index(state, mode_index, len(names))], **tail,
         )
 
 
