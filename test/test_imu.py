@@ -920,6 +920,11 @@ def test_convert_imu_bag_to_csv_and_process_it(synthetic_bags, tmp_path):
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "IMU calibration learnt" in r.stdout + r.stderr  # process says how the angles were made, as convert does
+    for bag in ("orientation", "raw.db3dir"):  # IMU angles (SI units by the message; standing near 0 by
+        # calibration, the fused ones with noise): no units check, as in the node
+        r = subprocess.run([sys.executable, "-m", "gait_estimator.cli", "process", str(d / bag), "-q"],
+                           capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
     whole = read_imu_bag(d / "raw.db3dir")
     part = whole.slice(100, 2000)
     assert isinstance(part, ImuBagRecording) and part.calibration == whole.calibration and len(part) == 1900

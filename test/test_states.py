@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+from imu_synth import gait_angles
 from synthetic import generate, new_wearer, with_stops
 
 from gait_estimator.analysis.train import TrainOptions, train_library
@@ -117,12 +118,25 @@ def test_units_check_flags_the_wrong_unit_and_nothing_else(swge: Path) -> None:
         t = rec.time_s - rec.time_s[0]
         assert first_problem(t, rec.angles_deg) is None
         when, why = first_problem(t, np.degrees(rec.angles_deg))
-        assert when <= 2.0 and "degrees read as radians" in why
-        walk = rec.slice(5000, 6000) if name.startswith("Multi") else rec
-        when, why = first_problem(walk.time_s - walk.time_s[0], np.radians(walk.angles_deg))
-        assert when <= 2.0 and "radians read as degrees" in why
+        assert when <= 0.5 and "degrees read as radians" in why
+        when, why = first_problem(t, np.radians(rec.angles_deg))
+        # the first step (a segment swinging 30 deg within 1 s): Multispeed 8.7 s (before it the
+        # wearer stands and shifts weight: in radians, a still wearer in degrees), LG_2_Ramp 1.2 s
+        first_step = 8.7 if name.startswith("Multi") else 1.2
+        assert first_step < when <= first_step + 2.0 and "radians read as degrees" in why, when
     check = UnitsCheck()
     assert all(check.observe(i / 100, [0.0, 0.0, 0.0, 0.0]) is None for i in range(500))  # still: no verdict
+
+
+def test_units_check_leaves_a_start_from_a_pose_at_zero_alone() -> None:
+    """The IMU tests' angles (standing at 0, walking blended in from 0): within +-1.6 deg and moving
+    for a few samples, then far beyond: degrees. In radians the same start is flagged."""
+    for rate in (100.0, 200.0, 230.0):
+        for seed in range(6):
+            a = gait_angles(rate, walk_s=6.0, seed=seed)
+            t = np.arange(len(a)) / rate
+            assert first_problem(t, a) is None, (rate, seed)
+            assert first_problem(t, np.radians(a))[0] <= 2.0 + 2.0
 
 
 def test_process_warns_once_about_a_bag_in_the_wrong_unit(multispeed_csv: Path, tmp_path: Path, capsys) -> None:

@@ -29,7 +29,7 @@ from ..io.bag import (
     read_bag,
 )
 from ..io.bag_write import STORAGES
-from ..io.imu_bag import is_imu_bag
+from ..io.imu_bag import ImuBagRecording, is_imu_bag
 from ..io.process import Predictions, predict
 from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
@@ -95,7 +95,10 @@ def add_process_options(proc: argparse.ArgumentParser) -> None:
 
 def warn_units(rec: Recording, source: str | Path, units: str) -> None:
     """One warning line (stderr) if ``rec``'s angles cannot be degrees as read (core/units.py);
-    ``units``: the ``--input-units`` a bag of angles is read with."""
+    ``units``: the ``--input-units`` a bag of angles is read with. Angles from IMUs (SI units, by the
+    message) are not checked, as in the node: standing, they are near 0 by calibration."""
+    if isinstance(rec, ImuBagRecording):
+        return
     found = first_problem(rec.time_s, rec.angles_deg)
     if found is not None:
         given = f"input_units {units}" if isinstance(rec, BagRecording) else "angle units"

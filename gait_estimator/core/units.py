@@ -2,13 +2,17 @@
 
 The estimator reads degrees (converted from the input's configured units). Segment angles of a
 person lie within +-180 deg, and walking swings the thigh and shank by tens of degrees. So, at
-the end of every ``BLOCK_S`` of input, over that block and the one before:
+the end of every ``STEP_S`` of input:
 
-* any |angle| above ``MAX_DEG``: these cannot be degrees (degrees read as radians give 57x);
-* every |angle| within ``RADIAN_BOUND`` while one channel moves by ``RADIAN_RANGE`` or more and
-  another by half that: radians read as degrees (walking in radians: segment angles within
-  +-1.2, the shank's range about 1, the thigh's 0.7). A wearer whose four angles all stay within
-  +-1.6 deg while swaying by ``RADIAN_RANGE`` or more would be flagged.
+* any |angle| in that step above ``MAX_DEG``: these cannot be degrees (degrees read as radians
+  give 57x);
+* over the ``WINDOW_S`` before that step, one channel moved by ``RADIAN_RANGE`` or more and
+  another by half that, and every |angle| of the window and the step stayed within
+  ``RADIAN_BOUND``: radians read as degrees (walking in radians: segment angles within +-1.2,
+  the shank's range about 1, the thigh's 0.7). A wearer moving in degrees leaves +-1.6 within a
+  step (a start from a pose at 0), one standing or shifting weight in radians reads as one
+  standing still in degrees: the check decides from the first steps. A wearer whose four angles
+  all stay within +-1.6 deg while swaying by ``RADIAN_RANGE`` or more would be flagged.
 
 ``UnitsCheck.observe`` is the one rule, O(1) per sample; the node warns (throttled) and its
 diagnostics say WARN, the offline commands print one warning line (``first_problem``).
@@ -17,14 +21,16 @@ diagnostics say WARN, the offline commands print one warning line (``first_probl
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 
 import numpy as np
 
-BLOCK_S = 0.5
+STEP_S = 0.25
+WINDOW_S = 1.0
 MAX_DEG = 360.0
 RADIAN_BOUND = 1.6
-RADIAN_RANGE = 0.8
+RADIAN_RANGE = 0.5
 
 
 class UnitsCheck:
@@ -39,11 +45,11 @@ class UnitsCheck:
         self._start: float | None = None
         self._low = [math.inf] * 4
         self._high = [-math.inf] * 4
-        self._before: tuple[list[float], list[float]] | None = None  # the previous block's low, high
+        self._steps: deque[tuple[list[float], list[float]]] = deque(maxlen=round(WINDOW_S / STEP_S))
 
     def observe(self, time_s: float, x: Sequence[float]) -> str | None:
         """Take one sample ``x`` (4 angles, degrees) at ``time_s`` (s); return a new verdict (a
-        sentence) the first time the block it ends shows angles that cannot be degrees."""
+        sentence) the first time the step it ends shows angles that cannot be degrees."""
         low, high = self._low, self._high
         x0, x1, x2, x3 = x
         if x0 < low[0]:
@@ -64,26 +70,31 @@ class UnitsCheck:
             high[3] = x3
         if self._start is None:
             self._start = time_s
-        if time_s - self._start < BLOCK_S or self.problem is not None:
+        if time_s - self._start < STEP_S or self.problem is not None:
             return None
-        before = self._before or (low, high)
-        verdict = block_verdict([min(a, b) for a, b in zip(low, before[0], strict=True)],
-                                [max(a, b) for a, b in zip(high, before[1], strict=True)])
-        self._before = (low, high)
+        steps = self._steps
+        window_low = [min(s[0][c] for s in steps) for c in range(4)] if steps else low
+        window_high = [max(s[1][c] for s in steps) for c in range(4)] if steps else high
+        verdict = step_verdict(low, high, window_low, window_high, moved=bool(steps))
+        steps.append((low, high))
         self._start, self._low, self._high = None, [math.inf] * 4, [-math.inf] * 4
         if verdict is not None:
             self.problem = verdict
         return verdict
 
 
-def block_verdict(low: Sequence[float], high: Sequence[float]) -> str | None:
-    """The verdict on a block whose angles (degrees) ranged from ``low`` to ``high`` per channel."""
+def step_verdict(low: Sequence[float], high: Sequence[float], window_low: Sequence[float],
+                 window_high: Sequence[float], moved: bool = True) -> str | None:
+    """The verdict on a step whose angles (degrees) ranged from ``low`` to ``high`` per channel,
+    after a window (``moved``: one was seen) whose angles ranged from ``window_low`` to
+    ``window_high``."""
     peak = max(max(abs(v) for v in low), max(abs(v) for v in high))
     if peak > MAX_DEG:
         return (f"angles reach {peak:.0f} deg: not degrees (radians read as degrees give at most "
                 f"{MAX_DEG:.0f}); the input is likely in degrees read as radians")
-    ranges = sorted(b - a for a, b in zip(low, high, strict=True))
-    if peak <= RADIAN_BOUND and ranges[-1] >= RADIAN_RANGE and ranges[-2] >= RADIAN_RANGE / 2:
+    peak = max(peak, max(abs(v) for v in window_low), max(abs(v) for v in window_high))
+    ranges = sorted(b - a for a, b in zip(window_low, window_high, strict=True))
+    if moved and peak <= RADIAN_BOUND and ranges[-1] >= RADIAN_RANGE and ranges[-2] >= RADIAN_RANGE / 2:
         return (f"angles stay within +-{peak:.2f} deg while the segments move: the input is likely in "
                 "radians read as degrees")
     return None
