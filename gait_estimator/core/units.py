@@ -21,8 +21,9 @@ diagnostics say WARN, the offline commands print one warning line (``first_probl
 from __future__ import annotations
 
 import math
+import operator
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
 import numpy as np
 
@@ -73,9 +74,7 @@ class UnitsCheck:
         if time_s - self._start < STEP_S or self.problem is not None:
             return None
         steps = self._steps
-        window_low = [min(s[0][c] for s in steps) for c in range(4)] if steps else low
-        window_high = [max(s[1][c] for s in steps) for c in range(4)] if steps else high
-        verdict = step_verdict(low, high, window_low, window_high, moved=bool(steps))
+        verdict = step_verdict(low, high, steps)
         steps.append((low, high))
         self._start, self._low, self._high = None, [math.inf] * 4, [-math.inf] * 4
         if verdict is not None:
@@ -83,18 +82,21 @@ class UnitsCheck:
         return verdict
 
 
-def step_verdict(low: Sequence[float], high: Sequence[float], window_low: Sequence[float],
-                 window_high: Sequence[float], moved: bool = True) -> str | None:
+def step_verdict(low: Sequence[float], high: Sequence[float],
+                 before: Collection[tuple[Sequence[float], Sequence[float]]]) -> str | None:
     """The verdict on a step whose angles (degrees) ranged from ``low`` to ``high`` per channel,
-    after a window (``moved``: one was seen) whose angles ranged from ``window_low`` to
-    ``window_high``."""
-    peak = max(max(abs(v) for v in low), max(abs(v) for v in high))
+    after the steps ``before`` it (each a (low, high) pair; ``WINDOW_S`` of them at most)."""
+    peak = max(-min(low), max(high))
     if peak > MAX_DEG:
         return (f"angles reach {peak:.0f} deg: not degrees (radians read as degrees give at most "
                 f"{MAX_DEG:.0f}); the input is likely in degrees read as radians")
-    peak = max(peak, max(abs(v) for v in window_low), max(abs(v) for v in window_high))
-    ranges = sorted(b - a for a, b in zip(window_low, window_high, strict=True))
-    if moved and peak <= RADIAN_BOUND and ranges[-1] >= RADIAN_RANGE and ranges[-2] >= RADIAN_RANGE / 2:
+    if peak > RADIAN_BOUND or not before:
+        return None
+    window_low = list(map(min, zip(*(b[0] for b in before), strict=True)))
+    window_high = list(map(max, zip(*(b[1] for b in before), strict=True)))
+    peak = max(peak, -min(window_low), max(window_high))
+    ranges = sorted(map(operator.sub, window_high, window_low))
+    if peak <= RADIAN_BOUND and ranges[-1] >= RADIAN_RANGE and ranges[-2] >= RADIAN_RANGE / 2:
         return (f"angles stay within +-{peak:.2f} deg while the segments move: the input is likely in "
                 "radians read as degrees")
     return None
