@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from imu_synth import require_raw_fusion, turned
+from imu_synth import turned
 
 from gait_estimator.cli.app import main
 from gait_estimator.core.imu import STANDARD_GRAVITY
@@ -42,7 +42,6 @@ def trial_sensors() -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
 @pytest.fixture(scope="module")
 def bags(tmp_path_factory):
     """The whole trial and its walking-only cut, as bags of four Imu topics (raw right IMUs)."""
-    require_raw_fusion()
     d = tmp_path_factory.mktemp("camargo_bags")
     stamps, gyro, acc, quats = trial_sensors()
     out = {}
