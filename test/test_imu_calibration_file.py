@@ -109,6 +109,18 @@ def test_a_calibration_file_that_cannot_be_used_is_one_line_naming_it(bags, tmp_
     assert not (tmp_path / "c.yaml").exists()
 
 
+@pytest.mark.parametrize("command", [
+    ["convert", "B", "--out", "o.csv"], ["process", "B"], ["train", "B", "--out", "l.yaml"],
+    ["evaluate", "--predictions", "p.csv", "--truth", "B", "--out-dir", "d"], ["resample", "B", "--out", "o.csv"],
+    ["label-strides", "B", "--out", "o.csv"], ["demo", "B"],
+])
+def test_every_command_that_reads_imu_bags_can_save_the_calibration(command):
+    from gait_estimator.cli.app import build_parser
+
+    args = build_parser().parse_args([*command, "--save-imu-calibration", "c.yaml", "--imu-calibration", "a.yaml"])
+    assert (args.save_imu_calibration, args.imu_calibration) == ("c.yaml", "a.yaml")
+
+
 @pytest.fixture
 def ros(monkeypatch):
     from ros_helpers import in_process_factory
