@@ -1,5 +1,5 @@
-"""argparse value types, the output-path check and the IMU reading options shared by the CLI
-modules (bad values: one-line usage errors)."""
+"""argparse value types, the output-path check and the IMU reading options (with
+``--save-imu-calibration``) shared by the CLI modules (bad values: one-line usage errors)."""
 
 from __future__ import annotations
 
