@@ -127,7 +127,8 @@ def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store
     )
     p.add_argument(
         "--imu-calibration", dest="imu_calibration", action=action, metavar="YAML",
-        help="bag of sensor_msgs/Imu topics: the IMU mounting to use (default: learnt from the bag; docs/imu.md)",
+        help="bag of sensor_msgs/Imu topics: the IMU mounting to use, a file the node or --save-imu-calibration "
+        "wrote; checked on the walking, a misfit is an error (default: learnt from the bag; docs/imu.md)",
     )
     p.add_argument(
         "--imu-lateral-axes", dest="imu_lateral_axes", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
