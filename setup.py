@@ -21,9 +21,10 @@ EXTRAS = {
     "analysis": ["scipy>=1.11", "matplotlib>=3.6"],  # train, evaluate, label tools, figures
     "bags": ["rosbags>=0.10"],  # rosbag2 (mcap, sqlite3) reading and writing without ROS
     "ros": [*ROS, "rosbags>=0.10"],  # estimator_node, demo, play; numba recommended: [ros,fast]
-    "test": ["pytest>=7", "hypothesis>=6.80", "ruff>=0.5", "wheel", "selenium>=4.20"],  # + Debian's chromium(-driver)
+    # + Debian's chromium(-driver); imufusion: the reference the raw-IMU fusion is tested against
+    "test": ["pytest>=7", "hypothesis>=6.80", "ruff>=0.5", "wheel", "selenium>=4.20", "imufusion>=1.3.3"],
     "colcon": ["colcon-common-extensions", "ros-jazzy-ament-package"],
-    "imu": ["imufusion>=1.3.3", "numba>=0.59"],  # raw IMUs' fusion: imufusion's AHRS, compiled with numba (docs/imu.md)
+    "imu": ["numba>=0.59"],  # raw IMUs' fusion compiled (without: plain Python, slower; docs/imu.md)
     "dashboard": ["aiohttp>=3.9"],  # gait-estimator dashboard (with [ros]); the page's chart library is bundled
 }
 EXTRAS["all"] = sorted({r for reqs in EXTRAS.values() for r in reqs})

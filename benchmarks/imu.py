@@ -14,7 +14,7 @@ synthetic checks and the per-sample conversion cost. One command:
   - **orientation** input: each right IMU's orientation computed with imufusion (its defaults, as
     a driver running Fusion would publish it), sent as the quaternion;
   - **raw** input: gyro + accelerometer only (orientation_covariance[0] = -1): the project's
-    fusion (imufusion's AHRS, compiled with numba when installed; gyro bias from the standing pose).
+    fusion (imufusion's AHRS ported, compiled with numba; gyro bias from the standing pose).
   RMS of IMU - mocap over the walking samples after the standing tare (IMU - mocap mean over the
   first standing bout removed), per segment.
 * Estimator: kernels (walk_slow, walk_normal, walk_fast; heel strikes from the data set) trained
@@ -41,6 +41,8 @@ synthetic checks and the per-sample conversion cost. One command:
 * Cost: SensorInput.convert for four sensors + pairing + the four angles, per paired sample
   (best of 3 rounds by median), the inputs built as the node builds them (rate from the stamps,
   per-segment fusion settings); the message fields as Python floats, as the node reads them.
+  Raw input also without numba (a process with GAIT_ESTIMATOR_NO_NUMBA: the fusion's step as
+  plain Python).
   With rclpy installed also the node's decoding of one serialised Imu message (``read_imu``
   from its CDR bytes) next to rclpy's ``deserialize_message`` and field access, interleaved.
 """
@@ -75,7 +77,6 @@ from gait_estimator.core.imu import (  # noqa: E402
     STANDARD_GRAVITY,
     FusionParams,
     ImuCalibration,
-    RawFusion,
     SegmentMount,
     ups_from_quaternions,
 )
@@ -502,23 +503,23 @@ def _ignore_angles(angles: tuple[float, ...], stamp_ns: int) -> None:
     """``ImuAngles.sample``'s emit for timing it: where the node passes the angles on."""
 
 
-def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
-    """us per four-sensor sample: convert x4 + pair + angles (median, p99), both inputs, as the
-    node's ImuInput does it (``ImuAngles`` with a calibration in use), raw input with the
-    node's fusion (compiled when numba is installed) and with imufusion's; of ``rounds``
-    rounds of ``n`` samples, the one with the lowest median (the machine is shared)."""
+UNCOMPILED = "raw, without numba (plain Python)"
+"""The cost row of raw input in a process without numba."""
+
+
+def conversion_cost(n: int = 20000, rounds: int = 3, kinds: tuple[str, ...] = ("orientation", "raw")) -> dict:
+    """us per four-sensor sample: convert x4 + pair + angles (median, p99), each input of
+    ``kinds``, as the node's ImuInput does it (``ImuAngles`` with a calibration in use); of
+    ``rounds`` rounds of ``n`` samples, the one with the lowest median (the machine is shared)."""
     rng = np.random.default_rng(0)
     cal = ImuCalibration(tuple(SegmentMount.from_axes("+z", "-x") for _ in range(4)))
     q = rng.normal(size=(n, 4, 4))
     w = rng.normal(0, 1, size=(n, 4, 3))
     a = rng.normal(0, 1, size=(n, 4, 3)) + np.array([0.0, 0.0, 9.8])
     out = {}
-    kinds = [("orientation", 0.0, True), ("raw", -1.0, True), ("raw, imufusion (without numba)", -1.0, False)]
-    for kind, cov0, compiled in [k for _ in range(rounds) for k in kinds]:
+    for kind in [k for _ in range(rounds) for k in kinds]:
+        cov0 = 0.0 if kind == "orientation" else -1.0
         inputs = [SensorInput(None, "", FUSION_BY_CHANNEL[c], 0.5) for c in range(4)]  # as the node builds them
-        if not compiled:  # the fusion make_fusion takes without numba
-            for sensor in inputs:
-                sensor.fusion = RawFusion(200.0, sensor.gyro_bias_dps, sensor.params)
         converts = [sensor.convert for sensor in inputs]
         pairer, sample = ImuPairer(), ImuAngles(inputs, ImuCalibrator([None] * 4, [None] * 4, [0.0] * 4, cal)).sample
         emit = _ignore_angles
@@ -539,6 +540,18 @@ def conversion_cost(n: int = 20000, rounds: int = 3) -> dict:
                 "rounds": rounds}
         if kind not in out or this["median_us"] < out[kind]["median_us"]:
             out[kind] = this
+    return out
+
+
+def costs() -> dict:
+    """``conversion_cost`` here, then its raw row in a process without numba (``UNCOMPILED``)."""
+    import subprocess
+
+    out = conversion_cost()
+    env = {**os.environ, "GAIT_ESTIMATOR_NO_NUMBA": "1"}
+    r = subprocess.run([sys.executable, __file__, "--raw-cost-json"], env=env, capture_output=True, text=True,
+                       check=True)
+    out[UNCOMPILED] = json.loads(r.stdout)
     return out
 
 
@@ -593,7 +606,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tables-only", action="store_true", help="only rewrite tables.md from the saved imu.json")
     ap.add_argument("--bags", type=Path, metavar="DIR", help="only write the trials as bags of four Imu topics "
                     "and their recordings from 0 s to DIR (to try the IMU path offline)")
+    ap.add_argument("--raw-cost-json", action="store_true", help=argparse.SUPPRESS)  # costs()' subprocess
     args = ap.parse_args(argv)
+    if args.raw_cost_json:
+        print(json.dumps(conversion_cost(kinds=("raw",))["raw"]))
+        return 0
     if args.bags:
         print("\n".join(f"wrote {p}" for p in write_bags(args.bags)))
         return 0
@@ -617,7 +634,7 @@ def main(argv: list[str] | None = None) -> int:
         "live": live_runs(trials, {tr["stats"]["trial"]: {c: virtual_quaternions(tr["rec"].angles_deg[:, c]) for c in (1, 3)}
                                    for tr in trials}),
         "synthetic": synthetic(),
-        "cost": conversion_cost(),
+        "cost": costs(),
         "decode": decode_cost(),
     }
     for kind in ("orientation", "raw"):

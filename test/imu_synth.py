@@ -14,21 +14,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
 
-from gait_estimator.core import ahrs
 from gait_estimator.core.imu import ImuCalibration
 
 S0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """Columns: segment forward, proximal, right in the world (x walking direction, z up) at theta 0."""
-
-
-def require_raw_fusion() -> None:
-    """Skip unless raw IMU input (gyro + accelerometer) can be fused: numba (the compiled port of
-    imufusion's AHRS) or imufusion itself."""
-    if not ahrs.AVAILABLE:
-        pytest.importorskip("imufusion")
 
 
 ALONG_SEGMENT = Rotation.from_matrix(np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from imu_synth import require_raw_fusion
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import Imu
 
@@ -44,13 +43,11 @@ def _node_angles(samples: list[tuple[bytes, ...]], lateral=BENCH_LATERAL_AXES, p
 
 @pytest.mark.parametrize("raw", [False, True])
 def test_imu_messages_give_the_angles_back(raw: bool) -> None:
-    if raw:
-        require_raw_fusion()  # the raw input's fusion
     rate = 230.0
     angles = _angles(rate)
     stamps = 1_700_000_000 * 10**9 + np.arange(len(angles)) * round(1e9 / rate)
     got = _node_angles(imu_samples(angles, stamps, 1 / rate, raw))
-    if raw:  # gyro + gravity, fused by imufusion: tracks the angles
+    if raw:  # gyro + gravity, fused (core/ahrs.py): tracks the angles
         assert np.abs(got - angles)[round(2 * rate):].max() < 1.0
     else:
         np.testing.assert_allclose(got, angles, rtol=0, atol=1e-9)

@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from imu_synth import require_raw_fusion
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from ros_helpers import (
@@ -336,7 +335,6 @@ def test_bench_node_with_more_modes(tmp_path: Path) -> None:
 def test_bench_node_with_raw_imu_input(tmp_path: Path) -> None:
     """--input imu-raw: the node runs input_type imu with configured mounting, four Imu messages
     (gyro + accelerometer only) per sample after a standing second; every sample is answered."""
-    require_raw_fusion()
     report = tmp_path / "bench.json"
     proc = _gait_estimator("bench-node", "--input", "imu-raw", "--samples", "150", "--rates", "300", "--seconds", "0.5",
                            "--executor", "events", "--outputs", "estimate", "--domain-id", "38", "--json", str(report))

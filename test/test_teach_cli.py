@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from imu_synth import require_raw_fusion
 from ros_helpers import BASE_NS
 
 from gait_estimator import load_library
@@ -103,7 +102,6 @@ def test_teach_on_a_camargo_bag_as_docs_teach_md_shows(tmp_path: Path) -> None:
     mounting) teaches Slow; then the default 10 strides, which the bag cannot give before its
     turns: teach says when the input stops, cancels at --max-time, and names the strides found,
     why the others were not used and what to do (issue 46; domain 104, the bag at 2x)."""
-    require_raw_fusion()
     doc = (REPO / "docs" / "teach.md").read_text(encoding="utf-8")
     block = doc.split("Without sensors, a camargo_ab06 bag", 1)[1].split("```bash\n", 1)[1].split("```", 1)[0]
     bags_line, node_line = block.splitlines()[0].split("; ")

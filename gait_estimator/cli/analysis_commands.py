@@ -17,7 +17,7 @@ from ..core.strides import MAX_STRIDE_S, MIN_PROMINENCE_DEG, MIN_STRIDE_S, Detec
 from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
-from .args import add_imu_reading_options, imu_reader_options, positive_float
+from .args import add_imu_reading_options, imu_reader_options, positive_float, save_imu_calibration
 
 
 def _window(text: str) -> tuple[float, float]:
@@ -66,6 +66,7 @@ def _read_labelled(path: str, args: argparse.Namespace, rate_hz: float | None = 
     from ..analysis.labels import labels_beside, read_label_ranges, with_mode, with_ranges
 
     rec = read_recording(path, rate_hz=rate_hz if rate_hz is not None else args.time_rate, **imu_reader_options(args))
+    save_imu_calibration(args, rec, path)
     if args.mode:
         return with_mode(rec, args.mode), f"--mode {args.mode}"
     if args.labels:
@@ -86,6 +87,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     from ..core.training import OutlierRule, TrainOptions
     from ..io.library_io import save_library
 
+    if args.save_imu_calibration and len(args.recordings) > 1:
+        raise GaitEstimatorError(f"--save-imu-calibration: one recording's calibration is saved, {len(args.recordings)} "
+                                 "recordings given (convert one of them with --save-imu-calibration)")
     recs = [_read_labelled(p, args)[0] for p in args.recordings]
     opts = TrainOptions(
         heel_strikes=args.heel_strikes,
@@ -185,6 +189,7 @@ def cmd_label_strides(args: argparse.Namespace) -> int:
     except KeyError as exc:
         raise GaitEstimatorError(str(exc.args[0])) from None
     rec = read_recording(args.recording, rate_hz=args.time_rate or lib.sample_rate_hz, **imu_reader_options(args))
+    save_imu_calibration(args, rec, args.recording)
     det = _detection(args)
     hs = heel_strikes(rec, args.heel_strikes, None, det)
     bounds, _ = stride_bounds(hs.times_s, det)

@@ -18,7 +18,7 @@ from typing import NoReturn
 from ..core.errors import GaitEstimatorError, missing_extra
 from ..io.library_io import load_library, save_library
 from ..io.resources import DEFAULT_LIBRARY
-from .args import choice_list, int_list, positive_int, prepare_output
+from .args import choice_list, int_list, positive_int, prepare_output, save_imu_calibration
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.node_commands",
@@ -90,6 +90,7 @@ def cmd_process(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise GaitEstimatorError(str(exc)) from None
     rec = read_recording(args.recording, **options)
+    save_imu_calibration(args, rec, args.recording)
     if args.start is not None and args.stop is not None and args.stop <= args.start:
         raise GaitEstimatorError(f"--stop ({args.stop}) must be greater than --start ({args.start})")
     rec = rec.slice(args.start, args.stop)

@@ -1,5 +1,5 @@
-"""argparse value types, the output-path check and the IMU reading options shared by the CLI
-modules (bad values: one-line usage errors)."""
+"""argparse value types, the output-path check and the IMU reading options (with
+``--save-imu-calibration``) shared by the CLI modules (bad values: one-line usage errors)."""
 
 from __future__ import annotations
 
@@ -127,7 +127,8 @@ def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store
     )
     p.add_argument(
         "--imu-calibration", dest="imu_calibration", action=action, metavar="YAML",
-        help="bag of sensor_msgs/Imu topics: the IMU mounting to use (default: learnt from the bag; docs/imu.md)",
+        help="bag of sensor_msgs/Imu topics: the IMU mounting to use, a file the node or --save-imu-calibration "
+        "wrote; checked on the walking, a misfit is an error (default: learnt from the bag; docs/imu.md)",
     )
     p.add_argument(
         "--imu-lateral-axes", dest="imu_lateral_axes", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
@@ -144,8 +145,32 @@ def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store
         help="bag of sensor_msgs/Imu topics: largest stamp spread of the four messages of one sample (default: "
         "0.9 of the message period, for sensors not sampled together)",
     )
+    p.add_argument(
+        "--save-imu-calibration", dest="save_imu_calibration", metavar="YAML",
+        help="bag of sensor_msgs/Imu topics: write the IMU calibration used (learnt or given) in the node's file "
+        "format, for --imu-calibration on the wearer's other recordings (docs/imu.md)",
+    )
 
 
 def imu_reader_options(args: argparse.Namespace) -> dict[str, Any]:
     """The IMU reading options given on the command line, as ``read_recording`` keywords."""
     return {k: getattr(args, k) for k in IMU_READING_OPTIONS if getattr(args, k, None) is not None}
+
+
+def save_imu_calibration(args: argparse.Namespace, rec: Any, source: str | Path) -> None:
+    """``--save-imu-calibration``: write the calibration ``rec`` (read from ``source``) was made
+    with, as the node saves its own (``io/imu_stream.save_calibration``); a recording that is not
+    a bag of Imu topics has none: one-line error."""
+    path = getattr(args, "save_imu_calibration", None)
+    if not path:
+        return
+    from ..io.imu_bag import ImuBagRecording
+    from ..io.imu_stream import save_calibration
+
+    if not isinstance(rec, ImuBagRecording) or rec.calibration is None:
+        raise GaitEstimatorError(f"--save-imu-calibration: {source} is not a bag of sensor_msgs/Imu topics "
+                                 "(no IMU calibration to save)")
+    try:
+        print(f"wrote IMU calibration {save_calibration(rec.calibration, path)}")
+    except OSError as exc:
+        raise GaitEstimatorError(f"--save-imu-calibration {path}: {exc.strerror or exc}") from None

@@ -35,7 +35,14 @@ from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
 from ..io.resources import DEFAULT_LIBRARY
 from ..io.stream import UNITS
-from .args import IMU_READING_OPTIONS, add_imu_reading_options, imu_reader_options, positive_float, seconds
+from .args import (
+    IMU_READING_OPTIONS,
+    add_imu_reading_options,
+    imu_reader_options,
+    positive_float,
+    save_imu_calibration,
+    seconds,
+)
 
 
 def _joint_names(text: str) -> tuple[str, ...]:
@@ -135,6 +142,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
     if bool(args.out_bag) == bool(args.out):
         raise GaitEstimatorError("give exactly one of --out-bag DIR (write a bag) or --out CSV (write a CSV)")
     rec = _read_source(args)
+    save_imu_calibration(args, rec, args.source)
     warn_units(rec, args.source, args.units)
     if args.out_bag:
         start_ns = None if args.start_time is None else round(args.start_time * 1e9)

@@ -20,7 +20,14 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import add_imu_reading_options, domain_id, imu_reader_options, port_number, positive_float
+from .args import (
+    add_imu_reading_options,
+    domain_id,
+    imu_reader_options,
+    port_number,
+    positive_float,
+    save_imu_calibration,
+)
 
 DEMO_DOMAIN_ID = 77
 """``demo``'s ROS domain when neither ``--domain-id`` nor ``ROS_DOMAIN_ID`` is set."""
@@ -81,7 +88,9 @@ def _demo_recording(args: argparse.Namespace) -> tuple[Path, Any, Any]:
     if not path.exists():
         raise GaitEstimatorError(f"{path}: recording not found")
     lib = load_library(args.kernels)
-    rec = read_recording(path, rate_hz=lib.sample_rate_hz, **imu_reader_options(args)).slice(args.start, args.stop)
+    rec = read_recording(path, rate_hz=lib.sample_rate_hz, **imu_reader_options(args))
+    save_imu_calibration(args, rec, path)
+    rec = rec.slice(args.start, args.stop)
     if len(rec) == 0:
         raise GaitEstimatorError(f"{path}: no samples in the selected range")
     return path, lib, rec

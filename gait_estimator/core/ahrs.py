@@ -1,14 +1,15 @@
-"""``RawFusion``'s filter compiled with numba: imufusion's AHRS without magnetometer, one call per sample.
+"""The raw-IMU fusion: the Fusion library's AHRS without magnetometer, one call per sample.
 
-``CompiledFusion`` has ``RawFusion``'s interface and does what it does: the gain tier from the
-gyro and accelerometer (``imu.gain_tier``, the same function compiled), then one update of the Fusion library's AHRS
-(xioTechnologies/Fusion ``FusionAhrsUpdateNoMagnetometer``, the code behind ``imufusion``:
-startup gain ramp, gyroscope overrange restart, acceleration rejection and recovery), and the
-gravity direction. It computes in double precision with exact square roots where the library
-uses single precision and a fast inverse square root, so the two differ by rounding (tested on
-real recordings); the heading, which the library zeroes during startup, is left alone because the
-gravity direction does not depend on it. ``make_fusion`` picks this one when numba is available
-(``compiled.AVAILABLE``) and ``RawFusion`` otherwise.
+``CompiledFusion`` takes the gain tier from the gyro and accelerometer (``imu.gain_tier``,
+compiled in), then does one update of xioTechnologies/Fusion's ``FusionAhrsUpdateNoMagnetometer``
+(the code behind ``imufusion``: startup gain ramp, gyroscope overrange restart, acceleration
+rejection and recovery), and gives the gravity direction. It computes in double precision with
+exact square roots where the library uses single precision and a fast inverse square root, so
+the two differ by rounding (the tests check it against imufusion on real recordings); the
+heading, which the library zeroes during startup, is left alone because the gravity direction
+does not depend on it. The step is compiled with numba when it is installed
+(``compiled.AVAILABLE``; the ``imu`` extra), and runs as plain Python otherwise (slower, same
+results).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import math
 import numpy as np
 
 from .compiled import AVAILABLE, njit
-from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, FusionParams, RawFusion, Vec3, gain_tier, tilt_quaternion_wxyz
+from .imu import DEFAULT_FUSION, GYROSCOPE_RANGE_DPS, FusionParams, Vec3, gain_tier, tilt_quaternion_wxyz
 
 INITIAL_STARTUP_GAIN = 10.0
 """The library's gain at the start of its startup ramp (after a gyroscope overrange)."""
@@ -106,7 +107,14 @@ def _step(s, p, g0, g1, g2, ax, ay, az, dt):  # pragma: no cover - compiled
 
 
 class CompiledFusion:
-    """``RawFusion`` (same arguments, same results to rounding) in one compiled call per sample."""
+    """Gyro + accelerometer -> ``up`` for one sensor (module docstring).
+
+    Args:
+        rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given
+            (at most ``FusionParams.max_step_s``).
+        gyro_bias_dps: Subtracted from every gyro sample (deg/s, sensor frame).
+        params: Gains and the stillness test.
+    """
 
     def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0),
                  params: FusionParams = DEFAULT_FUSION) -> None:
@@ -171,9 +179,9 @@ def warm_up() -> None:
 
 
 def make_fusion(rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0),
-                params: FusionParams = DEFAULT_FUSION) -> CompiledFusion | RawFusion:
-    """The raw-input fusion: ``CompiledFusion`` with numba, else ``RawFusion`` (imufusion)."""
-    return (CompiledFusion if AVAILABLE else RawFusion)(rate_hz, gyro_bias_dps, params)
+                params: FusionParams = DEFAULT_FUSION) -> CompiledFusion:
+    """The raw-input fusion of one sensor (``CompiledFusion``)."""
+    return CompiledFusion(rate_hz, gyro_bias_dps, params)
 
 
 def fuse_raw(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,

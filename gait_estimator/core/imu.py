@@ -8,8 +8,8 @@ A sensor on the segment sees gravity; ``up`` is the world's up direction express
 frame (unit vector). From an orientation quaternion (world <- sensor, world z up as in REP 103 /
 REP 145, ENU or NWU) ``up`` is the quaternion's rotation matrix' third row, so the heading (yaw,
 drifting without a magnetometer) never enters. Without an orientation, ``up`` is the gravity
-direction of a gyro + accelerometer fusion: the ``imufusion`` library's AHRS (``RawFusion``), or
-its port compiled with numba (``core/ahrs.py``, used when numba is installed); extra ``imu``.
+direction of a gyro + accelerometer fusion: the Fusion library's AHRS (``imufusion``), ported
+in ``core/ahrs.py`` and compiled with numba when it is installed (extra ``imu``).
 
 The mounting (``SegmentMount``) is three orthonormal sensor-frame axes: ``lateral`` (the sagittal
 rotation axis, pointing to the wearer's right, so that a forward swing is a positive rotation by
@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import copy
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -230,20 +229,9 @@ def ups_from_quaternions(q_xyzw: np.ndarray) -> np.ndarray:
     return np.stack([s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y)], axis=1)
 
 
-def _imufusion() -> Any:
-    try:
-        import imufusion
-    except ImportError:
-        numba = "numba (turned off by GAIT_ESTIMATOR_NO_NUMBA)" if os.environ.get("GAIT_ESTIMATOR_NO_NUMBA") else "numba"
-        raise CalibrationError(
-            f"raw IMU input (no orientation) needs {numba} or the imufusion package: pip install 'gait_estimator[imu]'"
-        ) from None
-    return imufusion
-
-
 @dataclass(frozen=True)
 class FusionParams:
-    """Settings of ``RawFusion`` (imufusion's AHRS without magnetometer).
+    """Settings of the raw-IMU fusion (``core/ahrs.CompiledFusion``: imufusion's AHRS without magnetometer).
 
     Attributes:
         gain: AHRS gain (imufusion's default): weight of the accelerometer's tilt correction.
@@ -321,7 +309,7 @@ def gain_tier(rate2: float, acc2_off: float, still: float, limits: Any, still_ne
     """The fusion's gain schedule for one sample: (tier, samples of stillness so far), tier 0
     moving, 1 turning slowly, 2 still; from the squared gyro rate ((deg/s)^2), |acc|^2 - 1, the
     stillness count before the sample, ``FusionParams.tier_limits()`` and ``still_samples``.
-    ``RawFusion`` calls it, ``core/ahrs.py`` compiles it into its step."""
+    ``core/ahrs.py`` compiles it into its step."""
     if rate2 >= limits[4]:  # faster than both tiers allow (most of a stride); still_needed >= 1
         return 0, 0.0
     acc2 = limits[1]
@@ -343,79 +331,3 @@ def tilt_quaternion_wxyz(acc: np.ndarray) -> np.ndarray:
         return np.array([0.0, 1.0, 0.0, 0.0])
     q = np.array([w, a[1], -a[0], 0.0])  # axis a x z, angle acos(a.z)
     return q / np.linalg.norm(q)
-
-
-class RawFusion:
-    """Gyro + accelerometer -> ``up`` for one sensor, with imufusion's AHRS (no magnetometer);
-    ``core/ahrs.CompiledFusion`` is the same filter in one compiled call per sample.
-
-    Args:
-        rate_hz: Nominal sample rate (Hz); each ``update`` uses the actual time step when given
-            (at most ``FusionParams.max_step_s``).
-        gyro_bias_dps: Subtracted from every gyro sample (deg/s, sensor frame).
-        params: Gains and the stillness test.
-    """
-
-    def __init__(self, rate_hz: float = 200.0, gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0),
-                 params: FusionParams = DEFAULT_FUSION) -> None:
-        self.params = params
-        self._ahrs = _imufusion().Ahrs()
-        self._set_rate(rate_hz)
-        self._ahrs.set_settings(self._settings[0])
-        self._limits = params.tier_limits()
-        self._still = 0.0
-        self._tier = 0  # settings in use: 0 moving, 1 turning slowly, 2 still
-        self.gyro_bias_dps = gyro_bias_dps
-        self._first = True
-
-    def _set_rate(self, rate_hz: float) -> None:
-        fusion, params = _imufusion(), self.params
-        self._settings = [fusion.AhrsSettings(
-            sample_rate=float(rate_hz),
-            convention=fusion.CONVENTION_NWU,
-            gain=gain,
-            gyroscope_range=GYROSCOPE_RANGE_DPS,
-            acceleration_rejection=params.acceleration_rejection_deg,
-            magnetic_rejection=0.0,
-            rejection_timeout=params.rejection_timeout_s,
-        ) for gain in params.tier_gains()]
-        self._still_needed = params.still_samples(rate_hz)
-        self._max_step = params.max_step_s(rate_hz)
-        self._period = 1.0 / rate_hz
-        self.rate_hz = rate_hz
-
-    def set_rate(self, rate_hz: float) -> None:
-        """Use ``rate_hz`` (Hz) as the nominal rate from now on (a live stream's measured rate)."""
-        self._set_rate(rate_hz)
-        self._ahrs.set_settings(self._settings[self._tier])
-        self._ahrs.set_sample_period(self._period)
-
-    def update(self, gyro_dps: Vec3, acc_g: Vec3, dt_s: float | None = None) -> Vec3:
-        """One sample: gyro (deg/s) and accelerometer (g), sensor frame; returns ``up`` (x, y, z)."""
-        g0, g1, g2 = gyro_dps
-        a0, a1, a2 = acc_g
-        return self.update_xyz(g0, g1, g2, a0, a1, a2, dt_s)
-
-    def update_xyz(self, g0: float, g1: float, g2: float, ax: float, ay: float, az: float,
-                   dt_s: float | None = None) -> Vec3:
-        """``update`` with the six components as Python floats (deg/s, g): the per-message path,
-        where numpy for a 3-vector costs more than the arithmetic."""
-        b0, b1, b2 = self.gyro_bias_dps
-        gx, gy, gz = g0 - b0, g1 - b1, g2 - b2
-        ahrs = self._ahrs
-        if dt_s is not None and dt_s > self._max_step:
-            dt_s = self._max_step
-        if dt_s is not None and not -1e-6 <= dt_s - self._period <= 1e-6 and dt_s > 0:
-            self._period = dt_s
-            ahrs.set_sample_period(dt_s)
-        if self._first:  # start from the accelerometer's tilt, not from a level sensor
-            self._first = False
-            ahrs.set_quaternion(tilt_quaternion_wxyz(np.array([ax, ay, az], dtype=np.float64)))
-            ahrs.skip_startup()
-        tier, self._still = gain_tier(gx * gx + gy * gy + gz * gz, ax * ax + ay * ay + az * az - 1.0, self._still,
-                                      self._limits, self._still_needed)
-        if tier != self._tier:
-            self._tier = tier
-            ahrs.set_settings(self._settings[tier]).set_sample_period(self._period)
-        x, y, z = ahrs.update_no_magnetometer((gx, gy, gz), (ax, ay, az)).get_gravity().tolist()
-        return x, y, z

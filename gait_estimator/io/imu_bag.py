@@ -143,6 +143,7 @@ def read_imu_bag(path: str | Path, options: ReadOptions | None = None, /, **valu
     try:
         lateral, proximal = check_configured(imu_lateral_axes or [""] * N_CHANNELS, imu_proximal_axes or [""] * N_CHANNELS)
         cal = imu_calibration or None
+        given_as = f"the IMU calibration {cal}" if isinstance(cal, (str, Path)) else "the IMU calibration given"
         if isinstance(cal, (str, Path)):
             cal = load_calibration(cal)
     except CalibrationError as exc:
@@ -174,7 +175,7 @@ def read_imu_bag(path: str | Path, options: ReadOptions | None = None, /, **valu
     else:
         note = "IMU calibration given: " + cal.summary()
     if given or all(m.source == "configured" for m in cal.mounts):  # made earlier: checked, as in the node
-        ending, checked = _check_note(p, paired, cal, learn_params, given)
+        ending, checked = _check_note(p, paired, cal, learn_params, given_as if given else "")
         note += ending
         if checked is not cal:  # raw sensors' biases of a standing pose before the verdict replace the file's
             cal = checked
@@ -329,19 +330,21 @@ def _learn(p: Path, paired: list, lateral: list, proximal: list, standing_deg: l
 
 
 def _check_note(p: Path, paired: list, cal: ImuCalibration, params: ImuLearnParams,
-                given: bool) -> tuple[str, ImuCalibration]:
+                given_as: str) -> tuple[str, ImuCalibration]:
     """The node's check of a calibration made earlier, on the recording's first walking: (the
     note's ending, ``cal`` with the gyro biases the node would have measured before the verdict);
-    RecordingError for a given calibration that does not fit (configured axes that do not fit are
-    kept, as in the node, with a warning in the note)."""
+    RecordingError for a given calibration (``given_as`` names it; '' = configured axes) that does
+    not fit: the node would learn one again, but the file was asked for, and a recording that
+    does not start standing could not be learnt from (configured axes that do not fit are kept,
+    as in the node, with a warning in the note)."""
     found, _, missing, checked = check_stream([s[0] * 1e-9 for s in paired], [s[2] for s in paired],
                                               [s[3] for s in paired], [s[4] for s in paired], cal, params)
     if found is None:
         return f"; not checked ({missing})", checked
     if found.fits:
         return "; checked on the walking: " + found.summary(), checked
-    if given:
-        raise RecordingError(f"{p}: the IMU calibration given does not fit this recording ({found.summary()}); "
+    if given_as:
+        raise RecordingError(f"{p}: {given_as} does not fit this recording ({found.summary()}); "
                              "without --imu-calibration one is learnt from it")
     return "; WARNING: the configured axes do not fit the walking (the angles are wrong): " + found.summary(), checked
 

@@ -24,7 +24,7 @@ import yaml
 
 from ..core.ahrs import CompiledFusion, make_fusion
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.imu import DEFAULT_FUSION, STANDARD_GRAVITY, CalibrationError, FusionParams, ImuCalibration, RawFusion, Vec3
+from ..core.imu import DEFAULT_FUSION, STANDARD_GRAVITY, CalibrationError, FusionParams, ImuCalibration, Vec3
 from .atomic import atomic_write_text
 from .stream import NON_FINITE, NON_INCREASING_STAMP, OUT_OF_RANGE, STREAM_RESTART_S, SampleRejected
 
@@ -78,7 +78,7 @@ class SensorInput:
         self.params = params
         self.frame_id = frame_id
         self.restart_back_ns = round(restart_back_s * 1e9)
-        self.fusion: CompiledFusion | RawFusion | None = None
+        self.fusion: CompiledFusion | None = None
         self.gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
         self.last_ns: int | None = None
         self.restarts = 0
