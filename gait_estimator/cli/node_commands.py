@@ -146,7 +146,7 @@ def _demo_summary(client: Any, path: Path, lib: Any, rec: Any, stamps: np.ndarra
         p = percentiles(lat)
         print(f"input -> estimate latency: p50 {p['p50_ms']:.2f} ms, p99 {p['p99_ms']:.2f} ms")
     if diag:
-        rejected = {k[len("rejected_") :]: v for k, v in diag.items() if k.startswith("rejected_") and v != "0"}
+        rejected = {k[len("rejected_") :]: v for k, v in diag.items() if k.startswith("rejected_") and v not in ("0", "")}
         print(
             f"node diagnostics: processing time mean {diag['processing_time_mean_ms']} ms, "
             f"max {diag['processing_time_max_ms']} ms (last second); accepted {diag['samples_accepted']}, "
