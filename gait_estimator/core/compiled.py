@@ -59,7 +59,7 @@ def step_rows(
     ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
     d0: float, d1: float, d2: float, d3: float, dsq: float,
     decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
-    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, mu_range: np.ndarray, mu_blocks: np.ndarray,
+    offset: bool, mu: np.ndarray, mu_anchor: np.ndarray, mu_range: np.ndarray, mu_blocks: np.ndarray,
     tau: np.ndarray,
     normalize: bool, n_scales: int, readable: np.ndarray, active: np.ndarray, slot: np.ndarray,
     out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
@@ -75,15 +75,15 @@ def step_rows(
     age-weighted window sums, with per row lam (R,) the weight factor per sample of age, lam_w =
     lam^N, wsum the weight sum of a full window (N without decay) and wsums (R, 4) the
     age-weighted window sums, updated in place; offset: apply the offset penalty (mu (R, 4)
-    kernel means, mu_seg (R, 4, Nmax) per-shift age-weighted means of the kernel with age
-    weights, mu_range (R, 2, 4) their minimum and maximum over the shifts, mu_blocks (R, 2, 4, B)
-    the same per block of 16 shifts, tau (2, 4):
+    kernel means, mu_anchor (R, 4, B) the per-shift age-weighted means of the kernel at every
+    16th shift (the others follow: ``matching.expand_shift_means``), mu_range (R, 2, 4) their
+    minimum and maximum over the shifts, mu_blocks (R, 2, 4, B) the same per block of 16 shifts, tau (2, 4):
     tolerances and sensor offsets; with decay the window's weight W_a and age-weighted sums stand
     for W and the sums);
     normalize: divide by the window's weight;
     readable (R,) bool: the rows a mode may be read at (at least one per mode); active: the rows
     updated and read out (the readable ones, or all); the others keep their sums. slot (R,): the
-    row of e, kern, ksq, wsums, mu, mu_seg, mu_range and mu_blocks that holds a row (the row
+    row of e, kern, ksq, wsums, mu, mu_anchor, mu_range and mu_blocks that holds a row (the row
     tables; every active row has one); lens, lam, lam_w, wsum, out_col and out_score are per row.
     Writes per active row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
@@ -144,8 +144,8 @@ def step_rows(
         if use_offset and not per_shift:
             const = _offset_penalty(s0, s1, s2, s3, wp, mu[p, 0], mu[p, 1], mu[p, 2], mu[p, 3], tau)
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
-            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[p], mu_range[p],
-                                         mu_blocks[p], out_col[r] + 1)
+            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_anchor[p], k0, k1, k2, k3,
+                                         lam[r], mu_range[p], mu_blocks[p], out_col[r] + 1)
         else:
             best, bj = _argmin(er, n)
             best -= const
@@ -229,8 +229,8 @@ def _argmin(v, n):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, inline="always")
 def _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3):  # pragma: no cover
-    """e[j] minus the offset penalty at column j with the kernel part's means m*[j] (per shift)."""
-    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+    """e[j] minus the offset penalty at column j with the kernel part's means m* (at that shift)."""
+    x0, x1, x2, x3 = a0 - m0, a1 - m1, a2 - m2, a3 - m3
     g0 = max(abs(x0 - f0) - t0, 0.0)
     g1 = max(abs(x1 - f1) - t1, 0.0)
     g2 = max(abs(x2 - f2) - t2, 0.0)
@@ -249,22 +249,28 @@ def _penalty_bound(a, lo, hi, t, f):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks, guess):  # pragma: no cover
+def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, anchor, k0, k1, k2, k3, lam, mu_range, mu_blocks,
+                      guess):  # pragma: no cover
     """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
-    a*: the window means, mu (4, Nmax) the kernel part's means per shift, mu_range (2, 4) their
-    range, mu_blocks (2, 4, B) per block of 16 shifts). A score is at least e[j] - wp * (the
+    a*: the window means; the kernel part's means per shift: anchor (4, B) those of every 16th
+    shift, the others m_j = lam m_{j-1} + (1 - lam) k_j (``matching.expand_shift_means``) from the
+    kernel k* (n,); mu_range (2, 4) their range, mu_blocks (2, 4, B) per block of 16 shifts). A score is at least e[j] - wp * (the
     largest penalty any shift of its block can have), so starting from the score at column
     ``guess`` (the last step's best, moved on by one), only the blocks whose smallest e[j] is
     within that bound (over all shifts, then over the block's) of the best score so far are
     scored: the result is the exhaustive scan's (test_matcher compares it with the numpy read-out)."""
     t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
     f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
-    m0, m1, m2, m3 = mu[0], mu[1], mu[2], mu[3]
+    c = 1.0 - lam
     bound = wp * (_penalty_bound(a0, mu_range[0, 0], mu_range[1, 0], t0, f0)
                   + _penalty_bound(a1, mu_range[0, 1], mu_range[1, 1], t1, f1)
                   + _penalty_bound(a2, mu_range[0, 2], mu_range[1, 2], t2, f2)
                   + _penalty_bound(a3, mu_range[0, 3], mu_range[1, 3], t3, f3))
     bj = guess if 0 <= guess < n else 0  # a first candidate: where the last step's best shift moved to
+    q = bj // 16
+    m0, m1, m2, m3 = anchor[0, q], anchor[1, q], anchor[2, q], anchor[3, q]
+    for j in range(q * 16 + 1, bj + 1):
+        m0, m1, m2, m3 = lam * m0 + c * k0[j], lam * m1 + c * k1[j], lam * m2 + c * k2[j], lam * m3 + c * k3[j]
     best = _shift_score(e, bj, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
     slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
     for lo in range(0, n, 16):  # in blocks of 16 shifts (SHIFT_BLOCK): one test per block
@@ -281,7 +287,10 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks, gu
                      + _penalty_bound(a3, mu_blocks[0, 3, q], mu_blocks[1, 3, q], t3, f3))
         if low - near > best + 1e-9 * (abs(best) + abs(near)):
             continue
+        m0, m1, m2, m3 = anchor[0, q], anchor[1, q], anchor[2, q], anchor[3, q]
         for j in range(lo, hi):
+            if j > lo:
+                m0, m1, m2, m3 = lam * m0 + c * k0[j], lam * m1 + c * k1[j], lam * m2 + c * k2[j], lam * m3 + c * k3[j]
             v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
             if v < best or (v == best and j < bj):
                 best, bj = v, j
@@ -329,7 +338,7 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
 def run_steps(  # pragma: no cover - compiled
     e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
     decay, lam, lam_w, wsum, wsums,
-    offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize, n_scales, readable, active, slot, out_col, out_score,
+    offset, mu, mu_anchor, mu_range, mu_blocks, tau, normalize, n_scales, readable, active, slot, out_col, out_score,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
@@ -348,7 +357,7 @@ def run_steps(  # pragma: no cover - compiled
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
         b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
-                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize,
+                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_anchor, mu_range, mu_blocks, tau, normalize,
                  n_scales, readable, active, slot, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
         best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
         if track.shape[0] == 0:

@@ -110,12 +110,13 @@ class IncrementalMatcher(_MatcherBase):
         resync_block: int = 64,
         backend: str = "auto",
     ) -> None:
-        super().__init__(library, channel_weights, time_scales, offset_tolerance_deg, normalize, recency_half_life)
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
         if backend == "numba" and not compiled.AVAILABLE:
             raise ValueError("backend 'numba' needs the numba package (pip install numba)")
         self.backend = "numba" if backend == "auto" and compiled.AVAILABLE else ("numpy" if backend == "auto" else backend)
+        self._shift_table = self.backend != "numba"  # the compiled read-out derives the per-shift means
+        super().__init__(library, channel_weights, time_scales, offset_tolerance_deg, normalize, recency_half_life)
         r, n = self.n_rows, self.max_length
         cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         large = self.backend == "numba" and self.n_rows >= PARALLEL_MIN_ROWS
@@ -332,7 +333,7 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, count, samples, squares, start, stop,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
+            self._offset, self._mu, self._mu_anchor, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
             self.n_scales,
             self._band.readable, self._active, self._slots.slot, self._out_col, self._out_score,
             out.sse, out.phases, out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
@@ -354,7 +355,7 @@ class IncrementalMatcher(_MatcherBase):
             self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
             self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
             self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
+            self._offset, self._mu, self._mu_anchor, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
             self.n_scales, self._band.readable, self._active, self._slots.slot,
             self._out_col, self._out_score, sse, phases, variant, column, window,
         )
@@ -470,7 +471,7 @@ class IncrementalMatcher(_MatcherBase):
         self._sync_rows(np.array([row]))
         p = int(self._slots.slot[row])
         if self.recency_half_life > 0:
-            return (self._wsums[p] / self._wsum[row] - self._mu_seg[p, :, column]) * self._unscale
+            return (self._wsums[p] / self._wsum[row] - self._row_shift_means(np.array([row]))[0, :, column]) * self._unscale
         w = int(self.windows[row])
         s = self.window_sums()[row]  # not from the prefix-sum ring: the longest window's start slot is overwritten
         return (s / w - self._mu[p]) * self._unscale
