@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import types
+from typing import NamedTuple
 
 import numpy as np
 
@@ -54,20 +55,48 @@ def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover
     return total * w
 
 
+class StepState(NamedTuple):
+    """The matcher state a compiled step reads and updates (its arrays in place), built by
+    ``IncrementalMatcher`` when one of them is replaced. The steps take it as a plain tuple
+    (``tuple(state)``), which numba types as fast as separate arguments (a named tuple costs a
+    microsecond more per call), and unpack it in this order (``step_rows``)."""
+
+    e: np.ndarray
+    kern: np.ndarray
+    ksq: np.ndarray
+    lens: np.ndarray
+    ring: np.ndarray
+    ring_sq: np.ndarray
+    psum_ring: np.ndarray
+    psum: np.ndarray
+    decay: bool
+    lam: np.ndarray
+    lam_w: np.ndarray
+    wsum: np.ndarray
+    wsums: np.ndarray
+    offset: bool
+    mu: np.ndarray
+    mu_anchor: np.ndarray
+    mu_range: np.ndarray
+    mu_blocks: np.ndarray
+    tau: np.ndarray
+    normalize: bool
+    n_scales: int
+    readable: np.ndarray
+    active: np.ndarray
+    slot: np.ndarray
+    out_col: np.ndarray
+    out_score: np.ndarray
+
+
 def step_rows(
-    e: np.ndarray, kern: np.ndarray, ksq: np.ndarray, lens: np.ndarray,
-    ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
-    d0: float, d1: float, d2: float, d3: float, dsq: float,
-    decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
-    offset: bool, mu: np.ndarray, mu_anchor: np.ndarray, mu_range: np.ndarray, mu_blocks: np.ndarray,
-    tau: np.ndarray,
-    normalize: bool, n_scales: int, readable: np.ndarray, active: np.ndarray, slot: np.ndarray,
-    out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
-    out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
+    state: tuple, count: int, d0: float, d1: float, d2: float, d3: float, dsq: float,
+    out_sse: np.ndarray, out_phase: np.ndarray, out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
     """One matcher step over the rows ``active``; returns the best mode. See the module docstring.
 
-    e (R, Nmax): running sums, updated in place; kern (R, 4, Nmax) float64 or float32; ksq (R, Nmax) = ||k_j||^2;
+    state: a ``StepState`` as a plain tuple, of which e (R, Nmax): running sums, updated in place;
+    kern (R, 4, Nmax) float64 or float32; ksq (R, Nmax) = ||k_j||^2;
     lens (R,): row lengths (= windows); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and
     their squared norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,)
     the prefix sum before this sample; count: samples before this one; d0..d3: the (weighted)
@@ -87,6 +116,8 @@ def step_rows(
     tables; every active row has one); lens, lam, lam_w, wsum, out_col and out_score are per row.
     Writes per active row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
+    (e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, decay, lam, lam_w, wsum, wsums, offset, mu, mu_anchor,
+     mu_range, mu_blocks, tau, normalize, n_scales, readable, active, slot, out_col, out_score) = state  # StepState
     wmax = ring.shape[0]
     i = count
     p0, p1, p2, p3 = psum[0] + d0, psum[1] + d1, psum[2] + d2, psum[3] + d3
@@ -336,15 +367,13 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
 
 
 def run_steps(  # pragma: no cover - compiled
-    e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
-    decay, lam, lam_w, wsum, wsums,
-    offset, mu, mu_anchor, mu_range, mu_blocks, tau, normalize, n_scales, readable, active, slot, out_col, out_score,
+    state, count, samples, squares, start, stop,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
     """Matcher steps ``start`` .. ``stop`` - 1 of ``samples`` (G, 4) (weighted; ``squares`` their
     squared norms) through step_rows (``run_steps_parallel``: step_rows_parallel, the rows of each
-    step over numba's threads), the matcher's state in place from ``count`` samples on. Per step:
+    step over numba's threads), the matcher's ``state`` (``step_rows``) in place from ``count`` samples on. Per step:
     every mode's score and phase into out_sse/out_phase (G, M), the best mode and its variant,
     column and window.
 
@@ -356,9 +385,7 @@ def run_steps(  # pragma: no cover - compiled
     for g in range(start, stop):
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
-        b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
-                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_anchor, mu_range, mu_blocks, tau, normalize,
-                 n_scales, readable, active, slot, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
+        b = step_rows(state, i, d0, d1, d2, d3, dsq, out_sse[g], out_phase[g], variant, column, window)
         best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
         if track.shape[0] == 0:
             continue

@@ -217,6 +217,7 @@ class _MatcherBase:
         self._mu_anchor = np.zeros((slots, N_CHANNELS, blocks if self._per_shift else 0))
         self._mu_seg_range = np.zeros((slots, 2, N_CHANNELS))  # per row: min and max of mu_seg over shifts
         self._mu_seg_blocks = np.zeros((slots, 2, N_CHANNELS, blocks))  # the same per block of shifts
+        self._state = None  # the compiled step's state refers to the arrays replaced
 
     def _kernel_samples(self, mode: int) -> np.ndarray:
         return self._samples.get(mode, self.library.modes[mode].samples)
@@ -279,6 +280,7 @@ class _MatcherBase:
     def _set_weights(self, half_life: float) -> None:
         self.recency_half_life = half_life
         self._lam, self._lam_w, self._wsum = self._weights(half_life)
+        self._state = None
 
     def set_recency_half_life(self, half_life: float) -> None:
         """Change ``recency_half_life`` (strides; 0 = uniform weights) at any sample, keeping the
@@ -373,6 +375,7 @@ class _MatcherBase:
             raise ValueError(f"sensor offset must be finite, got {o.tolist()}")
         self._tau[1] = o * self._scale
         self._offset = self._offset or bool(np.any(o != 0.0))
+        self._state = None
 
     @property
     def scale_band(self) -> np.ndarray:
