@@ -18,6 +18,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .stride_track import stride_step
+
 try:  # pragma: no cover - depends on the environment
     if os.environ.get("GAIT_ESTIMATOR_NO_NUMBA"):
         raise ImportError("disabled by GAIT_ESTIMATOR_NO_NUMBA")
@@ -105,7 +107,7 @@ def step_rows(
     lam^N, wsum the weight sum of a full window (N without decay) and wsums (R, 4) the
     age-weighted window sums, updated in place; offset: apply the offset penalty (mu (R, 4)
     kernel means, mu_anchor (R, 4, B) the per-shift age-weighted means of the kernel at every
-    16th shift (the others follow: ``matching.expand_shift_means``), mu_range (R, 2, 4) their
+    16th shift (the others follow: ``shift_means.expand_shift_means``), mu_range (R, 2, 4) their
     minimum and maximum over the shifts, mu_blocks (R, 2, 4, B) the same per block of 16 shifts, tau (2, 4):
     tolerances and sensor offsets; with decay the window's weight W_a and age-weighted sums stand
     for W and the sums);
@@ -284,7 +286,7 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, anchor, k0, k1, k2, k3, lam
                       guess):  # pragma: no cover
     """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
     a*: the window means; the kernel part's means per shift: anchor (4, B) those of every 16th
-    shift, the others m_j = lam m_{j-1} + (1 - lam) k_j (``matching.expand_shift_means``) from the
+    shift, the others m_j = lam m_{j-1} + (1 - lam) k_j (``shift_means.expand_shift_means``) from the
     kernel k* (n,); mu_range (2, 4) their range, mu_blocks (2, 4, B) per block of 16 shifts). A score is at least e[j] - wp * (the
     largest penalty any shift of its block can have), so starting from the score at column
     ``guess`` (the last step's best, moved on by one), only the blocks whose smallest e[j] is
@@ -366,6 +368,9 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
     return s0, s1, s2, s3
 
 
+_stride_step = njit(cache=True, nogil=True, inline="always")(stride_step)
+
+
 def run_steps(  # pragma: no cover - compiled
     state, count, samples, squares, start, stop,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
@@ -377,8 +382,9 @@ def run_steps(  # pragma: no cover - compiled
     every mode's score and phase into out_sse/out_phase (G, M), the best mode and its variant,
     column and window.
 
-    The walking calibrations' stride tracker (``WalkingCalibration._confident_stride_end`` without
-    its confidence test) runs along on the best mode and its phase: ``track`` = (valid, mode, phase,
+    The walking calibrations' stride tracker (``stride_track.stride_step``, as
+    ``WalkingCalibration._confident_stride_end`` runs it, without its confidence test) runs
+    along on the best mode and its phase: ``track`` = (valid, mode, phase,
     passed_mid, began_in_mode) as floats, ``near`` (M, M) the near copies; the steps stop after a
     heel strike that ends a whole stride, where the calibrations may act, with ``track`` as it was
     before that step. Returns the step after the last done and whether it ended such a stride."""
@@ -391,16 +397,13 @@ def run_steps(  # pragma: no cover - compiled
             continue
         phase = out_phase[g, b]
         same = track[0] > 0.0 and (int(track[1]) == b or near[int(track[1]), b])
-        wrapped = same and phase < track[2] - 0.5
-        passed_mid = same and track[3] > 0.0
-        whole = same and track[4] > 0.0
-        midway = (mid_lo <= phase < mid_hi) or (passed_mid and not wrapped)
-        if wrapped and whole and passed_mid:  # the tracker's state stays the one before this step
+        ends, midway, began = _stride_step(same, track[2], track[3] > 0.0, track[4] > 0.0, phase, mid_lo, mid_hi)
+        if ends:  # the tracker's state stays the one before this step
             return g + 1, True
         if i + 1 >= ready_from:
             track[0], track[1], track[2] = 1.0, b, phase
             track[3] = 1.0 if midway else 0.0
-            track[4] = 1.0 if wrapped or whole else 0.0
+            track[4] = 1.0 if began else 0.0
         else:
             track[0] = 0.0
     return stop, False

@@ -62,34 +62,9 @@ from .kernels import KernelLibrary, resample_stride
 from .match_results import MatchTrace, StepResult
 from .row_slots import RowSlots
 from .scale_band import ScaleBand
+from .shift_means import SHIFT_BLOCK, expand_shift_means, weighted_shift_means
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
-SHIFT_BLOCK = 16
-"""Shifts per block of the per-shift kernel means: each block's first mean is kept, the others follow
-from it (``expand_shift_means``); the compiled read-out bounds the penalty per block."""
-
-
-def expand_shift_means(anchors: np.ndarray, k: np.ndarray, lam: np.ndarray) -> np.ndarray:
-    """The per-shift age-weighted kernel means (g, 4, n) from their values at every SHIFT_BLOCK-th
-    shift ``anchors`` (g, 4, B), the kernels ``k`` (g, 4, n) and the rows' age weight factors
-    ``lam`` (g,): within a block m_j = lam m_{j-1} + (1 - lam) k_j (the window slides by one
-    sample), in the float operations ``compiled._argmin_per_shift`` does them in."""
-    g, _, n = k.shape
-    b = anchors.shape[2]
-    kb = np.zeros((g, N_CHANNELS, b * SHIFT_BLOCK))
-    kb[:, :, :n] = k
-    kb = kb.reshape(g, N_CHANNELS, b, SHIFT_BLOCK)
-    out = np.empty_like(kb)
-    a = np.asarray(lam, dtype=np.float64).reshape(-1, 1, 1)
-    c = 1.0 - a
-    m = np.array(anchors[:, :, :b], dtype=np.float64)
-    out[..., 0] = m
-    for q in range(1, SHIFT_BLOCK):
-        m = a * m + c * kb[..., q]
-        out[..., q] = m
-    return out.reshape(g, N_CHANNELS, b * SHIFT_BLOCK)[:, :, :n]
-
-
 def check_channel_weights(value: Sequence[float] | None) -> np.ndarray:
     """Validate ``channel_weights``: 4 finite numbers >= 0, not all 0 (None = all 1)."""
     if value is None:
@@ -339,17 +314,8 @@ class _MatcherBase:
         without recency weighting); ``k`` (g, n, 4); ``weights``: ``_weights`` of the means'
         half-life."""
         r = int(rows[0])
-        n, w = k.shape[1], int(self.windows[r])
         lam, _, wsum = weights
-        if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
-            c = np.cumsum(np.concatenate([k, k], axis=1), axis=1)
-            j = np.arange(n) + n
-            return ((c[:, j] - c[:, j - w]) / w).transpose(0, 2, 1)
-        weights = np.zeros(n)
-        weights[:w] = lam[r] ** np.arange(w)
-        conv = np.fft.irfft(np.fft.rfft(k.transpose(0, 2, 1), n=n) * np.fft.rfft(weights), n=n)  # sum_t w_t k_{j-t}
-        anchors = (conv / wsum[r])[:, :, ::SHIFT_BLOCK]
-        return expand_shift_means(anchors, k.transpose(0, 2, 1), np.full(rows.size, lam[r]))
+        return weighted_shift_means(k.transpose(0, 2, 1), int(self.windows[r]), float(lam[r]), float(wsum[r]))
 
     def _row_shift_means(self, rows: np.ndarray | slice) -> np.ndarray:
         """The per-shift kernel means of ``rows`` (which have slots), (r, 4, Nmax)."""
