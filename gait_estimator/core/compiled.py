@@ -282,31 +282,47 @@ def _penalty_bound(a, lo, hi, t, f):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _scan_block(e, lo, hi, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, anchor, k0, k1, k2, k3, lam, best,
+                bj):  # pragma: no cover - compiled
+    """(best, bj) after scoring the shifts lo .. hi - 1 of one block (``_argmin_per_shift``), the
+    kernel part's means from the block's first (anchor) on: m_j = lam m_{j-1} + (1 - lam) k_j."""
+    c = 1.0 - lam
+    q = lo // 16
+    m0, m1, m2, m3 = anchor[0, q], anchor[1, q], anchor[2, q], anchor[3, q]
+    for j in range(lo, hi):
+        if j > lo:
+            m0, m1, m2, m3 = lam * m0 + c * k0[j], lam * m1 + c * k1[j], lam * m2 + c * k2[j], lam * m3 + c * k3[j]
+        v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+        if v < best or (v == best and j < bj):
+            best, bj = v, j
+    return best, bj
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, anchor, k0, k1, k2, k3, lam, mu_range, mu_blocks,
                       guess):  # pragma: no cover
     """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
     a*: the window means; the kernel part's means per shift: anchor (4, B) those of every 16th
-    shift, the others m_j = lam m_{j-1} + (1 - lam) k_j (``shift_means.expand_shift_means``) from the
-    kernel k* (n,); mu_range (2, 4) their range, mu_blocks (2, 4, B) per block of 16 shifts). A score is at least e[j] - wp * (the
-    largest penalty any shift of its block can have), so starting from the score at column
-    ``guess`` (the last step's best, moved on by one), only the blocks whose smallest e[j] is
-    within that bound (over all shifts, then over the block's) of the best score so far are
-    scored: the result is the exhaustive scan's (test_matcher compares it with the numpy read-out)."""
+    shift, the others m_j = lam m_{j-1} + (1 - lam) k_j (``shift_means.expand_shift_means``)
+    from the kernel k* (n,); mu_range (2, 4) their range, mu_blocks (2, 4, B) per block of 16
+    shifts). A score is at least e[j] - wp * (the largest penalty any shift of its block can
+    have), so starting from the block of column ``guess`` (the last step's best, moved on by
+    one), only the blocks whose smallest e[j] is within that bound (over all shifts, then over
+    the block's) of the best score so far are scored: the result is the exhaustive scan's
+    (test_matcher compares it with the numpy read-out)."""
     t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
     f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
-    c = 1.0 - lam
     bound = wp * (_penalty_bound(a0, mu_range[0, 0], mu_range[1, 0], t0, f0)
                   + _penalty_bound(a1, mu_range[0, 1], mu_range[1, 1], t1, f1)
                   + _penalty_bound(a2, mu_range[0, 2], mu_range[1, 2], t2, f2)
                   + _penalty_bound(a3, mu_range[0, 3], mu_range[1, 3], t3, f3))
-    bj = guess if 0 <= guess < n else 0  # a first candidate: where the last step's best shift moved to
-    q = bj // 16
-    m0, m1, m2, m3 = anchor[0, q], anchor[1, q], anchor[2, q], anchor[3, q]
-    for j in range(q * 16 + 1, bj + 1):
-        m0, m1, m2, m3 = lam * m0 + c * k0[j], lam * m1 + c * k1[j], lam * m2 + c * k2[j], lam * m3 + c * k3[j]
-    best = _shift_score(e, bj, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+    first = (guess if 0 <= guess < n else 0) // 16 * 16  # where the last step's best shift moved to
+    best, bj = _scan_block(e, first, min(first + 16, n), wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, anchor,
+                           k0, k1, k2, k3, lam, np.inf, first)
     slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
     for lo in range(0, n, 16):  # in blocks of 16 shifts (SHIFT_BLOCK): one test per block
+        if lo == first:
+            continue
         hi = min(lo + 16, n)
         low = e[lo]
         for j in range(lo + 1, hi):
@@ -320,13 +336,8 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, anchor, k0, k1, k2, k3, lam
                      + _penalty_bound(a3, mu_blocks[0, 3, q], mu_blocks[1, 3, q], t3, f3))
         if low - near > best + 1e-9 * (abs(best) + abs(near)):
             continue
-        m0, m1, m2, m3 = anchor[0, q], anchor[1, q], anchor[2, q], anchor[3, q]
-        for j in range(lo, hi):
-            if j > lo:
-                m0, m1, m2, m3 = lam * m0 + c * k0[j], lam * m1 + c * k1[j], lam * m2 + c * k2[j], lam * m3 + c * k3[j]
-            v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
-            if v < best or (v == best and j < bj):
-                best, bj = v, j
+        best, bj = _scan_block(e, lo, hi, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, anchor, k0, k1, k2, k3,
+                               lam, best, bj)
     return best, bj
 
 
