@@ -55,8 +55,11 @@ class ScaleBand:
         the rows it is read at): the best ones, a mode replacing a searched one only if it fits
         better by SEARCH_MARGIN (near ties do not swap rows in and out); True if they changed."""
         if self._inside.size == self.search:  # full: the loop below would stop at the best other mode
-            if self._outside.size == 0 or not (np.minimum.reduce(score[self._outside])
-                                               < (1.0 - SEARCH_MARGIN) * np.maximum.reduce(score[self._inside])):
+            if self._outside.size == 0:
+                return False
+            others = score[self._outside]  # a short list is cheaper in Python floats (cold numpy calls cost)
+            best_other = min(others.tolist()) if others.size <= 64 else float(np.minimum.reduce(others))
+            if not best_other < (1.0 - SEARCH_MARGIN) * max(score[self._inside].tolist()):
                 return False
         chosen = self.searched.copy()
         for m in np.argsort(score, kind="stable"):  # ends at the first mode that does not enter
