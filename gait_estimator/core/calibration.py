@@ -190,11 +190,11 @@ class WalkingCalibration:
         last = self._last
         near = self.near_copies
         if last is None:
-            ends, midway, began = stride_step(False, 0.0, False, False, phase, *self.params.mid_stride)
+            ends, midway, began = stride_step(False, 0.0, False, False, phase, self.params.mid_stride)
         else:
-            same = last.mode == m or (near is not None and bool(near[last.mode, m]))
+            same = last.mode == m or (near is not None and near[last.mode, m])
             ends, midway, began = stride_step(same, last.phase, last.passed_mid, last.began_in_mode, phase,
-                                              *self.params.mid_stride)
+                                              self.params.mid_stride)
         self._last = _StrideTrack(m, phase, midway, began) if est.ready else None
         if not ends or est.held:
             return False

@@ -408,7 +408,7 @@ def run_steps(  # pragma: no cover - compiled
             continue
         phase = out_phase[g, b]
         same = track[0] > 0.0 and (int(track[1]) == b or near[int(track[1]), b])
-        ends, midway, began = _stride_step(same, track[2], track[3] > 0.0, track[4] > 0.0, phase, mid_lo, mid_hi)
+        ends, midway, began = _stride_step(same, track[2], track[3] > 0.0, track[4] > 0.0, phase, (mid_lo, mid_hi))
         if ends:  # the tracker's state stays the one before this step
             return g + 1, True
         if i + 1 >= ready_from:
