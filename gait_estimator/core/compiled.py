@@ -289,9 +289,11 @@ def _scan_block(e, lo, hi, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, a
     c = 1.0 - lam
     q = lo // 16
     m0, m1, m2, m3 = anchor[0, q], anchor[1, q], anchor[2, q], anchor[3, q]
-    for j in range(lo, hi):
-        if j > lo:
-            m0, m1, m2, m3 = lam * m0 + c * k0[j], lam * m1 + c * k1[j], lam * m2 + c * k2[j], lam * m3 + c * k3[j]
+    v = _shift_score(e, lo, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+    if v < best or (v == best and lo < bj):
+        best, bj = v, lo
+    for j in range(lo + 1, hi):
+        m0, m1, m2, m3 = lam * m0 + c * k0[j], lam * m1 + c * k1[j], lam * m2 + c * k2[j], lam * m3 + c * k3[j]
         v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
         if v < best or (v == best and j < bj):
             best, bj = v, j
