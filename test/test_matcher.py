@@ -525,6 +525,54 @@ def test_mean_offset_and_sensor_offset(able_bodied, recency) -> None:
     np.testing.assert_allclose(s.sse[s.ready], clean.sse[clean.ready], rtol=1e-9, atol=1e-6)
 
 
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba not installed")
+def test_per_shift_means_are_the_weighted_kernel_means_and_one_table(able_bodied) -> None:
+    """With recency weighting the offset penalty compares the window's weighted mean with the
+    kernel part's weighted mean at each shift: sum_t a_t k_{(j-t) mod n} / W_a, written plainly
+    here. The compiled step keeps only every SHIFT_BLOCK-th of them and derives the others as
+    the numpy step's full table holds them, bit for bit."""
+    opts = {"recency_half_life": 0.3, "offset_tolerance_deg": 2.0, "time_scales": (0.92, 1.0, 1.08)}
+    numba = IncrementalMatcher(able_bodied, backend="numba", **opts)
+    table = IncrementalMatcher(able_bodied, backend="numpy", **opts)
+    assert numba._mu_seg.size == 0 and table._mu_seg.shape[2] == table.max_length
+    rows = np.arange(numba.n_rows)
+    derived, kept = numba._row_shift_means(rows), table._row_shift_means(rows)
+    for r in rows:
+        n = int(numba.lengths[r])
+        np.testing.assert_array_equal(derived[r, :, :n], kept[r, :, :n])
+        k = numba._kernels[r, :, :n].astype(np.float64)  # (4, n)
+        a = numba._lam[r] ** np.arange(n)
+        plain = np.array([[(a * k[c, (j - np.arange(n)) % n]).sum() for j in range(n)] for c in range(4)]) / a.sum()
+        np.testing.assert_allclose(derived[r, :, :n], plain, rtol=0, atol=1e-9)
+
+
+@pytest.mark.skipif(not compiled.AVAILABLE, reason="numba not installed")
+def test_the_compiled_steps_state_follows_every_replaced_array(able_bodied, multispeed_csv) -> None:
+    """The compiled steps take the matcher's state as one structure, kept between steps: after
+    whatever replaces one of its arrays or flags (a scale band that repacks the row tables, new
+    age weights, a sensor offset) it holds the matcher's current ones."""
+    x = read_recording(multispeed_csv).angles_deg[:900]
+    m = IncrementalMatcher(able_bodied.replicated(14), time_scales=(0.92, 1.0, 1.08), recency_half_life=0.3,
+                           offset_tolerance_deg=2.0, normalize=True, backend="numba")
+
+    def fresh() -> tuple:
+        m._state = None
+        return m._step_state()
+
+    def check() -> None:
+        kept = m._step_state()
+        assert all(a is b for a, b in zip(kept, fresh(), strict=True))
+    m.run(x[:300])
+    check()
+    for change in (lambda: m.set_scale_band([False, True, False], search=2), lambda: m.set_recency_half_life(0.5),
+                   lambda: m.set_sensor_offset([1.0, 0.0, 0.0, 0.0]), lambda: m.set_scale_band(None), m.start_uniform):
+        kept = m._step_state()
+        change()
+        m.run(x[300:400])
+        assert m._step_state() is not kept or all(a is b for a, b in zip(kept, fresh(), strict=True))
+        check()
+
+
 def test_without_numba_the_numpy_step_runs(tmp_path) -> None:
     """GAIT_ESTIMATOR_NO_NUMBA=1 (or numba missing): the numpy step, same results."""
     import os

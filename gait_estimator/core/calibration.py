@@ -32,6 +32,7 @@ from .channels import N_CHANNELS
 from .kernels import KernelLibrary, near_duplicates
 from .matcher import IncrementalMatcher, StepResult
 from .options import EstimatorConfig
+from .stride_track import stride_step
 from .supervisor import Estimate, relative_margin
 
 
@@ -188,14 +189,14 @@ class WalkingCalibration:
         m, phase = est.mode_index, est.phase
         last = self._last
         near = self.near_copies
-        same = last is not None and (last.mode == m or (near is not None and near[last.mode, m]))
-        wrapped = same and phase < last.phase - 0.5
-        passed_mid = same and last.passed_mid
-        whole = same and last.began_in_mode
-        lo, hi = self.params.mid_stride
-        midway = lo <= phase < hi or (passed_mid and not wrapped)
-        self._last = _StrideTrack(m, phase, midway, wrapped or whole) if est.ready else None
-        if not (wrapped and whole and passed_mid) or est.held:
+        if last is None:
+            ends, midway, began = stride_step(False, 0.0, False, False, phase, self.params.mid_stride)
+        else:
+            same = last.mode == m or (near is not None and near[last.mode, m])
+            ends, midway, began = stride_step(same, last.phase, last.passed_mid, last.began_in_mode, phase,
+                                              self.params.mid_stride)
+        self._last = _StrideTrack(m, phase, midway, began) if est.ready else None
+        if not ends or est.held:
             return False
         confidence = est.confidence if near is None else _margin_over(est.sse, m, ~near[m])
         return confidence >= self.params.confidence

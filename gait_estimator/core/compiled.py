@@ -14,8 +14,11 @@ from __future__ import annotations
 
 import os
 import types
+from typing import NamedTuple
 
 import numpy as np
+
+from .stride_track import stride_step
 
 try:  # pragma: no cover - depends on the environment
     if os.environ.get("GAIT_ESTIMATOR_NO_NUMBA"):
@@ -54,20 +57,48 @@ def _offset_penalty(s0, s1, s2, s3, w, m0, m1, m2, m3, tau):  # pragma: no cover
     return total * w
 
 
+class StepState(NamedTuple):
+    """The matcher state a compiled step reads and updates (its arrays in place), built by
+    ``IncrementalMatcher`` when one of them is replaced. The steps take it as a plain tuple
+    (``tuple(state)``), which numba types as fast as separate arguments (a named tuple costs a
+    microsecond more per call), and unpack it in this order (``step_rows``)."""
+
+    e: np.ndarray
+    kern: np.ndarray
+    ksq: np.ndarray
+    lens: np.ndarray
+    ring: np.ndarray
+    ring_sq: np.ndarray
+    psum_ring: np.ndarray
+    psum: np.ndarray
+    decay: bool
+    lam: np.ndarray
+    lam_w: np.ndarray
+    wsum: np.ndarray
+    wsums: np.ndarray
+    offset: bool
+    mu: np.ndarray
+    mu_anchor: np.ndarray
+    mu_range: np.ndarray
+    mu_blocks: np.ndarray
+    tau: np.ndarray
+    normalize: bool
+    n_scales: int
+    readable: np.ndarray
+    active: np.ndarray
+    slot: np.ndarray
+    out_col: np.ndarray
+    out_score: np.ndarray
+
+
 def step_rows(
-    e: np.ndarray, kern: np.ndarray, ksq: np.ndarray, lens: np.ndarray,
-    ring: np.ndarray, ring_sq: np.ndarray, psum_ring: np.ndarray, psum: np.ndarray, count: int,
-    d0: float, d1: float, d2: float, d3: float, dsq: float,
-    decay: bool, lam: np.ndarray, lam_w: np.ndarray, wsum: np.ndarray, wsums: np.ndarray,
-    offset: bool, mu: np.ndarray, mu_seg: np.ndarray, mu_range: np.ndarray, mu_blocks: np.ndarray,
-    tau: np.ndarray,
-    normalize: bool, n_scales: int, readable: np.ndarray, active: np.ndarray, slot: np.ndarray,
-    out_col: np.ndarray, out_score: np.ndarray, out_sse: np.ndarray, out_phase: np.ndarray,
-    out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
+    state: tuple, count: int, d0: float, d1: float, d2: float, d3: float, dsq: float,
+    out_sse: np.ndarray, out_phase: np.ndarray, out_variant: np.ndarray, out_column: np.ndarray, out_window: np.ndarray,
 ) -> int:  # pragma: no cover - compiled
     """One matcher step over the rows ``active``; returns the best mode. See the module docstring.
 
-    e (R, Nmax): running sums, updated in place; kern (R, 4, Nmax) float64 or float32; ksq (R, Nmax) = ||k_j||^2;
+    state: a ``StepState`` as a plain tuple, of which e (R, Nmax): running sums, updated in place;
+    kern (R, 4, Nmax) float64 or float32; ksq (R, Nmax) = ||k_j||^2;
     lens (R,): row lengths (= windows); ring (Wmax, 4) and ring_sq (Wmax,): the last Wmax samples and
     their squared norms; psum_ring (Wmax, 4): prefix sums of the samples at those slots, psum (4,)
     the prefix sum before this sample; count: samples before this one; d0..d3: the (weighted)
@@ -75,18 +106,20 @@ def step_rows(
     age-weighted window sums, with per row lam (R,) the weight factor per sample of age, lam_w =
     lam^N, wsum the weight sum of a full window (N without decay) and wsums (R, 4) the
     age-weighted window sums, updated in place; offset: apply the offset penalty (mu (R, 4)
-    kernel means, mu_seg (R, 4, Nmax) per-shift age-weighted means of the kernel with age
-    weights, mu_range (R, 2, 4) their minimum and maximum over the shifts, mu_blocks (R, 2, 4, B)
-    the same per block of 16 shifts, tau (2, 4):
+    kernel means, mu_anchor (R, 4, B) the per-shift age-weighted means of the kernel at every
+    16th shift (the others follow: ``shift_means.expand_shift_means``), mu_range (R, 2, 4) their
+    minimum and maximum over the shifts, mu_blocks (R, 2, 4, B) the same per block of 16 shifts, tau (2, 4):
     tolerances and sensor offsets; with decay the window's weight W_a and age-weighted sums stand
     for W and the sums);
     normalize: divide by the window's weight;
     readable (R,) bool: the rows a mode may be read at (at least one per mode); active: the rows
     updated and read out (the readable ones, or all); the others keep their sums. slot (R,): the
-    row of e, kern, ksq, wsums, mu, mu_seg, mu_range and mu_blocks that holds a row (the row
+    row of e, kern, ksq, wsums, mu, mu_anchor, mu_range and mu_blocks that holds a row (the row
     tables; every active row has one); lens, lam, lam_w, wsum, out_col and out_score are per row.
     Writes per active row out_col/out_score, per mode out_sse/out_phase/out_variant/out_column/out_window.
     """
+    (e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, decay, lam, lam_w, wsum, wsums, offset, mu, mu_anchor,
+     mu_range, mu_blocks, tau, normalize, n_scales, readable, active, slot, out_col, out_score) = state  # StepState
     wmax = ring.shape[0]
     i = count
     p0, p1, p2, p3 = psum[0] + d0, psum[1] + d1, psum[2] + d2, psum[3] + d3
@@ -144,8 +177,8 @@ def step_rows(
         if use_offset and not per_shift:
             const = _offset_penalty(s0, s1, s2, s3, wp, mu[p, 0], mu[p, 1], mu[p, 2], mu[p, 3], tau)
         if per_shift:  # _offset_penalty per column, with the window means and tau hoisted out of the loop
-            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_seg[p], mu_range[p],
-                                         mu_blocks[p], out_col[r] + 1)
+            best, bj = _argmin_per_shift(er, n, wp, s0 / wp, s1 / wp, s2 / wp, s3 / wp, tau, mu_anchor[p], k0, k1, k2, k3,
+                                         lam[r], mu_range[p], mu_blocks[p], out_col[r] + 1)
         else:
             best, bj = _argmin(er, n)
             best -= const
@@ -229,8 +262,8 @@ def _argmin(v, n):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, inline="always")
 def _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3):  # pragma: no cover
-    """e[j] minus the offset penalty at column j with the kernel part's means m*[j] (per shift)."""
-    x0, x1, x2, x3 = a0 - m0[j], a1 - m1[j], a2 - m2[j], a3 - m3[j]
+    """e[j] minus the offset penalty at column j with the kernel part's means m* (at that shift)."""
+    x0, x1, x2, x3 = a0 - m0, a1 - m1, a2 - m2, a3 - m3
     g0 = max(abs(x0 - f0) - t0, 0.0)
     g1 = max(abs(x1 - f1) - t1, 0.0)
     g2 = max(abs(x2 - f2) - t2, 0.0)
@@ -249,25 +282,49 @@ def _penalty_bound(a, lo, hi, t, f):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks, guess):  # pragma: no cover
+def _scan_block(e, lo, hi, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, anchor, k0, k1, k2, k3, lam, best,
+                bj):  # pragma: no cover - compiled
+    """(best, bj) after scoring the shifts lo .. hi - 1 of one block (``_argmin_per_shift``), the
+    kernel part's means from the block's first (anchor) on: m_j = lam m_{j-1} + (1 - lam) k_j."""
+    c = 1.0 - lam
+    q = lo // 16
+    m0, m1, m2, m3 = anchor[0, q], anchor[1, q], anchor[2, q], anchor[3, q]
+    v = _shift_score(e, lo, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+    if v < best or (v == best and lo < bj):
+        best, bj = v, lo
+    for j in range(lo + 1, hi):
+        m0, m1, m2, m3 = lam * m0 + c * k0[j], lam * m1 + c * k1[j], lam * m2 + c * k2[j], lam * m3 + c * k3[j]
+        v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+        if v < best or (v == best and j < bj):
+            best, bj = v, j
+    return best, bj
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, anchor, k0, k1, k2, k3, lam, mu_range, mu_blocks,
+                      guess):  # pragma: no cover
     """(min, first index of the min) over j < n of the scores e[j] - penalty(j) (``_shift_score``;
-    a*: the window means, mu (4, Nmax) the kernel part's means per shift, mu_range (2, 4) their
-    range, mu_blocks (2, 4, B) per block of 16 shifts). A score is at least e[j] - wp * (the
-    largest penalty any shift of its block can have), so starting from the score at column
-    ``guess`` (the last step's best, moved on by one), only the blocks whose smallest e[j] is
-    within that bound (over all shifts, then over the block's) of the best score so far are
-    scored: the result is the exhaustive scan's (test_matcher compares it with the numpy read-out)."""
+    a*: the window means; the kernel part's means per shift: anchor (4, B) those of every 16th
+    shift, the others m_j = lam m_{j-1} + (1 - lam) k_j (``shift_means.expand_shift_means``)
+    from the kernel k* (n,); mu_range (2, 4) their range, mu_blocks (2, 4, B) per block of 16
+    shifts). A score is at least e[j] - wp * (the largest penalty any shift of its block can
+    have), so starting from the block of column ``guess`` (the last step's best, moved on by
+    one), only the blocks whose smallest e[j] is within that bound (over all shifts, then over
+    the block's) of the best score so far are scored: the result is the exhaustive scan's
+    (test_matcher compares it with the numpy read-out)."""
     t0, t1, t2, t3 = tau[0, 0], tau[0, 1], tau[0, 2], tau[0, 3]
     f0, f1, f2, f3 = tau[1, 0], tau[1, 1], tau[1, 2], tau[1, 3]
-    m0, m1, m2, m3 = mu[0], mu[1], mu[2], mu[3]
     bound = wp * (_penalty_bound(a0, mu_range[0, 0], mu_range[1, 0], t0, f0)
                   + _penalty_bound(a1, mu_range[0, 1], mu_range[1, 1], t1, f1)
                   + _penalty_bound(a2, mu_range[0, 2], mu_range[1, 2], t2, f2)
                   + _penalty_bound(a3, mu_range[0, 3], mu_range[1, 3], t3, f3))
-    bj = guess if 0 <= guess < n else 0  # a first candidate: where the last step's best shift moved to
-    best = _shift_score(e, bj, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
+    first = (guess if 0 <= guess < n else 0) // 16 * 16  # where the last step's best shift moved to
+    best, bj = _scan_block(e, first, min(first + 16, n), wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, anchor,
+                           k0, k1, k2, k3, lam, np.inf, first)
     slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
     for lo in range(0, n, 16):  # in blocks of 16 shifts (SHIFT_BLOCK): one test per block
+        if lo == first:
+            continue
         hi = min(lo + 16, n)
         low = e[lo]
         for j in range(lo + 1, hi):
@@ -281,10 +338,8 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, mu, mu_range, mu_blocks, gu
                      + _penalty_bound(a3, mu_blocks[0, 3, q], mu_blocks[1, 3, q], t3, f3))
         if low - near > best + 1e-9 * (abs(best) + abs(near)):
             continue
-        for j in range(lo, hi):
-            v = _shift_score(e, j, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
-            if v < best or (v == best and j < bj):
-                best, bj = v, j
+        best, bj = _scan_block(e, lo, hi, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, anchor, k0, k1, k2, k3,
+                               lam, best, bj)
     return best, bj
 
 
@@ -326,45 +381,42 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
     return s0, s1, s2, s3
 
 
+_stride_step = njit(cache=True, nogil=True, inline="always")(stride_step)
+
+
 def run_steps(  # pragma: no cover - compiled
-    e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, count, samples, squares, start, stop,
-    decay, lam, lam_w, wsum, wsums,
-    offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize, n_scales, readable, active, slot, out_col, out_score,
+    state, count, samples, squares, start, stop,
     out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
     track, near, mid_lo, mid_hi, ready_from,
 ):
     """Matcher steps ``start`` .. ``stop`` - 1 of ``samples`` (G, 4) (weighted; ``squares`` their
     squared norms) through step_rows (``run_steps_parallel``: step_rows_parallel, the rows of each
-    step over numba's threads), the matcher's state in place from ``count`` samples on. Per step:
+    step over numba's threads), the matcher's ``state`` (``step_rows``) in place from ``count`` samples on. Per step:
     every mode's score and phase into out_sse/out_phase (G, M), the best mode and its variant,
     column and window.
 
-    The walking calibrations' stride tracker (``WalkingCalibration._confident_stride_end`` without
-    its confidence test) runs along on the best mode and its phase: ``track`` = (valid, mode, phase,
+    The walking calibrations' stride tracker (``stride_track.stride_step``, as
+    ``WalkingCalibration._confident_stride_end`` runs it, without its confidence test) runs
+    along on the best mode and its phase: ``track`` = (valid, mode, phase,
     passed_mid, began_in_mode) as floats, ``near`` (M, M) the near copies; the steps stop after a
     heel strike that ends a whole stride, where the calibrations may act, with ``track`` as it was
     before that step. Returns the step after the last done and whether it ended such a stride."""
     for g in range(start, stop):
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
-        b = step_rows(e, kern, ksq, lens, ring, ring_sq, psum_ring, psum, i, d0, d1, d2, d3, dsq,
-                 decay, lam, lam_w, wsum, wsums, offset, mu, mu_seg, mu_range, mu_blocks, tau, normalize,
-                 n_scales, readable, active, slot, out_col, out_score, out_sse[g], out_phase[g], variant, column, window)
+        b = step_rows(state, i, d0, d1, d2, d3, dsq, out_sse[g], out_phase[g], variant, column, window)
         best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
         if track.shape[0] == 0:
             continue
         phase = out_phase[g, b]
         same = track[0] > 0.0 and (int(track[1]) == b or near[int(track[1]), b])
-        wrapped = same and phase < track[2] - 0.5
-        passed_mid = same and track[3] > 0.0
-        whole = same and track[4] > 0.0
-        midway = (mid_lo <= phase < mid_hi) or (passed_mid and not wrapped)
-        if wrapped and whole and passed_mid:  # the tracker's state stays the one before this step
+        ends, midway, began = _stride_step(same, track[2], track[3] > 0.0, track[4] > 0.0, phase, (mid_lo, mid_hi))
+        if ends:  # the tracker's state stays the one before this step
             return g + 1, True
         if i + 1 >= ready_from:
             track[0], track[1], track[2] = 1.0, b, phase
             track[3] = 1.0 if midway else 0.0
-            track[4] = 1.0 if wrapped or whole else 0.0
+            track[4] = 1.0 if began else 0.0
         else:
             track[0] = 0.0
     return stop, False

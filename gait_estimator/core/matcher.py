@@ -110,18 +110,20 @@ class IncrementalMatcher(_MatcherBase):
         resync_block: int = 64,
         backend: str = "auto",
     ) -> None:
-        super().__init__(library, channel_weights, time_scales, offset_tolerance_deg, normalize, recency_half_life)
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
         if backend == "numba" and not compiled.AVAILABLE:
             raise ValueError("backend 'numba' needs the numba package (pip install numba)")
         self.backend = "numba" if backend == "auto" and compiled.AVAILABLE else ("numpy" if backend == "auto" else backend)
+        self._shift_table = self.backend != "numba"  # the compiled read-out derives the per-shift means
+        super().__init__(library, channel_weights, time_scales, offset_tolerance_deg, normalize, recency_half_life)
         r, n = self.n_rows, self.max_length
         cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         large = self.backend == "numba" and self.n_rows >= PARALLEL_MIN_ROWS
         self.parallel = large and cpus > 1
         if large:  # stream float32 kernels: half the memory traffic
             self._kernels = self._kernels.astype(np.float32)
+        self._state = None
         self._active = self._rows  # rows the compiled step updates (the scale band's)
         self._choose_step()
         self._synced = np.zeros(r, dtype=np.int64)  # outside the band: the step count its sums are exact at
@@ -180,6 +182,7 @@ class IncrementalMatcher(_MatcherBase):
         self._ksq = np.zeros((slots, self.max_length))  # ||k_j||^2
         self._wsums = np.zeros((slots, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
         self._e = np.full((slots, self.max_length), np.inf)
+        self._state = None
 
     def _build(self, rows: np.ndarray) -> None:
         super()._build(rows)
@@ -230,6 +233,7 @@ class IncrementalMatcher(_MatcherBase):
         active = self._rows if now.all() else self._band.rows
         self._synced[was & ~now] = self._count  # rows leaving the band are exact now
         self._active = active
+        self._state = None
         if self._pooled:
             self._claim(active, now)
             room = active.size + self.n_scales  # and one mode's rows for mode_row_scores
@@ -329,13 +333,8 @@ class IncrementalMatcher(_MatcherBase):
         count = self._count
         threaded = self._compiled_step is compiled.step_rows_parallel  # the rows' results do not depend on it
         done, ended = (compiled.run_steps_parallel if threaded else compiled.run_steps)(
-            self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
-            self._psum_ring, self._psum, count, samples, squares, start, stop,
-            self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
-            self.n_scales,
-            self._band.readable, self._active, self._slots.slot, self._out_col, self._out_score,
-            out.sse, out.phases, out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
+            self._step_state(), count, samples, squares, start, stop, out.sse, out.phases,
+            out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
             track, near, mid_stride[0], mid_stride[1], self.max_window,
         )
         self._count = count + done - start
@@ -350,19 +349,24 @@ class IncrementalMatcher(_MatcherBase):
         m = self.n_modes
         sse, phases = np.empty(m), np.empty(m)
         variant, column, window = np.empty((3, m), dtype=np.int64)  # fresh arrays: results outlive the step
-        b = self._compiled_step(
-            self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq,
-            self._psum_ring, self._psum, self._count, d0, d1, d2, d3, dsq,
-            self._decay, self._lam, self._lam_w, self._wsum, self._wsums,
-            self._offset, self._mu, self._mu_seg, self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize,
-            self.n_scales, self._band.readable, self._active, self._slots.slot,
-            self._out_col, self._out_score, sse, phases, variant, column, window,
-        )
+        b = self._compiled_step(self._state or self._step_state(), self._count, d0, d1, d2, d3, dsq,
+                                sse, phases, variant, column, window)
         self._count += 1
         return StepResult(
             b, self.mode_names[b], float(phases[b]), sse, phases, self._count >= self.max_window, window,
             variant if self.n_scales > 1 else None, column,
         )
+
+    def _step_state(self) -> tuple:
+        """The compiled steps' ``compiled.StepState`` (as a plain tuple), built again after one of
+        its arrays or flags was replaced (``_state`` None)."""
+        if self._state is None:
+            self._state = tuple(compiled.StepState(
+                self._e, self._kernels, self._ksq, self.lengths, self._ring, self._ring_sq, self._psum_ring, self._psum,
+                self._decay, self._lam, self._lam_w, self._wsum, self._wsums, self._offset, self._mu, self._mu_anchor,
+                self._mu_seg_range, self._mu_seg_blocks, self._tau, self.normalize, self.n_scales, self._band.readable,
+                self._active, self._slots.slot, self._out_col, self._out_score))
+        return self._state
 
     def _step_numpy(self, d: np.ndarray, dsq: float) -> StepResult:
         i = self._count
@@ -470,7 +474,7 @@ class IncrementalMatcher(_MatcherBase):
         self._sync_rows(np.array([row]))
         p = int(self._slots.slot[row])
         if self.recency_half_life > 0:
-            return (self._wsums[p] / self._wsum[row] - self._mu_seg[p, :, column]) * self._unscale
+            return (self._wsums[p] / self._wsum[row] - self._row_shift_means(np.array([row]))[0, :, column]) * self._unscale
         w = int(self.windows[row])
         s = self.window_sums()[row]  # not from the prefix-sum ring: the longest window's start slot is overwritten
         return (s / w - self._mu[p]) * self._unscale

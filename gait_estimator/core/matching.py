@@ -62,11 +62,9 @@ from .kernels import KernelLibrary, resample_stride
 from .match_results import MatchTrace, StepResult
 from .row_slots import RowSlots
 from .scale_band import ScaleBand
+from .shift_means import SHIFT_BLOCK, expand_shift_means, weighted_shift_means
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
-SHIFT_BLOCK = 16
-"""Shifts per block of the compiled per-shift read-out's bounds (``compiled._argmin_per_shift``)."""
-
 def check_channel_weights(value: Sequence[float] | None) -> np.ndarray:
     """Validate ``channel_weights``: 4 finite numbers >= 0, not all 0 (None = all 1)."""
     if value is None:
@@ -120,6 +118,8 @@ class _MatcherBase:
             uniform weights, the paper.
     """
 
+    _shift_table = True  # keep every shift's kernel means (else derive them from every SHIFT_BLOCK-th)
+
     def __init__(
         self,
         library: KernelLibrary,
@@ -160,6 +160,7 @@ class _MatcherBase:
         self._means_half_life = self.recency_half_life  # the age weights whose kernel means mu_seg holds
         self._set_weights(self.recency_half_life)
         self._per_shift = self._decay  # the kernel part's weighted mean depends on the shift
+        self._means_lam = self._lam  # the age weight factors of the per-shift means
         self._rows = np.arange(self.n_rows)
         self._all = np.arange(self.n_modes)
         self._band = ScaleBand(self.n_modes, self.n_scales)  # the rows read out
@@ -176,17 +177,22 @@ class _MatcherBase:
 
     def _table_arrays(self) -> tuple[str, ...]:
         """The row tables: arrays indexed by slot."""
-        return "_kernels", "_mu", "_mu_seg", "_mu_seg_range", "_mu_seg_blocks"
+        return "_kernels", "_mu", "_mu_seg", "_mu_anchor", "_mu_seg_range", "_mu_seg_blocks"
 
     def _allocate(self, slots: int, dtype: type = np.float64) -> None:
         """Empty row tables with room for ``slots`` rows (``dtype``: the kernels')."""
         self._kernels = np.zeros((slots, N_CHANNELS, self.max_length), dtype=dtype)  # channel-major rows
         self._mu = np.zeros((slots, N_CHANNELS))
-        # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched on at any sample)
-        self._mu_seg = np.zeros((slots, N_CHANNELS, self.max_length if self._per_shift else 1))
+        # per-shift (weighted) kernel means of the window's part (the offset penalty may be switched
+        # on at any sample): those of every SHIFT_BLOCK-th shift, and all of them unless the step
+        # derives them (``_shift_table``)
+        per_shift = self.max_length if self._per_shift else 1
+        self._mu_seg = np.zeros((slots, N_CHANNELS, per_shift if self._shift_table or not self._per_shift else 0))
+        blocks = -(-per_shift // SHIFT_BLOCK)
+        self._mu_anchor = np.zeros((slots, N_CHANNELS, blocks if self._per_shift else 0))
         self._mu_seg_range = np.zeros((slots, 2, N_CHANNELS))  # per row: min and max of mu_seg over shifts
-        blocks = -(-self._mu_seg.shape[2] // SHIFT_BLOCK)
         self._mu_seg_blocks = np.zeros((slots, 2, N_CHANNELS, blocks))  # the same per block of shifts
+        self._state = None  # the compiled step's state refers to the arrays replaced
 
     def _kernel_samples(self, mode: int) -> np.ndarray:
         return self._samples.get(mode, self.library.modes[mode].samples)
@@ -215,7 +221,7 @@ class _MatcherBase:
             self._kernels[p] = 0.0
             self._kernels[p, :, :n] = k.transpose(0, 2, 1)
             self._mu[p] = k.mean(axis=1)
-            if self._mu_seg.shape[2] > 1:
+            if self._per_shift:
                 self._set_shift_means(p, self._shift_means(k, group, weights))
 
     def _set_rows(self, mode: int, samples: np.ndarray) -> None:
@@ -249,6 +255,7 @@ class _MatcherBase:
     def _set_weights(self, half_life: float) -> None:
         self.recency_half_life = half_life
         self._lam, self._lam_w, self._wsum = self._weights(half_life)
+        self._state = None
 
     def set_recency_half_life(self, half_life: float) -> None:
         """Change ``recency_half_life`` (strides; 0 = uniform weights) at any sample, keeping the
@@ -264,6 +271,7 @@ class _MatcherBase:
         if h > 0 and h != self._means_half_life:  # mu_seg: the means of the weights in use
             self._means_half_life = h
             weights = self._weights(h)
+            self._means_lam = weights[0]
             for group in self._length_groups(self._slots.held()):
                 p, n = self._slots.slot[group], int(self.lengths[group[0]])
                 self._set_shift_means(p, self._shift_means(self._kernels[p, :, :n].transpose(0, 2, 1).astype(np.float64),
@@ -292,7 +300,9 @@ class _MatcherBase:
         """Slots ``p``' per-shift kernel means (g, 4, n) and their range over all shifts and over
         each block of SHIFT_BLOCK shifts."""
         n = means.shape[2]
-        self._mu_seg[p, :, :n] = means
+        if self._shift_table:
+            self._mu_seg[p, :, :n] = means
+        self._mu_anchor[p, :, : -(-n // SHIFT_BLOCK)] = means[:, :, ::SHIFT_BLOCK]
         self._mu_seg_range[p] = np.stack([means.min(axis=2), means.max(axis=2)], axis=1)
         starts = np.arange(0, n, SHIFT_BLOCK)
         self._mu_seg_blocks[p, :, :, : starts.size] = np.stack(
@@ -304,16 +314,17 @@ class _MatcherBase:
         without recency weighting); ``k`` (g, n, 4); ``weights``: ``_weights`` of the means'
         half-life."""
         r = int(rows[0])
-        n, w = k.shape[1], int(self.windows[r])
         lam, _, wsum = weights
-        if lam[r] == 1.0:  # mean of k over columns j-W+1 .. j (circular), exactly
-            c = np.cumsum(np.concatenate([k, k], axis=1), axis=1)
-            j = np.arange(n) + n
-            return ((c[:, j] - c[:, j - w]) / w).transpose(0, 2, 1)
-        weights = np.zeros(n)
-        weights[:w] = lam[r] ** np.arange(w)
-        conv = np.fft.irfft(np.fft.rfft(k.transpose(0, 2, 1), n=n) * np.fft.rfft(weights), n=n)  # sum_t w_t k_{j-t}
-        return conv / wsum[r]
+        return weighted_shift_means(k.transpose(0, 2, 1), int(self.windows[r]), float(lam[r]), float(wsum[r]))
+
+    def _row_shift_means(self, rows: np.ndarray | slice) -> np.ndarray:
+        """The per-shift kernel means of ``rows`` (which have slots), (r, 4, Nmax)."""
+        if self._shift_table:
+            return self._mu_seg[self._slots.at(rows)]
+        rows = self._rows[rows]
+        p = self._slots.at(rows)
+        k = self._kernels[p].astype(np.float64)
+        return expand_shift_means(self._mu_anchor[p], k, self._means_lam[rows])
 
     @property
     def sensor_offset_deg(self) -> np.ndarray:
@@ -330,6 +341,7 @@ class _MatcherBase:
             raise ValueError(f"sensor offset must be finite, got {o.tolist()}")
         self._tau[1] = o * self._scale
         self._offset = self._offset or bool(np.any(o != 0.0))
+        self._state = None
 
     @property
     def scale_band(self) -> np.ndarray:
@@ -459,7 +471,7 @@ class _MatcherBase:
             w = self._wsum[rows]
             per_shift = self.recency_half_life > 0  # mu_seg: the active weights' means
             if per_shift:
-                x = sums[:, :, None] / w[:, None, None] - self._mu_seg[self._slots.at(rows)]  # (r, 4, Nmax)
+                x = sums[:, :, None] / w[:, None, None] - self._row_shift_means(rows)  # (r, 4, Nmax)
                 w_ = w[:, None]
                 tol, off = self._tau[0, :, None], self._tau[1, :, None]
             else:

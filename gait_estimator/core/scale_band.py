@@ -22,6 +22,8 @@ class ScaleBand:
         self.allowed = np.ones(n_scales, dtype=np.bool_)
         self.search = 0
         self.searched = np.zeros(n_modes, dtype=np.bool_)
+        self._inside = np.zeros(0, dtype=np.int64)  # the searched modes' indices, and the others'
+        self._outside = np.arange(n_modes)
         self.readable = np.ones(n_modes * n_scales, dtype=np.bool_)  # per row; updated in place
         self.rows = np.arange(n_modes * n_scales)
 
@@ -35,7 +37,7 @@ class ScaleBand:
             raise ValueError(f"search must be >= 0 modes, got {search}")
         self.allowed[:] = a
         self.search = 0 if a.all() else min(int(search), self.n_modes)
-        self.searched[:] = False
+        self._set_searched(np.zeros(self.n_modes, dtype=np.bool_))
         if self.search:
             self.choose(np.where(self.readable, row_score, np.inf).reshape(self.n_scales, self.n_modes).min(axis=0))
         self._update_rows()
@@ -52,10 +54,14 @@ class ScaleBand:
         """Choose the searched modes from the last step's per-mode scores (each mode's best over
         the rows it is read at): the best ones, a mode replacing a searched one only if it fits
         better by SEARCH_MARGIN (near ties do not swap rows in and out); True if they changed."""
-        chosen = self.searched.copy()
-        if chosen.sum() == self.search:  # full: the loop below would stop at the best other mode
-            if self.search == self.n_modes or not score[~chosen].min() < (1.0 - SEARCH_MARGIN) * score[chosen].max():
+        if self._inside.size == self.search:  # full: the loop below would stop at the best other mode
+            if self._outside.size == 0:
                 return False
+            others = score[self._outside]  # a short list is cheaper in Python floats (cold numpy calls cost)
+            best_other = min(others.tolist()) if others.size <= 64 else float(np.minimum.reduce(others))
+            if not best_other < (1.0 - SEARCH_MARGIN) * max(score[self._inside].tolist()):
+                return False
+        chosen = self.searched.copy()
         for m in np.argsort(score, kind="stable"):  # ends at the first mode that does not enter
             if chosen[m]:
                 continue
@@ -67,8 +73,12 @@ class ScaleBand:
                 break
             chosen[worst], chosen[m] = False, True
         changed = bool(np.any(chosen != self.searched))
-        self.searched[:] = chosen
+        self._set_searched(chosen)
         return changed
+
+    def _set_searched(self, chosen: np.ndarray) -> None:
+        self.searched[:] = chosen
+        self._inside, self._outside = np.flatnonzero(chosen), np.flatnonzero(~chosen)
 
     def _update_rows(self) -> None:
         self.readable[:] = (self.allowed[:, None] | self.searched[None, :]).ravel()
