@@ -59,19 +59,36 @@ def test_the_paper_preset_reports_library_modes_only(able_bodied, multispeed_csv
     assert not EstimatorConfig.preset("paper").states
 
 
-def test_running_like_strides_are_unknown(able_bodied) -> None:
-    """Strides 0.7 as long as the Fast kernel's with 1.6x its knee flexion match no mode."""
-    fast = able_bodied.mode("Fast").samples
+def fast_strides(library, duration: float, knee_gain: float, **states: float):
+    """12 strides of the Fast kernel ``duration`` times as long with ``knee_gain`` x its knee
+    flexion (shank - thigh about its mean), through the default preset with ``states``."""
+    fast = library.mode("Fast").samples
     knee = (fast[:, 2:] - fast[:, :2]) - (fast[:, 2:] - fast[:, :2]).mean(axis=0)
     run = fast.copy()
-    run[:, 2:] += 0.6 * knee
-    n = round(len(run) * 0.7)
+    run[:, 2:] += (knee_gain - 1.0) * knee
+    n = round(len(run) * duration)
     src = np.linspace(0, 1, len(run), endpoint=False)
     stride = np.stack([np.interp(np.linspace(0, 1, n, endpoint=False), src, run[:, c], period=1.0) for c in range(4)], 1)
     x = np.tile(stride, (12, 1))
-    t = np.arange(len(x)) / able_bodied.sample_rate_hz
-    tr = run_estimator(Estimator(able_bodied), t, x)
+    t = np.arange(len(x)) / library.sample_rate_hz
+    config = EstimatorConfig()
+    est = Estimator(library, config, params=PipelineParams.from_config(config, states=states) if states else None)
+    return run_estimator(est, t, x)
+
+
+def test_running_like_strides_are_unknown(able_bodied) -> None:
+    """Strides 0.7 as long as the Fast kernel's with 1.6x its knee flexion match no mode."""
+    tr = fast_strides(able_bodied, 0.7, 1.6)
     assert np.mean(tr.state[tr.ready] == UNKNOWN_STATE) >= 0.9
+
+
+def test_short_strides_with_a_walking_knee_are_walking(able_bodied) -> None:
+    """Strides 0.74 as long as the Fast kernel's (over ``max_cadence_ratio``) with its knee
+    flexion: walking (a last stride before a stop); unknown on cadence alone."""
+    tr = fast_strides(able_bodied, 0.74, 1.0)
+    assert np.mean(tr.mode[tr.ready] == "Fast") >= 0.9
+    alone = fast_strides(able_bodied, 0.74, 1.0, knee_speed_ratio=0.0)
+    assert np.mean(alone.state[alone.ready] == UNKNOWN_STATE) >= 0.9
 
 
 def lg2_states(library, swge: Path, **states: float) -> tuple[np.ndarray, np.ndarray]:
