@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 from imu_synth import gait_angles
 from synthetic import generate, new_wearer, with_stops
 
@@ -13,7 +14,17 @@ from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.cli import main
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
 from gait_estimator.core.pipeline import PipelineParams
-from gait_estimator.core.states import FIT_LIMIT_KEY, NOT_READY, STANDING, UNKNOWN_STATE, WALKING, StateParams
+from gait_estimator.core.states import (
+    FIT_LIMIT_KEY,
+    MEMORY,
+    NOT_READY,
+    STANDING,
+    UNKNOWN_STATE,
+    WALKING,
+    StateParams,
+    knee_speed_dps,
+    state_step,
+)
 from gait_estimator.core.units import UnitsCheck, first_problem
 from gait_estimator.io.library_io import load_library, save_library
 from gait_estimator.io.readers import read_recording
@@ -172,3 +183,21 @@ def test_the_controller_page_shows_the_tested_example() -> None:
     doc = (REPO / "docs" / "controller.md").read_text(encoding="utf-8")
     (code,) = re.findall(r"```python\n(.*?)```", doc, re.S)
     assert code.strip() in (REPO / "examples" / "impedance_controller.py").read_text(encoding="utf-8")
+
+
+def test_a_kernels_knee_speed_is_what_state_step_measures_of_it(able_bodied) -> None:
+    """``knee_speed_dps`` (the filters' periodic steady state) equals ``state_step``'s knee speed
+    average over a stride of that kernel streamed at its own rate, for every mode."""
+    p = StateParams()
+    span = p.slow_tau_s - p.fast_tau_s
+    for mode in able_bodied.modes:
+        x = np.tile(mode.samples, (30, 1))
+        t = np.arange(len(x)) / mode.sample_rate_hz
+        mem = np.zeros(MEMORY)
+        seen = []
+        for i in range(len(x)):
+            state_step(mem, t[i], *x[i], np.ones(4), True, 0.0, 1.0, 1.0, 0.0, 1.0, 2.0, 1.0, 4.0, p.fast_tau_s,
+                       p.slow_tau_s, p.knee_tau_s, p.stand_after_s, p.unknown_after_s)
+            seen.append(0.5 * (mem[18] + mem[19]) / span)
+        expected = knee_speed_dps(mode.samples, mode.sample_rate_hz, p.fast_tau_s, p.slow_tau_s)
+        assert np.mean(seen[-mode.length:]) == pytest.approx(expected, rel=1e-9), mode.name
