@@ -74,7 +74,8 @@ class StateParams:
             turns and first steps), when the knees also flex faster than ``knee_speed_ratio``.
         knee_speed_ratio: Knee flexion speed (``knee_speed_dps``, each matched knee, averaged over
             ``knee_tau_s``) over the reported mode's kernel's above which a fast stride is running-
-            like (a short last stride before a stop flexes the knee as a walking one does).
+            like (a short last stride before a stop flexes the knee as a walking one does). With no
+            knee matched (thigh and shank of one side), cadence alone decides.
         knee_tau_s: Time constant (s) of the knee speed average (about a stride).
         unknown_after_s: Seconds beyond the fit limit before ``unknown``, and within it before
             walking again.
