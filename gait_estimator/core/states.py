@@ -194,9 +194,10 @@ def state_step(mem: np.ndarray, time_s: float, x0: float, x1: float, x2: float, 
         mem[17] = time_s
         return 2
     # unknown after unknown_after s beyond a limit, walking again after as long within them
-    right, left = active[0] * active[2] > 0.0, active[1] * active[3] > 0.0
-    knee = min(mem[18] if right else math.inf, mem[19] if left else math.inf)
-    if (fit > limit and not time_s - mem[17] < start) or (cadence > max_cadence and knee > knee_limit) or slow:
+    # fast strides: the slower matched knee's speed against the limit
+    if ((fit > limit and not time_s - mem[17] < start) or slow
+            or (cadence > max_cadence and min(mem[18] if active[0] * active[2] > 0.0 else math.inf,
+                                              mem[19] if active[1] * active[3] > 0.0 else math.inf) > knee_limit)):
         mem[13] = NAN
         if math.isnan(mem[11]):
             mem[11] = time_s
