@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 from imu_synth import gait_angles
 from synthetic import generate, new_wearer, with_stops
 
@@ -13,7 +14,17 @@ from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.cli import main
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, run_estimator
 from gait_estimator.core.pipeline import PipelineParams
-from gait_estimator.core.states import FIT_LIMIT_KEY, NOT_READY, STANDING, UNKNOWN_STATE, WALKING, StateParams
+from gait_estimator.core.states import (
+    FIT_LIMIT_KEY,
+    MEMORY,
+    NOT_READY,
+    STANDING,
+    UNKNOWN_STATE,
+    WALKING,
+    StateParams,
+    knee_speed_dps,
+    state_step,
+)
 from gait_estimator.core.units import UnitsCheck, first_problem
 from gait_estimator.io.library_io import load_library, save_library
 from gait_estimator.io.readers import read_recording
@@ -59,19 +70,36 @@ def test_the_paper_preset_reports_library_modes_only(able_bodied, multispeed_csv
     assert not EstimatorConfig.preset("paper").states
 
 
-def test_running_like_strides_are_unknown(able_bodied) -> None:
-    """Strides 0.7 as long as the Fast kernel's with 1.6x its knee flexion match no mode."""
-    fast = able_bodied.mode("Fast").samples
+def fast_strides(library, duration: float, knee_gain: float, **states: float):
+    """12 strides of the Fast kernel ``duration`` times as long with ``knee_gain`` x its knee
+    flexion (shank - thigh about its mean), through the default preset with ``states``."""
+    fast = library.mode("Fast").samples
     knee = (fast[:, 2:] - fast[:, :2]) - (fast[:, 2:] - fast[:, :2]).mean(axis=0)
     run = fast.copy()
-    run[:, 2:] += 0.6 * knee
-    n = round(len(run) * 0.7)
+    run[:, 2:] += (knee_gain - 1.0) * knee
+    n = round(len(run) * duration)
     src = np.linspace(0, 1, len(run), endpoint=False)
     stride = np.stack([np.interp(np.linspace(0, 1, n, endpoint=False), src, run[:, c], period=1.0) for c in range(4)], 1)
     x = np.tile(stride, (12, 1))
-    t = np.arange(len(x)) / able_bodied.sample_rate_hz
-    tr = run_estimator(Estimator(able_bodied), t, x)
+    t = np.arange(len(x)) / library.sample_rate_hz
+    config = EstimatorConfig()
+    est = Estimator(library, config, params=PipelineParams.from_config(config, states=states) if states else None)
+    return run_estimator(est, t, x)
+
+
+def test_running_like_strides_are_unknown(able_bodied) -> None:
+    """Strides 0.7 as long as the Fast kernel's with 1.6x its knee flexion match no mode."""
+    tr = fast_strides(able_bodied, 0.7, 1.6)
     assert np.mean(tr.state[tr.ready] == UNKNOWN_STATE) >= 0.9
+
+
+def test_short_strides_with_a_walking_knee_are_walking(able_bodied) -> None:
+    """Strides 0.74 as long as the Fast kernel's (over ``max_cadence_ratio``) with its knee
+    flexion: walking (a last stride before a stop); unknown on cadence alone."""
+    tr = fast_strides(able_bodied, 0.74, 1.0)
+    assert np.mean(tr.mode[tr.ready] == "Fast") >= 0.9
+    alone = fast_strides(able_bodied, 0.74, 1.0, knee_speed_ratio=0.0)
+    assert np.mean(alone.state[alone.ready] == UNKNOWN_STATE) >= 0.9
 
 
 def lg2_states(library, swge: Path, **states: float) -> tuple[np.ndarray, np.ndarray]:
@@ -155,3 +183,21 @@ def test_the_controller_page_shows_the_tested_example() -> None:
     doc = (REPO / "docs" / "controller.md").read_text(encoding="utf-8")
     (code,) = re.findall(r"```python\n(.*?)```", doc, re.S)
     assert code.strip() in (REPO / "examples" / "impedance_controller.py").read_text(encoding="utf-8")
+
+
+def test_a_kernels_knee_speed_is_what_state_step_measures_of_it(able_bodied) -> None:
+    """``knee_speed_dps`` (the filters' periodic steady state) equals ``state_step``'s knee speed
+    average over a stride of that kernel streamed at its own rate, for every mode."""
+    p = StateParams()
+    span = p.slow_tau_s - p.fast_tau_s
+    for mode in able_bodied.modes:
+        x = np.tile(mode.samples, (30, 1))
+        t = np.arange(len(x)) / mode.sample_rate_hz
+        mem = np.zeros(MEMORY)
+        seen = []
+        for i in range(len(x)):
+            state_step(mem, t[i], *x[i], np.ones(4), True, 0.0, 1.0, 1.0, 0.0, 1.0, 2.0, 1.0, 4.0, p.fast_tau_s,
+                       p.slow_tau_s, p.knee_tau_s, p.stand_after_s, p.unknown_after_s)
+            seen.append(0.5 * (mem[18] + mem[19]) / span)
+        expected = knee_speed_dps(mode.samples, mode.sample_rate_hz, p.fast_tau_s, p.slow_tau_s)
+        assert np.mean(seen[-mode.length:]) == pytest.approx(expected, rel=1e-9), mode.name
