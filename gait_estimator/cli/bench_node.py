@@ -21,7 +21,7 @@ from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, imu
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import EXECUTORS, require_ros
-from .args import choice_list, domain_id, positive_float, positive_int, prepare_output
+from .args import checked_number, choice_list, domain_id, positive_float, positive_int, positive_list, prepare_output
 from .bench_profile import PROFILE_LABELS, clock_offset_ns, profile_stages
 from .node_commands import percentiles, start_node, wait_node
 
@@ -34,23 +34,12 @@ KEEP_UP_MS = 10.0
 def _priority(text: str) -> int:
     from ..ros.priority import MAX_PRIORITY
 
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer 0..{MAX_PRIORITY}, got {text!r}") from None
-    if not 0 <= v <= MAX_PRIORITY:
-        raise argparse.ArgumentTypeError(f"SCHED_FIFO priorities are 1..{MAX_PRIORITY} (0 = as started), got {text}")
-    return v
+    return checked_number(text, int, lambda v: 0 <= v <= MAX_PRIORITY, f"an integer 0..{MAX_PRIORITY}",
+                          f"SCHED_FIFO priorities are 1..{MAX_PRIORITY} (0 = as started), got {{text}}")
 
 
 def _rates(text: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated rates in Hz, got {text!r}") from None
-    if not values or any(not (math.isfinite(v) and v > 0) for v in values):
-        raise argparse.ArgumentTypeError(f"expected positive rates, got {text!r}")
-    return values
+    return positive_list(text, float, "rates in Hz", "rates")
 
 INPUTS = ("joint_state", "imu", "imu-raw")
 """bench-node --input: JointState angles, or four Imu topics with orientations / gyro + accelerometer only."""
