@@ -314,7 +314,9 @@ def bench_node(
     ``latency``/``throughput`` are the first variant's (by default the node's default executor,
     ``estimate`` only).
     """
+    from ..analysis.bench import machine_info
     from ..io.library_io import load_library, save_library
+    from ..ros.node_client import use_local_ros
 
     lib = load_library(kernels)
     kernels = str(lib.path or kernels)
@@ -322,49 +324,37 @@ def bench_node(
         if modes is not None:
             lib = lib.replicated(modes)
             kernels = str(save_library(lib, Path(tmp) / f"{lib.name}_{modes}.npz"))
-        return _bench_node(lib, kernels, latency_samples, rate_hz, rates, rate_seconds, domain_id, node_cmd, log,
-                           executors, outputs, profile, preset, thread_priority, input_kind)
-
-
-def _bench_node(
-    lib: Any, kernels: str, latency_samples: int, rate_hz: float, rates: Any, rate_seconds: float, domain_id: int,
-    node_cmd: str | None, log: Any, executors: Any, outputs: Any, profile: bool, preset: str, thread_priority: int = 0,
-    input_kind: str = "joint_state",
-) -> dict[str, Any]:
-    from ..analysis.bench import machine_info
-    from ..ros.node_client import use_local_ros
-
-    use_local_ros(domain_id)
-    report: dict[str, Any] = {
-        "machine": machine_info(),
-        "load_average_before": list(os.getloadavg()),
-        "library": lib.name,
-        "modes": len(lib),
-        "domain_id": domain_id,
-        "preset": preset,
-        "thread_priority": thread_priority,
-        "variants": [],
-    }
-    if input_kind != "joint_state":
-        report["input"] = input_kind
-    for executor in executors:
-        for out in outputs:
-            v = _bench_variant(
-                lib, kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
-                node_cmd, profile, throughput=out == "estimate", log=log, preset=preset, thread_priority=thread_priority,
-                input_kind=input_kind,
-            )
-            report["variants"].append(v)
-    first = report["variants"][0]
-    report["node_cmd"] = first["node_cmd"]
-    report["executor"], report["outputs"] = first["executor"], first["outputs"]
-    report["latency"] = first["latency"]
-    if "throughput" in first:
-        report["throughput"] = first["throughput"]
-    codes = [v["node_exit_code"] for v in report["variants"]]
-    report["node_exit_code"] = next((c for c in codes if c != 0), 0)
-    report["load_average_after"] = list(os.getloadavg())
-    return report
+        use_local_ros(domain_id)
+        report: dict[str, Any] = {
+            "machine": machine_info(),
+            "load_average_before": list(os.getloadavg()),
+            "library": lib.name,
+            "modes": len(lib),
+            "domain_id": domain_id,
+            "preset": preset,
+            "thread_priority": thread_priority,
+            "variants": [],
+        }
+        if input_kind != "joint_state":
+            report["input"] = input_kind
+        for executor in executors:
+            for out in outputs:
+                v = _bench_variant(
+                    lib, kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
+                    node_cmd, profile, throughput=out == "estimate", log=log, preset=preset, thread_priority=thread_priority,
+                    input_kind=input_kind,
+                )
+                report["variants"].append(v)
+        first = report["variants"][0]
+        report["node_cmd"] = first["node_cmd"]
+        report["executor"], report["outputs"] = first["executor"], first["outputs"]
+        report["latency"] = first["latency"]
+        if "throughput" in first:
+            report["throughput"] = first["throughput"]
+        codes = [v["node_exit_code"] for v in report["variants"]]
+        report["node_exit_code"] = next((c for c in codes if c != 0), 0)
+        report["load_average_after"] = list(os.getloadavg())
+        return report
 
 
 def cmd_bench_node(args: argparse.Namespace) -> int:
