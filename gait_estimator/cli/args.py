@@ -147,6 +147,16 @@ def imu_reader_options(args: argparse.Namespace) -> dict[str, Any]:
     return {k: getattr(args, k) for k in IMU_READING_OPTIONS if getattr(args, k, None) is not None}
 
 
+def read_recording_args(args: argparse.Namespace, path: str | Path, **options: Any) -> Any:
+    """The recording at ``path`` read with ``options`` and the IMU reading options given on the
+    command line, after ``--save-imu-calibration`` wrote its calibration."""
+    from ..io.readers import read_recording
+
+    rec = read_recording(path, **{**imu_reader_options(args), **options})
+    save_imu_calibration(args, rec, path)
+    return rec
+
+
 def save_imu_calibration(args: argparse.Namespace, rec: Any, source: str | Path) -> None:
     """``--save-imu-calibration``: write the calibration ``rec`` (read from ``source``) was made
     with, as the node saves its own (``io/imu_stream.save_calibration``); a recording that is not
