@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -107,31 +107,31 @@ def _topic_list(text: str) -> list[str]:
     return [t.strip() for t in text.split(",")]
 
 
-def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store") -> None:
+def add_imu_reading_options(p: Any) -> None:
     """The options of a recording that is a bag of four sensor_msgs/Imu topics (docs/imu.md), on
-    every command that reads recordings; ``imu_reader_options`` collects them."""
+    every command that reads recordings; ``reader_options`` collects them."""
     p.add_argument(
-        "--imu-topics", dest="imu_topics", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        "--imu-topics", dest="imu_topics", type=_topic_list, metavar="RT,LT,RS,LS",
         help="bag of sensor_msgs/Imu topics: those of right_thigh,left_thigh,right_shank,left_shank (default "
         "/imu/<channel>, or the Imu topics named after the channels)",
     )
     p.add_argument(
-        "--imu-calibration", dest="imu_calibration", action=action, metavar="YAML",
+        "--imu-calibration", dest="imu_calibration", metavar="YAML",
         help="bag of sensor_msgs/Imu topics: the IMU mounting to use, a file the node or --save-imu-calibration "
         "wrote; checked on the walking, a misfit is an error (default: learnt from the bag; docs/imu.md)",
     )
     p.add_argument(
-        "--imu-lateral-axes", dest="imu_lateral_axes", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        "--imu-lateral-axes", dest="imu_lateral_axes", type=_topic_list, metavar="RT,LT,RS,LS",
         help="bag of sensor_msgs/Imu topics: per segment, the sensor axis pointing to the wearer's right (+x, -y, "
         "...; empty = learn), as the node's imu_lateral_axes; a list starting with - needs '=': --imu-lateral-axes=-z,...",
     )
     p.add_argument(
-        "--imu-proximal-axes", dest="imu_proximal_axes", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        "--imu-proximal-axes", dest="imu_proximal_axes", type=_topic_list, metavar="RT,LT,RS,LS",
         help="bag of sensor_msgs/Imu topics: per segment, the sensor axis along it towards the hip or knee "
         "(empty = learn), as the node's imu_proximal_axes (--imu-proximal-axes=-x,... when it starts with -)",
     )
     p.add_argument(
-        "--imu-tolerance-s", dest="imu_tolerance_s", type=seconds, action=action, metavar="SECONDS",
+        "--imu-tolerance-s", dest="imu_tolerance_s", type=seconds, metavar="SECONDS",
         help="bag of sensor_msgs/Imu topics: largest stamp spread of the four messages of one sample (default: "
         "0.9 of the message period, for sensors not sampled together)",
     )
@@ -142,9 +142,10 @@ def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store
     )
 
 
-def imu_reader_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The IMU reading options given on the command line, as ``read_recording`` keywords."""
-    return {k: getattr(args, k) for k in IMU_READING_OPTIONS if getattr(args, k, None) is not None}
+def reader_options(args: argparse.Namespace, names: Sequence[str] = IMU_READING_OPTIONS) -> dict[str, Any]:
+    """The reading options ``names`` (default: the IMU ones) given on the command line, as
+    ``read_recording`` keywords."""
+    return {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
 
 
 def read_recording_args(args: argparse.Namespace, path: str | Path, **options: Any) -> Any:
@@ -152,7 +153,7 @@ def read_recording_args(args: argparse.Namespace, path: str | Path, **options: A
     command line, after ``--save-imu-calibration`` wrote its calibration."""
     from ..io.readers import read_recording
 
-    rec = read_recording(path, **{**imu_reader_options(args), **options})
+    rec = read_recording(path, **{**reader_options(args), **options})
     save_imu_calibration(args, rec, path)
     return rec
 

@@ -38,8 +38,8 @@ from ..io.stream import UNITS
 from .args import (
     IMU_READING_OPTIONS,
     add_imu_reading_options,
-    imu_reader_options,
     positive_float,
+    reader_options,
     save_imu_calibration,
     seconds,
 )
@@ -55,49 +55,42 @@ def _joint_names(text: str) -> tuple[str, ...]:
 
 
 
-class _ReaderOption(argparse.Action):
-    """Stores the value and also into ``namespace.reader_options[dest]`` (read_recording kwargs)."""
-
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: Any = None) -> None:
-        setattr(namespace, self.dest, values)
-        options = dict(getattr(namespace, "reader_options", None) or {})
-        options[self.dest] = values
-        namespace.reader_options = options
+BAG_READING_OPTIONS = ("topic", "input_units", "joint_names", "max_gap_s")
+"""``read_recording`` keywords of ``process``'s bag options (``reader_options`` collects them)."""
 
 
-def _bag_reading_options(p: Any, action: type[argparse.Action] | str = "store", max_gap: Any = None) -> None:
+def _bag_reading_options(p: Any, max_gap: Any = None) -> None:
     p.add_argument(
-        "--joint-names", dest="joint_names", type=_joint_names, action=action, metavar="A,B,C,D",
+        "--joint-names", dest="joint_names", type=_joint_names, metavar="A,B,C,D",
         help="JointState names of right_thigh,left_thigh,right_shank,left_shank (default: those names)",
     )
     (max_gap or p).add_argument(
-        "--max-gap", dest="max_gap_s", type=seconds, action=action, metavar="SECONDS",
+        "--max-gap", dest="max_gap_s", type=seconds, metavar="SECONDS",
         help=f"a gap between sample times longer than this restarts the window, as in the node (default "
         f"{DEFAULT_MAX_GAP_S:g}; 0 disables; any recording)",
     )
-    add_imu_reading_options(p, action)
+    add_imu_reading_options(p)
 
 
 def add_process_options(proc: argparse.ArgumentParser) -> None:
-    """Bag options of ``process``; the reading ones end up in ``args.reader_options``."""
+    """Bag options of ``process``; ``reader_options(args, BAG_READING_OPTIONS)`` collects the reading ones."""
     g = proc.add_argument_group("rosbag2 input (RECORDING is a bag directory or .mcap/.db3 file)")
     g.add_argument(
-        "--topic", dest="topic", action=_ReaderOption, metavar="TOPIC",
+        "--topic", dest="topic", metavar="TOPIC",
         help=f"input topic, sensor_msgs/JointState or std_msgs/Float64MultiArray (default {DEFAULT_TOPIC}, "
         "or the only topic of such a type)",
     )
     g.add_argument(
-        "--input-units", dest="input_units", choices=UNITS, action=_ReaderOption,
+        "--input-units", dest="input_units", choices=UNITS,
         help="units of the angles in the messages (default rad)",
     )
-    _bag_reading_options(g, _ReaderOption, max_gap=proc)
+    _bag_reading_options(g, max_gap=proc)
     o = proc.add_argument_group("rosbag2 output")
     o.add_argument(
         "--out-bag", metavar="DIR",
         help="also write the outputs (mode, phase, sse, estimate, as the live node publishes them) to a new bag",
     )
     o.add_argument("--storage", choices=STORAGES, default="mcap", help="storage of --out-bag (default %(default)s)")
-    proc.set_defaults(reader_options=None)
 
 
 def warn_units(rec: Recording, source: str | Path, units: str) -> None:
@@ -120,9 +113,8 @@ def finish_process(args: argparse.Namespace, rec: Recording, pred: Predictions) 
     if isinstance(rec, BagRecording):
         lines += [f"note: {n}" for n in rec.notes]
     else:
-        flags = {"topic": "--topic", "input_units": "--input-units", "joint_names": "--joint-names",
-                 **{k: "--" + k.replace("_", "-") for k in IMU_READING_OPTIONS}}
-        given = [flags[k] for k in getattr(args, "reader_options", None) or {} if k in flags]
+        bag_only = ("topic", "input_units", "joint_names", *IMU_READING_OPTIONS)
+        given = ["--" + k.replace("_", "-") for k in reader_options(args, bag_only)]
         if given:
             lines.append(f"note: {', '.join(given)} apply to bags only; ignored for {args.recording}")
     if getattr(args, "out_bag", None):
@@ -166,7 +158,7 @@ def _read_source(args: argparse.Namespace) -> Recording:
             p, topic=args.topic, joint_names=args.joint_names, input_units=args.units,
             max_gap_s=DEFAULT_MAX_GAP_S if args.max_gap_s is None else args.max_gap_s,
         )
-    return read_recording(p, rate_hz=args.sample_rate, **imu_reader_options(args))
+    return read_recording(p, rate_hz=args.sample_rate, **reader_options(args))
 
 
 def _print_reading_notes(rec: Recording) -> None:
