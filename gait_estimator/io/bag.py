@@ -255,7 +255,8 @@ def choose_topic(bag: Path, topics: dict[str, tuple[str, int]], topic: str | Non
 # Reading samples
 
 
-def _joint_names(joint_names: Sequence[str] | str | None) -> tuple[str, ...]:
+def parse_joint_names(joint_names: Sequence[str] | str | None) -> tuple[str, ...]:
+    """JointState names of the CHANNELS (default: theirs; or comma-separated); four distinct ones."""
     if joint_names is None:
         return CHANNELS
     if isinstance(joint_names, str):
@@ -281,7 +282,7 @@ def read_bag(path: str | Path, options: ReadOptions | None = None, /, **values: 
     p = Path(path)
     o = ReadOptions.of(options, values)
     topic, input_units, max_gap_s = o.topic, o.input_units, o.max_gap_s
-    names = _joint_names(o.joint_names)
+    names = parse_joint_names(o.joint_names)
     if input_units not in UNITS:
         raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {input_units!r}")
     max_gap = float(max_gap_s)
