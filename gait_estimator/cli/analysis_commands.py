@@ -16,6 +16,7 @@ from ..core.errors import GaitEstimatorError
 from ..core.strides import MAX_STRIDE_S, MIN_PROMINENCE_DEG, MIN_STRIDE_S, DetectionOptions, stride_bounds
 from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.recording import Recording, write_project_csv
+from ..io.resources import DEFAULT_LIBRARY
 from .args import add_imu_reading_options, positive_float, read_recording_args
 
 
@@ -275,7 +276,7 @@ def add_commands(sub: Any) -> None:
 
     ls = sub.add_parser("label-strides", help="label steady strides by the nearest kernel stride duration (cadence)")
     ls.add_argument("recording", help="recording: project CSV, reference Dimension CSV or rosbag2 bag")
-    ls.add_argument("--kernels", "-k", default="able_bodied", metavar="LIB", help="library giving N_m / rate per mode")
+    ls.add_argument("--kernels", "-k", default=DEFAULT_LIBRARY, metavar="LIB", help="library giving N_m / rate per mode")
     ls.add_argument("--modes", metavar="A,B,...", help="modes to choose from (default: all of the library)")
     ls.add_argument("--heel-strikes", choices=HEEL_STRIKE_SOURCES, default="auto", help=hs_help)
     ls.add_argument("--tolerance", type=positive_float, default=0.15,

@@ -30,6 +30,7 @@ from ..io.bag import (
 )
 from ..io.bag_write import STORAGES
 from ..io.imu_bag import ImuBagRecording, is_imu_bag
+from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.process import Predictions, predict
 from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
@@ -303,7 +304,7 @@ def add_commands(sub: Any) -> None:
         help="stamp of the first sample in seconds since the epoch (default: now); bag sources keep their stamps",
     )
     conv.add_argument(
-        "--sample-rate", type=positive_float, default=230.0, metavar="HZ",
+        "--sample-rate", type=positive_float, default=DEFAULT_REFERENCE_RATE_HZ, metavar="HZ",
         help="time base of a reference CSV without time column (default %(default)g)",
     )
     conv.set_defaults(func=cmd_convert)
@@ -328,7 +329,8 @@ def add_commands(sub: Any) -> None:
     )
     play.add_argument("--units", choices=UNITS, default="rad", help="CSV: angle units published (default %(default)s)")
     play.add_argument("--joint-names", type=_joint_names, metavar="A,B,C,D", help="CSV: JointState joint names")
-    play.add_argument("--sample-rate", type=positive_float, default=230.0, metavar="HZ", help="reference CSV time base")
+    play.add_argument("--sample-rate", type=positive_float, default=DEFAULT_REFERENCE_RATE_HZ, metavar="HZ",
+                      help="reference CSV time base")
     play.add_argument(
         "--wait-for-subscribers", type=seconds, default=0.0, metavar="SECONDS",
         help="first wait up to SECONDS until every topic has a subscriber (default 0: start at once)",

@@ -27,6 +27,7 @@ import numpy as np
 from ..core.channels import CHANNELS
 from ..core.errors import GaitEstimatorError
 from .bag import (
+    DEFAULT_TOPIC,
     FLOAT64_MULTI_ARRAY,
     INPUT_MSGTYPES,
     JOINT_STATE,
@@ -179,7 +180,7 @@ def write_input_bag(
     path: str | Path,
     *,
     storage: str = "mcap",
-    topic: str = "/segment_angles",
+    topic: str = DEFAULT_TOPIC,
     msg_type: str = "joint_state",
     units: str = "rad",
     joint_names: Sequence[str] = CHANNELS,
