@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.errors import GaitEstimatorError
+from ..core.errors import GaitEstimatorError, RecordingError
 from ..core.units import first_problem
 from ..io.bag import (
     DEFAULT_MAX_GAP_S,
@@ -26,6 +26,7 @@ from ..io.bag import (
     INPUT_MSGTYPES,
     BagRecording,
     is_bag_path,
+    parse_joint_names,
     read_bag,
 )
 from ..io.bag_write import STORAGES
@@ -47,12 +48,11 @@ from .args import (
 
 
 def _joint_names(text: str) -> tuple[str, ...]:
-    names = tuple(n.strip() for n in text.split(","))
-    if len(names) != N_CHANNELS or not all(names) or len(set(names)) != N_CHANNELS:
+    try:
+        return parse_joint_names(text)
+    except RecordingError:
         raise argparse.ArgumentTypeError(
-            f"expected {N_CHANNELS} distinct comma-separated names ({','.join(CHANNELS)}), got {text!r}"
-        )
-    return names
+            f"expected {N_CHANNELS} distinct comma-separated names ({','.join(CHANNELS)}), got {text!r}") from None
 
 
 
