@@ -155,10 +155,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
 def _read_source(args: argparse.Namespace) -> Recording:
     p = Path(args.source)
     if is_bag_path(p) and not is_imu_bag(p) and not args.imu_topics:
-        return read_bag(
-            p, topic=args.topic, joint_names=args.joint_names, input_units=args.units,
-            max_gap_s=DEFAULT_MAX_GAP_S if args.max_gap_s is None else args.max_gap_s,
-        )
+        return read_bag(p, topic=args.topic, joint_names=args.joint_names, input_units=args.units,
+                        **reader_options(args, ("max_gap_s",)))
     return read_recording(p, rate_hz=args.sample_rate, **reader_options(args))
 
 
