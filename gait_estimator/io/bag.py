@@ -24,6 +24,7 @@ A cut or damaged bag is read as far as it goes (``bag_recover.py``, through ``op
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, replace
@@ -186,7 +187,7 @@ def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = Fals
     except Exception as exc:  # rosbags raises many kinds for damaged files
         raise RecordingError(f"{where}: cannot open bag, truncated or corrupt? ({_one_line(exc)})") from None
     if isinstance(reader, bag_recover.RecoveredBag) and not quiet:
-        bag_recover.report(reader.recovery)
+        print(f"warning: {reader.recovery.line()}", file=sys.stderr, flush=True)
     try:
         yield reader
     except (RecordingError, KeyboardInterrupt):

@@ -19,8 +19,8 @@ What counts as damaged (``damage``):
 
 ``RecoveredBag`` offers the part of rosbags' ``Reader`` interface the project reads bags with
 (``topics``, ``connections``, ``messages(connections)``, ``close``), so topic decoding is the
-same for damaged and intact bags; ``records()`` gives the raw ``(topic, type, log time, CDR)``
-records. ``Recovery.line()`` is the one-line account of what was recovered.
+same for damaged and intact bags. ``Recovery.line()`` is the one-line account of what was
+recovered.
 """
 
 from __future__ import annotations
@@ -28,7 +28,6 @@ from __future__ import annotations
 import re
 import shutil
 import sqlite3
-import sys
 import tempfile
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
@@ -78,11 +77,6 @@ class Recovery:
 
 def _utc(ns: int) -> str:
     return datetime.fromtimestamp(ns * 1e-9, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
-
-
-def report(recovery: Recovery) -> None:
-    """Say on stderr, in one line, what was recovered."""
-    print(f"warning: {recovery.line()}", file=sys.stderr, flush=True)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -430,20 +424,9 @@ class RecoveredBag:
                 if (start is None or log_ns >= start) and (stop is None or log_ns < stop):
                     yield self.connections[keys[key]], log_ns, data
 
-    def records(self) -> Iterator[RawRecord]:
-        """Every recovered message as a RawRecord, in file order."""
-        for conn, log_ns, data in self.messages():
-            yield RawRecord(conn.topic, conn.msgtype, log_ns, data)
-
     def close(self) -> None:
         for st in self._storages:
             st.close()
-
-    def __enter__(self) -> RecoveredBag:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def open_recovered(path: str | Path, reason: str) -> RecoveredBag:
