@@ -997,8 +997,8 @@ def test_every_command_that_reads_recordings_takes_the_imu_options(command):
                                       "--imu-tolerance-s", "0.01", "--imu-lateral-axes", "+z,,+z,",
                                       "--imu-proximal-axes=-x,-x,-x,-x"])
     assert reader_options(args) == {"imu_topics": ["/a", "/b", "/c", "/d"], "imu_calibration": "c.yaml",
-                                        "imu_tolerance_s": 0.01, "imu_lateral_axes": ["+z", "", "+z", ""],
-                                        "imu_proximal_axes": ["-x"] * 4}
+                                    "imu_tolerance_s": 0.01, "imu_lateral_axes": ["+z", "", "+z", ""],
+                                    "imu_proximal_axes": ["-x"] * 4}
 
 
 def test_convert_with_the_nodes_configured_axes(tmp_path):
