@@ -212,7 +212,7 @@ def cmd_repair(args: argparse.Namespace) -> int:
 # bench-bag
 
 
-def bench_bag(bag: Path, library: Any, out_dir: Path, repeat: int = 3, storage: str = "mcap") -> dict[str, Any]:
+def bench_bag(bag: Path, library: Any, out_dir: Path, repeat: int, storage: str) -> dict[str, Any]:
     """Time the offline bag pipeline on ``bag``: read (decode + checks), predict, write the
     output bag; median of ``repeat`` runs, as seconds and samples/s."""
     from ..io.bag_write import output_stamps, write_output_bag
