@@ -991,14 +991,14 @@ def _with_joint_states(src, dst):
 ])
 def test_every_command_that_reads_recordings_takes_the_imu_options(command):
     from gait_estimator.cli.app import build_parser
-    from gait_estimator.cli.args import imu_reader_options
+    from gait_estimator.cli.args import reader_options
 
     args = build_parser().parse_args([*command, "--imu-topics", "/a, /b,/c,/d", "--imu-calibration", "c.yaml",
                                       "--imu-tolerance-s", "0.01", "--imu-lateral-axes", "+z,,+z,",
                                       "--imu-proximal-axes=-x,-x,-x,-x"])
-    assert imu_reader_options(args) == {"imu_topics": ["/a", "/b", "/c", "/d"], "imu_calibration": "c.yaml",
-                                        "imu_tolerance_s": 0.01, "imu_lateral_axes": ["+z", "", "+z", ""],
-                                        "imu_proximal_axes": ["-x"] * 4}
+    assert reader_options(args) == {"imu_topics": ["/a", "/b", "/c", "/d"], "imu_calibration": "c.yaml",
+                                    "imu_tolerance_s": 0.01, "imu_lateral_axes": ["+z", "", "+z", ""],
+                                    "imu_proximal_axes": ["-x"] * 4}
 
 
 def test_convert_with_the_nodes_configured_axes(tmp_path):

@@ -77,6 +77,12 @@ def _cpu_model() -> str:
     return platform.processor()
 
 
+def _summary(us: np.ndarray) -> dict[str, float]:
+    """Median, p99, mean and max of per-step times ``us`` (microseconds), and their number."""
+    return {"step_us_median": float(np.median(us)), "step_us_p99": float(np.percentile(us, 99)),
+            "step_us_mean": float(us.mean()), "step_us_max": float(us.max()), "steps_timed": len(us)}
+
+
 def time_steps(matcher: IncrementalMatcher | NaiveMatcher, samples: np.ndarray, warmup: int) -> dict[str, float]:
     """Stream ``samples`` one step at a time; per-step wall time after ``warmup`` steps (us)."""
     for i in range(min(warmup, len(samples))):
@@ -89,14 +95,7 @@ def time_steps(matcher: IncrementalMatcher | NaiveMatcher, samples: np.ndarray, 
         t0 = clock()
         step(timed[i])
         ns[i] = clock() - t0
-    us = ns / 1e3
-    return {
-        "step_us_median": float(np.median(us)),
-        "step_us_p99": float(np.percentile(us, 99)),
-        "step_us_mean": float(us.mean()),
-        "step_us_max": float(us.max()),
-        "steps_timed": len(us),
-    }
+    return _summary(ns / 1e3)
 
 
 def matcher_options(preset: str) -> dict[str, Any]:
@@ -120,9 +119,7 @@ def time_updates(estimator: Estimator, samples: np.ndarray, rate_hz: float, warm
         t0 = clock()
         update(float(t[i]), samples[i])
         ns[k] = clock() - t0
-    us = ns / 1e3
-    return {"step_us_median": float(np.median(us)), "step_us_p99": float(np.percentile(us, 99)),
-            "step_us_mean": float(us.mean()), "step_us_max": float(us.max()), "steps_timed": len(us)}
+    return _summary(ns / 1e3)
 
 
 def calibrated_after(library: KernelLibrary, samples: np.ndarray, backend: str = "auto") -> int:
@@ -147,11 +144,6 @@ def preset_target_met(row: dict[str, Any]) -> bool:
     """Whether a default-preset row of ``bench`` is within PRESET_RATIO_TARGET of its paper row,
     median and p99."""
     return max(row["median_ratio_to_paper"], row["p99_ratio_to_paper"]) <= PRESET_RATIO_TARGET
-
-
-def _summary(us: np.ndarray) -> dict[str, float]:
-    return {"step_us_median": float(np.median(us)), "step_us_p99": float(np.percentile(us, 99)),
-            "step_us_mean": float(us.mean()), "step_us_max": float(us.max()), "steps_timed": len(us)}
 
 
 def time_presets(library: KernelLibrary, m: int, steps: int, backend: str) -> list[dict[str, Any]]:

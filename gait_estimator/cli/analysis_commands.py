@@ -15,9 +15,9 @@ from ..analysis.strides import HEEL_STRIKE_SOURCES, heel_strikes, nearest_index,
 from ..core.errors import GaitEstimatorError
 from ..core.strides import MAX_STRIDE_S, MIN_PROMINENCE_DEG, MIN_STRIDE_S, DetectionOptions, stride_bounds
 from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
-from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
-from .args import add_imu_reading_options, imu_reader_options, positive_float, save_imu_calibration
+from ..io.resources import DEFAULT_LIBRARY
+from .args import add_imu_reading_options, positive_float, read_recording_args
 
 
 def _window(text: str) -> tuple[float, float]:
@@ -65,8 +65,7 @@ def _read_labelled(path: str, args: argparse.Namespace, rate_hz: float | None = 
     label file beside it (printed)."""
     from ..analysis.labels import labels_beside, read_label_ranges, with_mode, with_ranges
 
-    rec = read_recording(path, rate_hz=rate_hz if rate_hz is not None else args.time_rate, **imu_reader_options(args))
-    save_imu_calibration(args, rec, path)
+    rec = read_recording_args(args, path, rate_hz=rate_hz if rate_hz is not None else args.time_rate)
     if args.mode:
         return with_mode(rec, args.mode), f"--mode {args.mode}"
     if args.labels:
@@ -188,8 +187,7 @@ def cmd_label_strides(args: argparse.Namespace) -> int:
         durations = {n: lib.mode(n).stride_duration_s for n in names}
     except KeyError as exc:
         raise GaitEstimatorError(str(exc.args[0])) from None
-    rec = read_recording(args.recording, rate_hz=args.time_rate or lib.sample_rate_hz, **imu_reader_options(args))
-    save_imu_calibration(args, rec, args.recording)
+    rec = read_recording_args(args, args.recording, rate_hz=args.time_rate or lib.sample_rate_hz)
     det = _detection(args)
     hs = heel_strikes(rec, args.heel_strikes, None, det)
     bounds, _ = stride_bounds(hs.times_s, det)
@@ -278,7 +276,7 @@ def add_commands(sub: Any) -> None:
 
     ls = sub.add_parser("label-strides", help="label steady strides by the nearest kernel stride duration (cadence)")
     ls.add_argument("recording", help="recording: project CSV, reference Dimension CSV or rosbag2 bag")
-    ls.add_argument("--kernels", "-k", default="able_bodied", metavar="LIB", help="library giving N_m / rate per mode")
+    ls.add_argument("--kernels", "-k", default=DEFAULT_LIBRARY, metavar="LIB", help="library giving N_m / rate per mode")
     ls.add_argument("--modes", metavar="A,B,...", help="modes to choose from (default: all of the library)")
     ls.add_argument("--heel-strikes", choices=HEEL_STRIKE_SOURCES, default="auto", help=hs_help)
     ls.add_argument("--tolerance", type=positive_float, default=0.15,

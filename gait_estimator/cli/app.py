@@ -18,7 +18,7 @@ from typing import NoReturn
 from ..core.errors import GaitEstimatorError, missing_extra
 from ..io.library_io import load_library, save_library
 from ..io.resources import DEFAULT_LIBRARY
-from .args import choice_list, int_list, positive_int, prepare_output, save_imu_calibration
+from .args import choice_list, int_list, positive_int, prepare_output, read_recording_args, reader_options
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.node_commands",
@@ -78,19 +78,16 @@ def cmd_kernels_convert(args: argparse.Namespace) -> int:
 
 def cmd_process(args: argparse.Namespace) -> int:
     from ..io.process import format_summary, predict, write_predictions_csv
-    from ..io.readers import read_recording
-    from .bag_commands import finish_process, warn_units
+    from .bag_commands import BAG_READING_OPTIONS, finish_process, warn_units
     from .estimator_args import config_from_args
 
     lib = load_library(args.kernels)
-    options = {"rate_hz": lib.sample_rate_hz}
-    options.update(getattr(args, "reader_options", {}) or {})
+    options = {"rate_hz": lib.sample_rate_hz, **reader_options(args, BAG_READING_OPTIONS)}
     try:
         config = config_from_args(args, max_gap_s=options.get("max_gap_s"))
     except ValueError as exc:
         raise GaitEstimatorError(str(exc)) from None
-    rec = read_recording(args.recording, **options)
-    save_imu_calibration(args, rec, args.recording)
+    rec = read_recording_args(args, args.recording, **options)
     if args.start is not None and args.stop is not None and args.stop <= args.start:
         raise GaitEstimatorError(f"--stop ({args.stop}) must be greater than --start ({args.start})")
     rec = rec.slice(args.start, args.stop)

@@ -5,21 +5,40 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from ..core.errors import GaitEstimatorError
 
 
+def checked_number(text: str, kind: type, ok: Callable[[Any], bool], expected: str, bad: str = "") -> Any:
+    """``kind(text)`` when ``ok`` of it is true; otherwise ArgumentTypeError ``expected
+    {expected}, got {text!r}``, or ``bad`` formatted with ``text`` when the value is out of range."""
+    try:
+        v = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+    if not ok(v):
+        raise argparse.ArgumentTypeError(bad.format(text=text) if bad else f"expected {expected}, got {text!r}")
+    return v
+
+
+def positive_list(text: str, kind: type, listed: str, positive: str) -> list[Any]:
+    """Comma-separated finite numbers > 0 of ``kind``; errors say ``expected comma-separated
+    {listed}`` or ``expected positive {positive}``."""
+    try:
+        values = [kind(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated {listed}, got {text!r}") from None
+    if not values or any(not (math.isfinite(v) and v > 0) for v in values):
+        raise argparse.ArgumentTypeError(f"expected positive {positive}, got {text!r}")
+    return values
+
+
 def positive_int(text: str) -> int:
     """An integer > 0."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return v
+    return checked_number(text, int, lambda v: v > 0, "a positive integer")
 
 
 def choice_list(allowed: tuple[str, ...]) -> Any:
@@ -46,35 +65,18 @@ def prepare_output(path: str, option: str) -> None:
 
 def port_number(text: str) -> int:
     """A TCP port, 0..65535 (0: any free one)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a TCP port, got {text!r}") from None
-    if not 0 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"TCP ports are 0..65535, got {text}")
-    return v
+    return checked_number(text, int, lambda v: 0 <= v <= 65535, "a TCP port", "TCP ports are 0..65535, got {text}")
 
 
 def positive_float(text: str) -> float:
     """A finite number > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return v
+    return checked_number(text, float, lambda v: math.isfinite(v) and v > 0, "a positive number")
 
 
 def domain_id(text: str) -> int:
     """A ROS domain ID, 0..232."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer ROS domain ID, got {text!r}") from None
-    if not 0 <= v <= 232:
-        raise argparse.ArgumentTypeError(f"ROS domain IDs are 0..232, got {text}")
-    return v
+    return checked_number(text, int, lambda v: 0 <= v <= 232, "an integer ROS domain ID",
+                          "ROS domain IDs are 0..232, got {text}")
 
 
 def add_target_node_options(p: Any, node_note: str = "") -> None:
@@ -88,24 +90,12 @@ def add_target_node_options(p: Any, node_note: str = "") -> None:
 
 def seconds(text: str) -> float:
     """A duration in seconds, >= 0 (inf allowed)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
-    if math.isnan(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"expected seconds >= 0, got {text!r}")
-    return v
+    return checked_number(text, float, lambda v: v >= 0, "seconds", "expected seconds >= 0, got {text!r}")
 
 
 def int_list(text: str) -> list[int]:
     """Comma-separated positive integers, e.g. ``7,70,700``."""
-    try:
-        values = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
-    if not values or any(v <= 0 for v in values):
-        raise argparse.ArgumentTypeError(f"expected positive integers, got {text!r}")
-    return values
+    return positive_list(text, int, "integers", "integers")
 
 
 IMU_READING_OPTIONS = ("imu_topics", "imu_calibration", "imu_lateral_axes", "imu_proximal_axes", "imu_tolerance_s")
@@ -117,31 +107,31 @@ def _topic_list(text: str) -> list[str]:
     return [t.strip() for t in text.split(",")]
 
 
-def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store") -> None:
+def add_imu_reading_options(p: Any) -> None:
     """The options of a recording that is a bag of four sensor_msgs/Imu topics (docs/imu.md), on
-    every command that reads recordings; ``imu_reader_options`` collects them."""
+    every command that reads recordings; ``reader_options`` collects them."""
     p.add_argument(
-        "--imu-topics", dest="imu_topics", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        "--imu-topics", dest="imu_topics", type=_topic_list, metavar="RT,LT,RS,LS",
         help="bag of sensor_msgs/Imu topics: those of right_thigh,left_thigh,right_shank,left_shank (default "
         "/imu/<channel>, or the Imu topics named after the channels)",
     )
     p.add_argument(
-        "--imu-calibration", dest="imu_calibration", action=action, metavar="YAML",
+        "--imu-calibration", dest="imu_calibration", metavar="YAML",
         help="bag of sensor_msgs/Imu topics: the IMU mounting to use, a file the node or --save-imu-calibration "
         "wrote; checked on the walking, a misfit is an error (default: learnt from the bag; docs/imu.md)",
     )
     p.add_argument(
-        "--imu-lateral-axes", dest="imu_lateral_axes", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        "--imu-lateral-axes", dest="imu_lateral_axes", type=_topic_list, metavar="RT,LT,RS,LS",
         help="bag of sensor_msgs/Imu topics: per segment, the sensor axis pointing to the wearer's right (+x, -y, "
         "...; empty = learn), as the node's imu_lateral_axes; a list starting with - needs '=': --imu-lateral-axes=-z,...",
     )
     p.add_argument(
-        "--imu-proximal-axes", dest="imu_proximal_axes", type=_topic_list, action=action, metavar="RT,LT,RS,LS",
+        "--imu-proximal-axes", dest="imu_proximal_axes", type=_topic_list, metavar="RT,LT,RS,LS",
         help="bag of sensor_msgs/Imu topics: per segment, the sensor axis along it towards the hip or knee "
         "(empty = learn), as the node's imu_proximal_axes (--imu-proximal-axes=-x,... when it starts with -)",
     )
     p.add_argument(
-        "--imu-tolerance-s", dest="imu_tolerance_s", type=seconds, action=action, metavar="SECONDS",
+        "--imu-tolerance-s", dest="imu_tolerance_s", type=seconds, metavar="SECONDS",
         help="bag of sensor_msgs/Imu topics: largest stamp spread of the four messages of one sample (default: "
         "0.9 of the message period, for sensors not sampled together)",
     )
@@ -152,9 +142,20 @@ def add_imu_reading_options(p: Any, action: type[argparse.Action] | str = "store
     )
 
 
-def imu_reader_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The IMU reading options given on the command line, as ``read_recording`` keywords."""
-    return {k: getattr(args, k) for k in IMU_READING_OPTIONS if getattr(args, k, None) is not None}
+def reader_options(args: argparse.Namespace, names: Sequence[str] = IMU_READING_OPTIONS) -> dict[str, Any]:
+    """The reading options ``names`` (default: the IMU ones) given on the command line, as
+    ``read_recording`` keywords."""
+    return {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
+
+
+def read_recording_args(args: argparse.Namespace, path: str | Path, **options: Any) -> Any:
+    """The recording at ``path`` read with ``options`` and the IMU reading options given on the
+    command line, after ``--save-imu-calibration`` wrote its calibration."""
+    from ..io.readers import read_recording
+
+    rec = read_recording(path, **{**reader_options(args), **options})
+    save_imu_calibration(args, rec, path)
+    return rec
 
 
 def save_imu_calibration(args: argparse.Namespace, rec: Any, source: str | Path) -> None:

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.errors import GaitEstimatorError
+from ..core.errors import GaitEstimatorError, RecordingError
 from ..core.units import first_problem
 from ..io.bag import (
     DEFAULT_MAX_GAP_S,
@@ -26,10 +26,12 @@ from ..io.bag import (
     INPUT_MSGTYPES,
     BagRecording,
     is_bag_path,
+    parse_joint_names,
     read_bag,
 )
 from ..io.bag_write import STORAGES
 from ..io.imu_bag import ImuBagRecording, is_imu_bag
+from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.process import Predictions, predict
 from ..io.readers import read_recording
 from ..io.recording import Recording, write_project_csv
@@ -38,66 +40,58 @@ from ..io.stream import UNITS
 from .args import (
     IMU_READING_OPTIONS,
     add_imu_reading_options,
-    imu_reader_options,
     positive_float,
+    reader_options,
     save_imu_calibration,
     seconds,
 )
 
 
 def _joint_names(text: str) -> tuple[str, ...]:
-    names = tuple(n.strip() for n in text.split(","))
-    if len(names) != N_CHANNELS or not all(names) or len(set(names)) != N_CHANNELS:
+    try:
+        return parse_joint_names(text)
+    except RecordingError:
         raise argparse.ArgumentTypeError(
-            f"expected {N_CHANNELS} distinct comma-separated names ({','.join(CHANNELS)}), got {text!r}"
-        )
-    return names
+            f"expected {N_CHANNELS} distinct comma-separated names ({','.join(CHANNELS)}), got {text!r}") from None
 
 
 
-class _ReaderOption(argparse.Action):
-    """Stores the value and also into ``namespace.reader_options[dest]`` (read_recording kwargs)."""
-
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: Any = None) -> None:
-        setattr(namespace, self.dest, values)
-        options = dict(getattr(namespace, "reader_options", None) or {})
-        options[self.dest] = values
-        namespace.reader_options = options
+BAG_READING_OPTIONS = ("topic", "input_units", "joint_names", "max_gap_s")
+"""``read_recording`` keywords of ``process``'s bag options (``reader_options`` collects them)."""
 
 
-def _bag_reading_options(p: Any, action: type[argparse.Action] | str = "store", max_gap: Any = None) -> None:
+def _bag_reading_options(p: Any, max_gap: Any = None) -> None:
     p.add_argument(
-        "--joint-names", dest="joint_names", type=_joint_names, action=action, metavar="A,B,C,D",
+        "--joint-names", dest="joint_names", type=_joint_names, metavar="A,B,C,D",
         help="JointState names of right_thigh,left_thigh,right_shank,left_shank (default: those names)",
     )
     (max_gap or p).add_argument(
-        "--max-gap", dest="max_gap_s", type=seconds, action=action, metavar="SECONDS",
+        "--max-gap", dest="max_gap_s", type=seconds, metavar="SECONDS",
         help=f"a gap between sample times longer than this restarts the window, as in the node (default "
         f"{DEFAULT_MAX_GAP_S:g}; 0 disables; any recording)",
     )
-    add_imu_reading_options(p, action)
+    add_imu_reading_options(p)
 
 
 def add_process_options(proc: argparse.ArgumentParser) -> None:
-    """Bag options of ``process``; the reading ones end up in ``args.reader_options``."""
+    """Bag options of ``process``; ``reader_options(args, BAG_READING_OPTIONS)`` collects the reading ones."""
     g = proc.add_argument_group("rosbag2 input (RECORDING is a bag directory or .mcap/.db3 file)")
     g.add_argument(
-        "--topic", dest="topic", action=_ReaderOption, metavar="TOPIC",
+        "--topic", dest="topic", metavar="TOPIC",
         help=f"input topic, sensor_msgs/JointState or std_msgs/Float64MultiArray (default {DEFAULT_TOPIC}, "
         "or the only topic of such a type)",
     )
     g.add_argument(
-        "--input-units", dest="input_units", choices=UNITS, action=_ReaderOption,
+        "--input-units", dest="input_units", choices=UNITS,
         help="units of the angles in the messages (default rad)",
     )
-    _bag_reading_options(g, _ReaderOption, max_gap=proc)
+    _bag_reading_options(g, max_gap=proc)
     o = proc.add_argument_group("rosbag2 output")
     o.add_argument(
         "--out-bag", metavar="DIR",
         help="also write the outputs (mode, phase, sse, estimate, as the live node publishes them) to a new bag",
     )
     o.add_argument("--storage", choices=STORAGES, default="mcap", help="storage of --out-bag (default %(default)s)")
-    proc.set_defaults(reader_options=None)
 
 
 def warn_units(rec: Recording, source: str | Path, units: str) -> None:
@@ -120,9 +114,8 @@ def finish_process(args: argparse.Namespace, rec: Recording, pred: Predictions) 
     if isinstance(rec, BagRecording):
         lines += [f"note: {n}" for n in rec.notes]
     else:
-        flags = {"topic": "--topic", "input_units": "--input-units", "joint_names": "--joint-names",
-                 **{k: "--" + k.replace("_", "-") for k in IMU_READING_OPTIONS}}
-        given = [flags[k] for k in getattr(args, "reader_options", None) or {} if k in flags]
+        bag_only = ("topic", "input_units", "joint_names", *IMU_READING_OPTIONS)
+        given = ["--" + k.replace("_", "-") for k in reader_options(args, bag_only)]
         if given:
             lines.append(f"note: {', '.join(given)} apply to bags only; ignored for {args.recording}")
     if getattr(args, "out_bag", None):
@@ -162,11 +155,9 @@ def cmd_convert(args: argparse.Namespace) -> int:
 def _read_source(args: argparse.Namespace) -> Recording:
     p = Path(args.source)
     if is_bag_path(p) and not is_imu_bag(p) and not args.imu_topics:
-        return read_bag(
-            p, topic=args.topic, joint_names=args.joint_names, input_units=args.units,
-            max_gap_s=DEFAULT_MAX_GAP_S if args.max_gap_s is None else args.max_gap_s,
-        )
-    return read_recording(p, rate_hz=args.sample_rate, **imu_reader_options(args))
+        return read_bag(p, topic=args.topic, joint_names=args.joint_names, input_units=args.units,
+                        **reader_options(args, ("max_gap_s",)))
+    return read_recording(p, rate_hz=args.sample_rate, **reader_options(args))
 
 
 def _print_reading_notes(rec: Recording) -> None:
@@ -221,7 +212,7 @@ def cmd_repair(args: argparse.Namespace) -> int:
 # bench-bag
 
 
-def bench_bag(bag: Path, library: Any, out_dir: Path, repeat: int = 3, storage: str = "mcap") -> dict[str, Any]:
+def bench_bag(bag: Path, library: Any, out_dir: Path, repeat: int, storage: str) -> dict[str, Any]:
     """Time the offline bag pipeline on ``bag``: read (decode + checks), predict, write the
     output bag; median of ``repeat`` runs, as seconds and samples/s."""
     from ..io.bag_write import output_stamps, write_output_bag
@@ -311,7 +302,7 @@ def add_commands(sub: Any) -> None:
         help="stamp of the first sample in seconds since the epoch (default: now); bag sources keep their stamps",
     )
     conv.add_argument(
-        "--sample-rate", type=positive_float, default=230.0, metavar="HZ",
+        "--sample-rate", type=positive_float, default=DEFAULT_REFERENCE_RATE_HZ, metavar="HZ",
         help="time base of a reference CSV without time column (default %(default)g)",
     )
     conv.set_defaults(func=cmd_convert)
@@ -336,7 +327,8 @@ def add_commands(sub: Any) -> None:
     )
     play.add_argument("--units", choices=UNITS, default="rad", help="CSV: angle units published (default %(default)s)")
     play.add_argument("--joint-names", type=_joint_names, metavar="A,B,C,D", help="CSV: JointState joint names")
-    play.add_argument("--sample-rate", type=positive_float, default=230.0, metavar="HZ", help="reference CSV time base")
+    play.add_argument("--sample-rate", type=positive_float, default=DEFAULT_REFERENCE_RATE_HZ, metavar="HZ",
+                      help="reference CSV time base")
     play.add_argument(
         "--wait-for-subscribers", type=seconds, default=0.0, metavar="SECONDS",
         help="first wait up to SECONDS until every topic has a subscriber (default 0: start at once)",

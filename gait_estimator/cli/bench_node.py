@@ -21,7 +21,7 @@ from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, imu
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import EXECUTORS, require_ros
-from .args import choice_list, domain_id, positive_float, positive_int, prepare_output
+from .args import checked_number, choice_list, domain_id, positive_float, positive_int, positive_list, prepare_output
 from .bench_profile import PROFILE_LABELS, clock_offset_ns, profile_stages
 from .node_commands import percentiles, start_node, wait_node
 
@@ -34,23 +34,12 @@ KEEP_UP_MS = 10.0
 def _priority(text: str) -> int:
     from ..ros.priority import MAX_PRIORITY
 
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer 0..{MAX_PRIORITY}, got {text!r}") from None
-    if not 0 <= v <= MAX_PRIORITY:
-        raise argparse.ArgumentTypeError(f"SCHED_FIFO priorities are 1..{MAX_PRIORITY} (0 = as started), got {text}")
-    return v
+    return checked_number(text, int, lambda v: 0 <= v <= MAX_PRIORITY, f"an integer 0..{MAX_PRIORITY}",
+                          f"SCHED_FIFO priorities are 1..{MAX_PRIORITY} (0 = as started), got {{text}}")
 
 
 def _rates(text: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated rates in Hz, got {text!r}") from None
-    if not values or any(not (math.isfinite(v) and v > 0) for v in values):
-        raise argparse.ArgumentTypeError(f"expected positive rates, got {text!r}")
-    return values
+    return positive_list(text, float, "rates in Hz", "rates")
 
 INPUTS = ("joint_state", "imu", "imu-raw")
 """bench-node --input: JointState angles, or four Imu topics with orientations / gyro + accelerometer only."""
@@ -219,42 +208,27 @@ class _Variant:
         return {"steps": steps, "max_sustained_rate_hz": best, "rates_tried": sorted(rates)}
 
 
-def _bench_variant(
-    lib: Any,
-    kernels: str,
-    executor: str,
-    outputs: str,
-    latency_samples: int,
-    rate_hz: float,
-    rates: list[float] | tuple[float, ...],
-    rate_seconds: float,
-    domain_id: int,
-    node_cmd: str | None,
-    profile: bool,
-    throughput: bool,
-    log: Any,
-    preset: str = "default",
-    thread_priority: int = 0,
-    input_kind: str = "joint_state",
-) -> dict[str, Any]:
+def _bench_variant(lib: Any, kernels: str, executor: str, outputs: str, args: argparse.Namespace, log: Any) -> dict[str, Any]:
     """One variant of bench_node: a fresh estimator_node process, its latency and throughput."""
     from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
     from ..ros.node import NODE_NAME
     from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient
 
+    input_kind, rate_hz = args.input, args.rate
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
-    extra = ["-p", f"thread_priority:={thread_priority}"] if thread_priority else []
+    extra = ["-p", f"thread_priority:={args.thread_priority}"] if args.thread_priority else []
     if input_kind != "joint_state":  # configured mounting; a path without a file: no saved calibration
         extra += node_imu_arguments(os.path.join(tempfile.gettempdir(), f"gait_estimator_bench_{os.getpid()}.imu.yaml"))
-    node = start_node(domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={preset}", *extra], node_cmd)
+    node = start_node(args.domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={args.preset}", *extra],
+                      args.node_cmd)
     try:
         client = EstimatorClient(
-            domain_id,
+            args.domain_id,
             input_type="imu" if input_kind != "joint_state" else "joint_state",
             reliable=True,
             record=False,
             outputs=(*topics, DIAGNOSTICS_TOPIC),
-            profile_topic=f"/{NODE_NAME}/profile" if profile else None,
+            profile_topic=f"/{NODE_NAME}/profile" if args.profile else None,
         )
     except BaseException:
         node.close()
@@ -267,9 +241,9 @@ def _bench_variant(
         if input_kind != "joint_state":  # as a wearer would: stand (the fusion settles), then walk
             bench.run(round(lib.sample_rate_hz), rate_hz, standing=True)
         bench.run(int(lib.lengths.max()) + 50, rate_hz)  # warm-up: fill the window, first-call costs
-        bench.latency(latency_samples, rate_hz, profile, out)
-        if throughput:
-            out["throughput"] = bench.throughput(rates, rate_seconds)
+        bench.latency(args.samples, rate_hz, args.profile, out)
+        if outputs == "estimate":
+            out["throughput"] = bench.throughput(args.rates, args.seconds)
         out["node_exit_code"] = node.stop(signal.SIGINT)
     finally:
         client.close()
@@ -277,44 +251,29 @@ def _bench_variant(
     return out
 
 
-def bench_node(
-    kernels: str = DEFAULT_LIBRARY,
-    latency_samples: int = 2300,
-    rate_hz: float = 230.0,
-    rates: list[float] | tuple[float, ...] = DEFAULT_RATES,
-    rate_seconds: float = 2.0,
-    domain_id: int = BENCH_DOMAIN_ID,
-    node_cmd: str | None = None,
-    log: Any = print,
-    executors: list[str] | tuple[str, ...] = EXECUTORS,
-    outputs: list[str] | tuple[str, ...] = OUTPUT_SETS,
-    profile: bool = False,
-    preset: str = "default",
-    modes: int | None = None,
-    thread_priority: int = 0,
-    input_kind: str = "joint_state",
-) -> dict[str, Any]:
-    """Measure estimator_node (with estimator preset ``preset``) in a child process over DDS on this machine, once per variant
-    (``executors`` x ``outputs``, a fresh node process each). With ``modes``, the node runs a
-    library of that many modes cycled from ``kernels`` (``KernelLibrary.replicated``, as
-    ``gait-estimator bench --modes``), written to a temporary NPZ. With ``thread_priority`` P > 0
-    the node runs with ``thread_priority: P`` (``cmd_bench_node`` also puts this process under
-    SCHED_FIFO P, as a controller subscribing to the node would run).
+def bench_node(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
+    """Measure estimator_node (with estimator preset ``--preset``) in a child process over DDS on
+    this machine, once per variant (``--executor`` x ``--outputs``, a fresh node process each),
+    with the options of ``bench-node`` (``args``). With ``--modes``, the node runs a library of
+    that many modes cycled from ``--kernels`` (``KernelLibrary.replicated``, as ``gait-estimator
+    bench --modes``), written to a temporary NPZ. With ``--thread-priority`` P > 0 the node runs
+    with ``thread_priority: P`` (``cmd_bench_node`` also puts this process under SCHED_FIFO P, as
+    a controller subscribing to the node would run).
 
-    1. Latency: ``latency_samples`` inputs at ``rate_hz``; latency = arrival of the ``estimate``
+    1. Latency: ``--samples`` inputs at ``--rate``; latency = arrival of the ``estimate``
        message carrying an input's stamp in the bench's callback - publication of that input
        (same clock, this process); ``dds_*``: arrival at the bench's DDS reader instead (the
        message info's ``received_timestamp``), i.e. without the bench's own executor.
-    2. Throughput (variants with outputs ``estimate``): for each rate in ``rates`` (ascending),
-       ``rate_seconds`` of input; sustained = the node processed every input (its diagnostics
+    2. Throughput (variants with outputs ``estimate``): for each rate in ``--rates`` (ascending),
+       ``--seconds`` of input; sustained = the node processed every input (its diagnostics
        ``samples_received``, so nothing was lost in its best-effort input queue), the input went
        out at >= 95% of the requested rate, and the median latency stayed below KEEP_UP_MS (no
        growing backlog). Stops at the first rate that fails twice.
-    3. With ``profile``: the latency run's time split per sample (node's ``~/profile`` topic and
+    3. With ``--profile``: the latency run's time split per sample (node's ``~/profile`` topic and
        the message info of ``estimate``; see PROFILE_LABELS), and the per-call costs of the
        publishing levers in this process.
 
-    With ``input_kind`` ``imu`` / ``imu-raw`` the node runs ``input_type: imu`` with configured
+    With ``--input`` ``imu`` / ``imu-raw`` the node runs ``input_type: imu`` with configured
     mounting (analysis/imu_sagittal.py) and each sample is four Imu messages with one stamp (with
     orientations / gyro + accelerometer only) after one second of standing; latency runs from the
     publication of a sample's last message, rates count samples.
@@ -325,57 +284,42 @@ def bench_node(
     ``latency``/``throughput`` are the first variant's (by default the node's default executor,
     ``estimate`` only).
     """
-    from ..io.library_io import load_library, save_library
-
-    lib = load_library(kernels)
-    kernels = str(lib.path or kernels)
-    with tempfile.TemporaryDirectory(prefix="gait_estimator_bench_") as tmp:
-        if modes is not None:
-            lib = lib.replicated(modes)
-            kernels = str(save_library(lib, Path(tmp) / f"{lib.name}_{modes}.npz"))
-        return _bench_node(lib, kernels, latency_samples, rate_hz, rates, rate_seconds, domain_id, node_cmd, log,
-                           executors, outputs, profile, preset, thread_priority, input_kind)
-
-
-def _bench_node(
-    lib: Any, kernels: str, latency_samples: int, rate_hz: float, rates: Any, rate_seconds: float, domain_id: int,
-    node_cmd: str | None, log: Any, executors: Any, outputs: Any, profile: bool, preset: str, thread_priority: int = 0,
-    input_kind: str = "joint_state",
-) -> dict[str, Any]:
     from ..analysis.bench import machine_info
+    from ..io.library_io import load_library, save_library
     from ..ros.node_client import use_local_ros
 
-    use_local_ros(domain_id)
-    report: dict[str, Any] = {
-        "machine": machine_info(),
-        "load_average_before": list(os.getloadavg()),
-        "library": lib.name,
-        "modes": len(lib),
-        "domain_id": domain_id,
-        "preset": preset,
-        "thread_priority": thread_priority,
-        "variants": [],
-    }
-    if input_kind != "joint_state":
-        report["input"] = input_kind
-    for executor in executors:
-        for out in outputs:
-            v = _bench_variant(
-                lib, kernels, executor, out, latency_samples, rate_hz, rates, rate_seconds, domain_id,
-                node_cmd, profile, throughput=out == "estimate", log=log, preset=preset, thread_priority=thread_priority,
-                input_kind=input_kind,
-            )
-            report["variants"].append(v)
-    first = report["variants"][0]
-    report["node_cmd"] = first["node_cmd"]
-    report["executor"], report["outputs"] = first["executor"], first["outputs"]
-    report["latency"] = first["latency"]
-    if "throughput" in first:
-        report["throughput"] = first["throughput"]
-    codes = [v["node_exit_code"] for v in report["variants"]]
-    report["node_exit_code"] = next((c for c in codes if c != 0), 0)
-    report["load_average_after"] = list(os.getloadavg())
-    return report
+    lib = load_library(args.kernels)
+    kernels = str(lib.path or args.kernels)
+    with tempfile.TemporaryDirectory(prefix="gait_estimator_bench_") as tmp:
+        if args.modes is not None:
+            lib = lib.replicated(args.modes)
+            kernels = str(save_library(lib, Path(tmp) / f"{lib.name}_{args.modes}.npz"))
+        use_local_ros(args.domain_id)
+        report: dict[str, Any] = {
+            "machine": machine_info(),
+            "load_average_before": list(os.getloadavg()),
+            "library": lib.name,
+            "modes": len(lib),
+            "domain_id": args.domain_id,
+            "preset": args.preset,
+            "thread_priority": args.thread_priority,
+            "variants": [],
+        }
+        if args.input != "joint_state":
+            report["input"] = args.input
+        for executor in args.executor:
+            for out in args.outputs:
+                report["variants"].append(_bench_variant(lib, kernels, executor, out, args, log))
+        first = report["variants"][0]
+        report["node_cmd"] = first["node_cmd"]
+        report["executor"], report["outputs"] = first["executor"], first["outputs"]
+        report["latency"] = first["latency"]
+        if "throughput" in first:
+            report["throughput"] = first["throughput"]
+        codes = [v["node_exit_code"] for v in report["variants"]]
+        report["node_exit_code"] = next((c for c in codes if c != 0), 0)
+        report["load_average_after"] = list(os.getloadavg())
+        return report
 
 
 def cmd_bench_node(args: argparse.Namespace) -> int:
@@ -389,22 +333,7 @@ def cmd_bench_node(args: argparse.Namespace) -> int:
             set_process_priority(args.thread_priority)
         except OSError as exc:
             raise GaitEstimatorError(f"--thread-priority {args.thread_priority}: {exc}") from None
-    report = bench_node(
-        kernels=args.kernels,
-        latency_samples=args.samples,
-        rate_hz=args.rate,
-        rates=args.rates,
-        rate_seconds=args.seconds,
-        domain_id=args.domain_id,
-        node_cmd=args.node_cmd,
-        executors=args.executor,
-        outputs=args.outputs,
-        profile=args.profile,
-        preset=args.preset,
-        modes=args.modes,
-        thread_priority=args.thread_priority,
-        input_kind=args.input,
-    )
+    report = bench_node(args)
     m = report["machine"]
     print(f"machine: {m['processor']}, {m['cpus']} CPUs ({m['cpus_allowed']} allowed), Python {m['python']}; "
           f"library {report['library']} ({report['modes']} modes), input {args.input}; load average before "

@@ -82,18 +82,6 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_arguments(p: Any) -> None:
-    p.add_argument("--host", default="127.0.0.1", help="address to serve on (default %(default)s: this machine only; "
-                   "any other asks for a token)")
-    p.add_argument("--port", type=port_number, default=8080, help="TCP port (default %(default)s; 0 = any free one)")
-    p.add_argument("--token", help="the token the page asks for (default: $GAIT_DASHBOARD_TOKEN, else a new one "
-                   "printed with the URL when --host is not loopback; given, it is asked on loopback too)")
-    p.add_argument("--read-only", action="store_true", help="show the node only: no teaching, no saving")
-    p.add_argument("--rate", type=frame_rate, default=30.0, help="page updates per second, at most 60 (default %(default)s)")
-    add_target_node_options(p)
-    p.set_defaults(func=cmd_dashboard)
-
-
 def add_commands(sub: Any) -> None:
     """Register ``dashboard`` on the ``gait-estimator`` subparsers."""
     d = sub.add_parser(
@@ -105,7 +93,15 @@ def add_commands(sub: Any) -> None:
         "with a token. Uses the environment's ROS_DOMAIN_ID unless --domain-id is given. Needs the 'ros' and "
         "'dashboard' extras. docs/dashboard.md",
     )
-    add_arguments(d)
+    d.add_argument("--host", default="127.0.0.1", help="address to serve on (default %(default)s: this machine only; "
+                   "any other asks for a token)")
+    d.add_argument("--port", type=port_number, default=8080, help="TCP port (default %(default)s; 0 = any free one)")
+    d.add_argument("--token", help="the token the page asks for (default: $GAIT_DASHBOARD_TOKEN, else a new one "
+                   "printed with the URL when --host is not loopback; given, it is asked on loopback too)")
+    d.add_argument("--read-only", action="store_true", help="show the node only: no teaching, no saving")
+    d.add_argument("--rate", type=frame_rate, default=30.0, help="page updates per second, at most 60 (default %(default)s)")
+    add_target_node_options(d)
+    d.set_defaults(func=cmd_dashboard)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -20,14 +20,7 @@ import numpy as np
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import require_ros
-from .args import (
-    add_imu_reading_options,
-    domain_id,
-    imu_reader_options,
-    port_number,
-    positive_float,
-    save_imu_calibration,
-)
+from .args import add_imu_reading_options, domain_id, port_number, positive_float, read_recording_args
 
 DEMO_DOMAIN_ID = 77
 """``demo``'s ROS domain when neither ``--domain-id`` nor ``ROS_DOMAIN_ID`` is set."""
@@ -78,7 +71,6 @@ def percentiles(values_ms: np.ndarray) -> dict[str, float]:
 def _demo_recording(args: argparse.Namespace) -> tuple[Path, Any, Any]:
     """(path, library, recording slice) of ``demo``'s arguments; one-line errors."""
     from ..io.library_io import load_library
-    from ..io.readers import read_recording
     from ..io.resources import DEMO_RECORDING, data_path
 
     try:
@@ -88,8 +80,7 @@ def _demo_recording(args: argparse.Namespace) -> tuple[Path, Any, Any]:
     if not path.exists():
         raise GaitEstimatorError(f"{path}: recording not found")
     lib = load_library(args.kernels)
-    rec = read_recording(path, rate_hz=lib.sample_rate_hz, **imu_reader_options(args))
-    save_imu_calibration(args, rec, path)
+    rec = read_recording_args(args, path, rate_hz=lib.sample_rate_hz)
     rec = rec.slice(args.start, args.stop)
     if len(rec) == 0:
         raise GaitEstimatorError(f"{path}: no samples in the selected range")

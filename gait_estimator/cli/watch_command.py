@@ -12,14 +12,12 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from ..dashboard.state import STALE_AFTER_S
 from ..ros import require_ros
 from .args import add_target_node_options, positive_float
 
 _READY = re.compile(r"^ready: \S+ phase [0-9.]+(; )?")
 """The diagnostics message's start that repeats the mode and phase columns."""
-
-STALE_AFTER_S = 3.0
-"""Diagnostics older than this (s; the node sends them every second) are shown as stale."""
 
 
 def watch_line(elapsed_s: float, mode: str | None, phase: float | None, level: str, message: str,

@@ -24,6 +24,7 @@ A cut or damaged bag is read as far as it goes (``bag_recover.py``, through ``op
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, replace
@@ -186,7 +187,7 @@ def open_bag(path: str | Path, topic: str | None = None, all_topics: bool = Fals
     except Exception as exc:  # rosbags raises many kinds for damaged files
         raise RecordingError(f"{where}: cannot open bag, truncated or corrupt? ({_one_line(exc)})") from None
     if isinstance(reader, bag_recover.RecoveredBag) and not quiet:
-        bag_recover.report(reader.recovery)
+        print(f"warning: {reader.recovery.line()}", file=sys.stderr, flush=True)
     try:
         yield reader
     except (RecordingError, KeyboardInterrupt):
@@ -255,7 +256,8 @@ def choose_topic(bag: Path, topics: dict[str, tuple[str, int]], topic: str | Non
 # Reading samples
 
 
-def _joint_names(joint_names: Sequence[str] | str | None) -> tuple[str, ...]:
+def parse_joint_names(joint_names: Sequence[str] | str | None) -> tuple[str, ...]:
+    """JointState names of the CHANNELS (default: theirs; or comma-separated); four distinct ones."""
     if joint_names is None:
         return CHANNELS
     if isinstance(joint_names, str):
@@ -281,7 +283,7 @@ def read_bag(path: str | Path, options: ReadOptions | None = None, /, **values: 
     p = Path(path)
     o = ReadOptions.of(options, values)
     topic, input_units, max_gap_s = o.topic, o.input_units, o.max_gap_s
-    names = _joint_names(o.joint_names)
+    names = parse_joint_names(o.joint_names)
     if input_units not in UNITS:
         raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {input_units!r}")
     max_gap = float(max_gap_s)

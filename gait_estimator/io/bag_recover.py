@@ -19,8 +19,8 @@ What counts as damaged (``damage``):
 
 ``RecoveredBag`` offers the part of rosbags' ``Reader`` interface the project reads bags with
 (``topics``, ``connections``, ``messages(connections)``, ``close``), so topic decoding is the
-same for damaged and intact bags; ``records()`` gives the raw ``(topic, type, log time, CDR)``
-records. ``Recovery.line()`` is the one-line account of what was recovered.
+same for damaged and intact bags. ``Recovery.line()`` is the one-line account of what was
+recovered.
 """
 
 from __future__ import annotations
@@ -28,7 +28,6 @@ from __future__ import annotations
 import re
 import shutil
 import sqlite3
-import sys
 import tempfile
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
@@ -40,7 +39,7 @@ import yaml
 
 from ..core.errors import RecordingError
 from .mcap_scan import McapScan, has_end_magic, iter_mcap
-from .sqlite_pages import SQLITE_MAGIC, rebuild_rosbag2
+from .sqlite_pages import page_size, rebuild_rosbag2
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 SIDE_FILES = ("-wal", "-journal")
@@ -78,11 +77,6 @@ class Recovery:
 
 def _utc(ns: int) -> str:
     return datetime.fromtimestamp(ns * 1e-9, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
-
-
-def report(recovery: Recovery) -> None:
-    """Say on stderr, in one line, what was recovered."""
-    print(f"warning: {recovery.line()}", file=sys.stderr, flush=True)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -129,14 +123,13 @@ def file_damage(f: Path) -> str:
             return f"{s.name} left beside it (last transaction unfinished)"
     with f.open("rb") as fh:
         head = fh.read(100)
-    if len(head) < 100 or not head.startswith(SQLITE_MAGIC):
+    page = page_size(head)
+    if not page:
         return "not a complete SQLite database header"
-    page = int.from_bytes(head[16:18], "big")
-    page = 65536 if page == 1 else page
     pages = int.from_bytes(head[28:32], "big")
     if head[24:28] == head[92:96] and pages and size < page * pages:
         return f"the file ends at byte {size}, its header says {page * pages}"
-    if page and size % page:
+    if size % page:
         return f"the file size {size} is not a whole number of {page}-byte pages"
     return ""
 
@@ -208,23 +201,32 @@ class _Storage:
         pass
 
 
+def _msgdef(encoding: str, text: str) -> Any:
+    """rosbags' MessageDefinition of a recorded definition; format NONE for an unknown encoding."""
+    from rosbags.interfaces import MessageDefinition, MessageDefinitionFormat
+
+    fmt = {"ros2msg": MessageDefinitionFormat.MSG, "ros2idl": MessageDefinitionFormat.IDL}.get(encoding)
+    return MessageDefinition(fmt, text) if fmt else MessageDefinition(MessageDefinitionFormat.NONE, "")
+
+
+def _qos(text: str | None) -> list[Any]:
+    """The offered QoS profiles recorded for a topic ([] when none)."""
+    from rosbags.rosbag2.metadata import parse_qos
+
+    return parse_qos(text) if text else []
+
+
 class _McapStorage(_Storage):
     def __init__(self, path: Path) -> None:
-        from rosbags.interfaces import MessageDefinition, MessageDefinitionFormat
-        from rosbags.rosbag2.metadata import parse_qos
-
         super().__init__(path)
         scan = McapScan(path)
         for _ in iter_mcap(scan, with_data=False):
             pass
-        formats = {"ros2msg": MessageDefinitionFormat.MSG, "ros2idl": MessageDefinitionFormat.IDL}
-        none = MessageDefinition(MessageDefinitionFormat.NONE, "")
         for ch in scan.channels.values():
             schema = scan.schemas.get(ch.schema_id)
-            fmt = formats.get(schema.encoding) if schema else None
-            msgdef = MessageDefinition(fmt, schema.data.decode("utf-8", "replace")) if schema and fmt else none
-            qos = parse_qos(ch.metadata["offered_qos_profiles"]) if "offered_qos_profiles" in ch.metadata else []
+            msgdef = _msgdef(schema.encoding, schema.data.decode("utf-8", "replace")) if schema else _msgdef("", "")
             name = schema.name if schema else "(unknown type)"
+            qos = _qos(ch.metadata.get("offered_qos_profiles"))
             self.topics.append(_Topic(ch.id, ch.topic, name, msgdef, "", ch.message_encoding, qos))
         self.counts, self.first_ns, self.last_ns = dict(scan.counts), scan.first_ns, scan.last_ns
         if not scan.complete:
@@ -260,9 +262,6 @@ class _SqliteStorage(_Storage):
 
     def _read(self) -> str:
         """Topics and message counts through SQLite: '' or what stopped the read."""
-        from rosbags.interfaces import MessageDefinition, MessageDefinitionFormat
-        from rosbags.rosbag2.metadata import parse_qos
-
         self.topics, self.counts, self.first_ns, self.last_ns = [], {}, None, None
         try:
             con = self._connect()
@@ -273,15 +272,12 @@ class _SqliteStorage(_Storage):
                     for ty, enc, text in con.execute(
                         "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
                     ):
-                        fmt = {"ros2msg": MessageDefinitionFormat.MSG, "ros2idl": MessageDefinitionFormat.IDL}.get(enc)
-                        defs[ty] = MessageDefinition(fmt, text) if fmt else None
-                none = MessageDefinition(MessageDefinitionFormat.NONE, "")
+                        defs[ty] = _msgdef(enc, text)
                 for row in con.execute("SELECT * FROM topics"):
                     r = dict(zip(cols, row, strict=False))
-                    qos = parse_qos(r["offered_qos_profiles"]) if r.get("offered_qos_profiles") else []
                     self.topics.append(_Topic(
-                        int(r["id"]), r["name"], r["type"], defs.get(r["type"]) or none,
-                        r.get("type_description_hash") or "", r["serialization_format"], qos,
+                        int(r["id"]), r["name"], r["type"], defs.get(r["type"]) or _msgdef("", ""),
+                        r.get("type_description_hash") or "", r["serialization_format"], _qos(r.get("offered_qos_profiles")),
                     ))
                 return self._count(con)
             finally:
@@ -338,11 +334,7 @@ def _whole_pages(db: Path) -> None:
     """Cut a copy of a database cut inside a page back to its last whole page: SQLite would
     read the missing part of that page as zeros, i.e. wrong rows, instead of failing."""
     with db.open("r+b") as f:
-        head = f.read(100)
-        if len(head) < 100 or not head.startswith(SQLITE_MAGIC):
-            return
-        page = int.from_bytes(head[16:18], "big")
-        page = 65536 if page == 1 else page
+        page = page_size(f.read(100))
         size = f.seek(0, 2)
         if page and size % page:
             f.truncate(size - size % page)
@@ -432,20 +424,9 @@ class RecoveredBag:
                 if (start is None or log_ns >= start) and (stop is None or log_ns < stop):
                     yield self.connections[keys[key]], log_ns, data
 
-    def records(self) -> Iterator[RawRecord]:
-        """Every recovered message as a RawRecord, in file order."""
-        for conn, log_ns, data in self.messages():
-            yield RawRecord(conn.topic, conn.msgtype, log_ns, data)
-
     def close(self) -> None:
         for st in self._storages:
             st.close()
-
-    def __enter__(self) -> RecoveredBag:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def open_recovered(path: str | Path, reason: str) -> RecoveredBag:

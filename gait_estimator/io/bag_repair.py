@@ -60,7 +60,7 @@ def repair_bag(bag: str | Path, out: str | Path | None = None) -> RepairResult:
         raise GaitEstimatorError(f"{target}: parent directory {target.parent} does not exist")
     if not src.exists():
         raise GaitEstimatorError(f"{src}: no such file or directory")
-    files = storage_files(src) if src.is_dir() else [src]
+    files = storage_files(src)
     storage = "sqlite3" if files and all(f.suffix == ".db3" for f in files) else "mcap"
     result = RepairResult(target, storage)
     with open_bag(src, all_topics=True) as reader, staged_writer(target, storage) as writer:

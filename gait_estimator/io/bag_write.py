@@ -24,15 +24,17 @@ from typing import Any
 
 import numpy as np
 
-from ..core.channels import CHANNELS, N_CHANNELS
+from ..core.channels import CHANNELS
 from ..core.errors import GaitEstimatorError
 from .bag import (
+    DEFAULT_TOPIC,
     FLOAT64_MULTI_ARRAY,
     INPUT_MSGTYPES,
     JOINT_STATE,
     BagRecording,
     normalize_topic,
     ns_to_stamp,
+    parse_joint_names,
     typestore,
 )
 from .outputs import (
@@ -46,6 +48,7 @@ from .outputs import (
     sse_label,
 )
 from .recording import Recording
+from .stream import UNITS
 
 STORAGES = ("mcap", "sqlite3")
 """rosbag2 storage plugins: mcap (the Jazzy default) and sqlite3."""
@@ -177,7 +180,7 @@ def write_input_bag(
     path: str | Path,
     *,
     storage: str = "mcap",
-    topic: str = "/segment_angles",
+    topic: str = DEFAULT_TOPIC,
     msg_type: str = "joint_state",
     units: str = "rad",
     joint_names: Sequence[str] = CHANNELS,
@@ -226,11 +229,9 @@ def serialize_inputs(
     JointState messages are stamped ``stamps_ns[i]`` (ns since the epoch)."""
     if msg_type not in INPUT_MSGTYPES:
         raise GaitEstimatorError(f"message type must be one of {', '.join(INPUT_MSGTYPES)}, got {msg_type!r}")
-    if units not in ("rad", "deg"):
+    if units not in UNITS:
         raise GaitEstimatorError(f"units must be rad or deg, got {units!r}")
-    names = list(joint_names)
-    if len(names) != N_CHANNELS or len(set(names)) != N_CHANNELS or not all(names):
-        raise GaitEstimatorError(f"expected {N_CHANNELS} distinct joint names, got {names}")
+    names = list(parse_joint_names(joint_names))
     ts = typestore()
     msgtype = INPUT_MSGTYPES[msg_type]
     values = np.radians(rec.angles_deg) if units == "rad" else np.asarray(rec.angles_deg, dtype=np.float64)

@@ -85,7 +85,6 @@ class McapScan:
             uncompressed chunk, just after its last complete inner record.
         complete: The walk reached the end of the data section (data end record or footer).
         problem: Why the walk stopped early ('' when complete).
-        orphans: Messages whose channel record was never seen (skipped).
     """
 
     path: Path
@@ -98,7 +97,6 @@ class McapScan:
     intact_bytes: int = 0
     complete: bool = False
     problem: str = ""
-    orphans: int = 0
 
     @property
     def messages(self) -> int:
@@ -165,13 +163,11 @@ def _walk(
                 scan.problem = f"invalid message record at byte {pos}"
                 return
             channel, _seq, log_ns, _pub = _MESSAGE.unpack_from(buf, body)
-            if channel in scan.channels:
+            if channel in scan.channels:  # a message of a channel never seen is skipped
                 scan.counts[channel] = scan.counts.get(channel, 0) + 1
                 scan.first_ns = log_ns if scan.first_ns is None else min(scan.first_ns, log_ns)
                 scan.last_ns = log_ns if scan.last_ns is None else max(scan.last_ns, log_ns)
                 yield channel, log_ns, bytes(buf[body + MESSAGE_HEADER_BYTES : stop]) if with_data else b""
-            else:
-                scan.orphans += 1
         elif op in (OP_SCHEMA, OP_CHANNEL):
             try:
                 (_schema if op == OP_SCHEMA else _channel)(buf, body, stop, scan)
