@@ -84,7 +84,7 @@ class ImuInput:
     invalid axes or an unreadable calibration file."""
 
     def __init__(self, node: Any, qos: QoSProfile) -> None:
-        """``node``: the EstimatorNode (its ``_process``, ``_reject`` and counters are used)."""
+        """``node``: the EstimatorNode (its stream, ``take_angles`` and ``reject`` are used)."""
         self.node = node
         values = {}
         for name, (default, text) in PARAMETERS.items():
@@ -100,7 +100,7 @@ class ImuInput:
         for name in ("imu_pairing_tolerance_s", "imu_timeout_s"):
             if not (math.isfinite(values[name]) and values[name] >= 0):
                 raise CalibrationError(f"{name}: must be >= 0 s, got {values[name]!r}")
-        lib = node._library  # None: no library yet (kernels: ''), the modes are to be taught
+        lib = node.stream.library  # None: no library yet (kernels: ''), the modes are to be taught
         self.path = Path(values["imu_calibration_path"]).expanduser() if values["imu_calibration_path"] else \
             calibration_path_for(lib.path, lib.name) if lib is not None else calibration_path_for(None, TAUGHT_LIBRARY)
         saved = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
@@ -112,7 +112,7 @@ class ImuInput:
         frames = list(values["imu_frame_ids"])
         if len(frames) != N_CHANNELS:
             raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
-        back = node._guard.restart_back_s  # a sensor restarts where the node's stream does
+        back = node.stream.guard.restart_back_s  # a sensor restarts where the node's stream does
         self.inputs = [SensorInput(None, f.strip(), fusion, back)  # raw: rate from stamps
                        for f, fusion in zip(frames, FUSION_BY_CHANNEL, strict=True)]
         self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
@@ -136,7 +136,7 @@ class ImuInput:
             node.create_subscription(Imu, topic, lambda msg, i=i: self._on_imu(i, msg), qos, raw=True)
             for i, topic in enumerate(topics)
         ]
-        self._srv = node.create_service(Trigger, CALIBRATE_STANDING_SERVICE, self._calibrate_standing)
+        self._srv = node.create_service(Trigger, CALIBRATE_STANDING_SERVICE, self.calibrate_standing)
         log = node.get_logger()
         if saved is not None:
             log.info(f"IMU calibration from {self.path if from_file else 'the configured axes'}: {saved.summary()}")
@@ -186,7 +186,7 @@ class ImuInput:
         pairer = self.pairer
         unpaired = pairer.unpaired
         for sample_ns, items in pairer.push(sensor, stamp_ns, item):
-            self._sample(sample_ns, items, t0)
+            self.paired(sample_ns, items, t0)
         if pairer.unpaired == unpaired:
             return
         waiting = [c for c, q in zip(CHANNELS, pairer.queues, strict=True) if not q]
@@ -194,50 +194,44 @@ class ImuInput:
                else "a message without partners within the pairing tolerance")
         for _ in range(pairer.unpaired - unpaired):
             self.rejected[UNPAIRED] += 1
-            node._reject(SampleRejected(UNPAIRED, f"{why} (dropped so far: {dict(pairer.dropped)})"))
+            node.reject(SampleRejected(UNPAIRED, f"{why} (dropped so far: {dict(pairer.dropped)})"), received=False)
 
     def _rejected(self, sensor: int, exc: SampleRejected) -> None:
         """Count and log (throttled) a dropped message of ``sensor``."""
-        node = self.node
         self.rejected[exc.reason] += 1
-        node._received += 1
-        node._period_received += 1
-        node._reject(SampleRejected(exc.reason, f"{CHANNELS[sensor]}: {exc}"))
+        self.node.reject(SampleRejected(exc.reason, f"{CHANNELS[sensor]}: {exc}"))
 
     def _drop_raw(self, why: str) -> None:
         """Count a raw message that cannot be fused; say why once (an error, not a warning per
         message: every raw message will fail the same way until the extra is installed)."""
         node = self.node
         self.rejected[NO_FUSION] += 1
-        node._received += 1
-        node._period_received += 1
-        node._period_rejected += 1
-        node._guard.reject(SampleRejected(NO_FUSION, why))
+        node.stream.reject(SampleRejected(NO_FUSION, why))
         if not self.no_fusion:
             self.no_fusion = why
             node.get_logger().error(f"{why}; until then raw messages are dropped (counted as {NO_FUSION})")
 
-    def _sample(self, stamp_ns: int, items: list, t0: float) -> None:
-        node = self.node
-        node._received += 1
-        node._period_received += 1
+    def paired(self, stamp_ns: int, items: list, t0: float) -> None:
+        """One paired sample (``ImuPairer``): its angles, once calibrated, to the node's stream."""
+        stream = self.node.stream
+        stream.count_received()
         self._t0 = t0
         last, self._last_ns = self._last_ns, stamp_ns
         if last is not None:
-            gap_s = node._config.calibration_reset_gap_s
+            gap_s = stream.config.calibration_reset_gap_s
             if gap_s > 0 and stamp_ns - last > gap_s * 1e9:
                 self._recheck(f"gap of {(stamp_ns - last) * 1e-9:.3f} s in IMU stamps > calibration_reset_gap_s {gap_s:g} s")
-            elif last - stamp_ns > node._guard.restart_back_s * 1e9:
+            elif last - stamp_ns > stream.guard.restart_back_s * 1e9:
                 self._recheck(f"IMU stamps jumped back by {(last - stamp_ns) * 1e-9:.3f} s (a restarted stream)")
         self.angles.sample(stamp_ns, items, self._emit)
 
     def _emit(self, angles: tuple[float, ...], stamp_ns: int) -> None:
         """The angles of a sample, to the node's estimator."""
         node = self.node
-        est = node._estimator
+        est = node.stream.estimator
         if est is not None and est.personaliser is not None:  # kernels learn only from angles known to be right
             est.pause_adaptation(self.calibrator.checking or bool(self.check_problem))
-        node._process(angles, Stamp(*divmod(stamp_ns, 1_000_000_000)), self._t0)
+        node.take_angles(angles, Stamp(*divmod(stamp_ns, 1_000_000_000)), self._t0, counted=True)
 
     def _biases_measured(self, biases_dps: Sequence[Vec3]) -> None:
         self.node.get_logger().info("IMU gyro bias measured at the standing pose (deg/s): " + "; ".join(
@@ -254,10 +248,9 @@ class ImuInput:
             log.info(f"IMU calibration from {source} checked on the walking: {found.summary()}")
         elif self.from_file:
             self._forget()
-            if node._estimator is not None:  # its window and learnt offsets came from wrong angles
-                node._estimator.reset_calibration()
-                node._estimator.reset()
-            node._teacher.drop_strides("the IMU calibration did not fit")
+            node.stream.reset_calibration()  # its window and learnt offsets came from wrong angles
+            node.stream.drop_strides("the IMU calibration did not fit")
+            node.log_events()
             if self.configured:  # the configured axes take over; the file would be read again at the next start
                 try:
                     self.path.unlink(missing_ok=True)
@@ -304,7 +297,7 @@ class ImuInput:
 
     # -----------------------------------------------------------------------------------------
 
-    def _calibrate_standing(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def calibrate_standing(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         relearn = self.calibrator.checking
         self.calibrator.request_standing()
         response.success = True
