@@ -4,15 +4,17 @@ per-sample timing of the last second."""
 
 from __future__ import annotations
 
-import array
 import math
 import time
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import InvalidHandle
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from .outputs import OUTPUT_QOS, QUIET, double_array
 from .priority import process_priority
 
 DIAGNOSTICS_TOPIC = "/diagnostics"
@@ -30,20 +32,17 @@ MAX_PROFILE_ROWS = 20_000
 """Most ``~/profile`` rows kept per diagnostics period (later samples are not profiled)."""
 
 
-def double_array(values: np.ndarray) -> array.array:
-    """float64 numpy -> array('d') without a per-element Python loop (the fast message setter)."""
-    out = array.array("d")
-    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
-    return out
-
-
 class NodeDiagnostics:
     """``/diagnostics`` and ``~/profile`` of ``node`` (an EstimatorNode: its public state and its
     stream's counters); ``record`` takes each sample's timing."""
 
-    def __init__(self, node: Any, profile_pub: Any) -> None:
+    def __init__(self, node: Any) -> None:
         self.node = node
-        self.profile_pub = profile_pub
+        self.diagnostics_pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, OUTPUT_QOS, event_callbacks=QUIET)
+        self.profile_pub = node.create_publisher(Float64MultiArray, PROFILE_TOPIC, OUTPUT_QOS, event_callbacks=QUIET)
+        # Diagnostics describe the process (rates, processing time), so they run on the steady
+        # clock: they keep coming while simulated time is paused.
+        node.create_timer(DIAGNOSTICS_PERIOD_S, self.publish, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.profile: list[tuple[int, int, int, int, int, int]] | None = None  # rows while subscribed
         self._start = time.monotonic()
         self._sum = self._max = 0.0
@@ -160,6 +159,18 @@ class NodeDiagnostics:
                 level, message = DiagnosticStatus.WARN, "; ".join(imu[1]) + "; " + message
         return DiagnosticStatus(level=level, name=name, message=message, hardware_id="",
                                 values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+    def publish(self) -> None:
+        """The timer's callback: ``/diagnostics``, then the period's ``~/profile`` rows."""
+        try:
+            msg = DiagnosticArray()
+            msg.header.stamp = self.node.get_clock().now().to_msg()
+            msg.status = [self.status()]
+            self.diagnostics_pub.publish(msg)
+            self.publish_profile()
+        except (RuntimeError, InvalidHandle):
+            if self.node.context.ok():
+                raise  # (a timer event can still be dispatched after the context shut down)
 
     def publish_profile(self) -> None:
         """Publish the period's ``~/profile`` rows; record the next period's only while
