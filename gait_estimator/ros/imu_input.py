@@ -1,6 +1,6 @@
 """``input_type: imu`` for ``estimator_node``: four ``sensor_msgs/Imu`` topics -> segment angles.
 
-Each message becomes its sensor's up direction (``io/imu_stream.py``: from the orientation, or from
+Each message becomes its sensor's up direction (``core/imu_pairing.py``: from the orientation, or from
 gyro + accelerometer when ``orientation_covariance[0] == -1``); the four streams are paired by stamp
 (``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting calibration
 (``core/imu_angles.ImuAngles``, which learns or checks it on the way; this module saves and logs what
@@ -44,18 +44,11 @@ from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, Segm
 from ..core.imu_angles import ImuAngles
 from ..core.imu_calibrator import ImuCalibrator
 from ..core.imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
+from ..core.imu_pairing import DEFAULT_TOLERANCE_S, UNPAIRED, ImuPairer, SensorInput
 from ..core.teach import TAUGHT_LIBRARY
 from ..io.cdr import CdrError, Stamp, read_imu
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
-from ..io.imu_stream import (
-    DEFAULT_TOLERANCE_S,
-    UNPAIRED,
-    ImuPairer,
-    SensorInput,
-    calibration_path_for,
-    load_calibration,
-    save_calibration,
-)
+from ..io.imu_stream import calibration_path_for, load_calibration, save_calibration
 from ..io.stream import MALFORMED, SampleRejected
 
 CALIBRATE_STANDING_SERVICE = "~/calibrate_standing"
