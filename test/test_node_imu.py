@@ -258,15 +258,15 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
                                   s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
 
     imu, adapter = node.imu, node.stream.estimator.adapter
-    assert imu.from_file and imu.calibrator.checking
+    assert imu.flow.from_file and imu.calibrator.checking
     for stamp, k in samples:
         imu.paired(stamp, items(stamp, k), time.perf_counter())
         if k == round(9.0 * RATE):
-            assert not path.exists() and not imu.from_file, "the file gave way after the first check"
+            assert not path.exists() and not imu.flow.from_file, "the file gave way after the first check"
             assert imu.calibrator.calibration == right and imu.calibrator.checking
             assert set(adapter.skipped) == {"unchecked"}, "no stride of unchecked angles reached the kernels"
     assert adapter.skipped["warmup"] >= 2, "checked, the strides are personalised again"
-    assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within") and not imu.check_problem
+    assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within") and not imu.flow.check_problem
     # ~/calibrate_standing before the file's verdict: the configured axes take over, and their
     # verdict is theirs (the file, never checked, is kept for the next start)
     path = save_calibration(turned(right, 0, 90.0), path)
@@ -275,7 +275,7 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
     assert "then walk 4 s" in imu.calibrate_standing(Trigger.Request(), Trigger.Response()).message
     for stamp, k in samples:
         imu.paired(stamp, items(stamp, k), time.perf_counter())
-    assert not imu.from_file and imu.calibrator.calibration == right and path.exists()  # orientations: no bias
+    assert not imu.flow.from_file and imu.calibrator.calibration == right and path.exists()  # orientations: no bias
     assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within")
 
 
@@ -309,7 +309,7 @@ def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path)
             angles.append(cal.angles_deg([i[0] for i in items]) if cal else (math.nan,) * 4)
             if t < 1.5:
                 assert not any(any(i.gyro_bias_dps) for i in imu.inputs), "no bias before the standing"
-        assert not imu.from_file and not path.exists(), "the misfit file gave way" if saved else "no file"
+        assert not imu.flow.from_file and not path.exists(), "the misfit file gave way" if saved else "no file"
         assert imu.calibrator.calibration.mounts[0].lateral == right.mounts[0].lateral
         got = np.array([i.gyro_bias_dps for i in imu.inputs])
         assert np.abs(got - true_bias).max() < 0.1, (saved, got, true_bias)
@@ -376,8 +376,8 @@ def test_benchmarks_replay_of_the_live_calibration_is_the_nodes(ros, tmp_path, m
     node = ros(58).estimator(input_type="imu", imu_calibration_path=str(tmp_path / "user.imu.yaml"),
                              **live.VIRTUAL_AXES)
     seen = []
-    monkeypatch.setattr(node, "take_angles", lambda angles, stamp, t0, counted=False: seen.append(
-        (stamp.sec * 1_000_000_000 + stamp.nanosec, tuple(angles))))
+    monkeypatch.setattr(node, "publish_outputs", lambda outputs, t0: seen.extend(
+        (o[0].sec * 1_000_000_000 + o[0].nanosec, tuple(o[1])) for o in outputs if isinstance(o, tuple)))
     imu, zero = node.imu, (0.0, 0.0, 0.0)
     for k in range(len(t)):
         stamp = live.BASE_NS + round(float(t[k]) * 1e9)

@@ -14,13 +14,14 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, replace
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
 from .channels import Sample
 from .errors import GaitEstimatorError
 from .estimator import Estimator, EstimatorConfig
+from .imu_flow import IMU_NOT_FIT, NO_FUSION, ImuFlow
 from .kernels import KernelLibrary, make_mode
 from .stamps import SampleRejected, StreamGuard, restart_threshold
 from .strides import MAX_STRIDE_S
@@ -46,6 +47,17 @@ REPLAY_MARGIN_S = 0.5
 class Stamp(Protocol):
     sec: int
     nanosec: int
+
+
+class SampleStamp(NamedTuple):
+    """A paired IMU sample's stamp, as a message's ``header.stamp``."""
+
+    sec: int
+    nanosec: int
+
+
+Output = tuple[Stamp, Sample, Estimate | None] | SampleRejected
+"""What ``push_imu`` gives per sample or dropped message, in order."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +117,9 @@ class GaitStream:
         self._origin: float | None = None
         self._replay_for: tuple[object, object] = (None, None)
         self._replay_s = 0.0
+        self.imu: ImuFlow | None = None
+        """The four-IMU flow (``attach_imu``), None for angle input."""
+        self._imu_out: list[Output] = []
         if library is None:
             self._warm_up()
 
@@ -187,8 +202,61 @@ class GaitStream:
 
     def take_events(self) -> list[StreamEvent]:
         """The events so far; the list starts again empty."""
-        events, self.events = self.events, []
+        events = list(self.events)
+        self.events.clear()
         return events
+
+    # -- four IMUs
+
+    def attach_imu(self, flow: ImuFlow) -> None:
+        """Take four-IMU input through ``flow`` (``push_imu``); its events join ``events``."""
+        self.imu = flow
+        flow.on_event = self._imu_event
+        flow.set_restart_back(self.guard.restart_back_s)
+
+    def _imu_event(self, kind: str, line: str) -> None:
+        self.events.append(StreamEvent(kind, line, warn=kind == IMU_NOT_FIT))  # the caller knows the others' levels
+
+    def push_imu(self, sensor: int, stamp_ns: int, orientation: Any, cov0: float, gyro: Any, acc: Any,
+                 frame_id: str) -> list[Output]:
+        """One decoded Imu message of ``sensor`` (CHANNELS index): what it gave, in order, each a
+        counted SampleRejected or a paired sample's (stamp, angles, estimate or None)."""
+        flow = self.imu
+        assert flow is not None
+        before = flow.pairer.unpaired
+        try:
+            paired = flow.convert(sensor, stamp_ns, orientation, cov0, gyro, acc, frame_id)
+        except SampleRejected as exc:
+            self.reject(exc)
+            return [exc] if exc.reason != NO_FUSION else []  # said once, as an event
+        out = [o for ns, items in paired for o in self.push_paired(ns, items)]
+        for exc in flow.unpaired(before):
+            self.reject(exc, received=False)
+            out.append(exc)
+        return out
+
+    def push_paired(self, stamp_ns: int, items: list) -> list[Output]:
+        """One paired IMU sample (``ImuPairer``): its angles, once calibrated, through ``push``."""
+        flow = self.imu
+        assert flow is not None
+        self.count_received()
+        out = self._imu_out = []
+        flow.sample(stamp_ns, items, self.config.calibration_reset_gap_s, self.guard.restart_back_s, self._emit)
+        if flow.not_fit:  # the window and learnt offsets came from wrong angles, the strides too
+            flow.not_fit = False
+            self.reset_calibration()
+            self.drop_strides("the IMU calibration did not fit")
+        return out
+
+    def _emit(self, angles: Sample, stamp_ns: int) -> None:
+        est = self.estimator
+        if est is not None and est.personaliser is not None:  # kernels learn only from angles known to be right
+            est.pause_adaptation(self.imu is not None and self.imu.unchecked)
+        stamp = SampleStamp(*divmod(stamp_ns, 1_000_000_000))
+        try:
+            self._imu_out.append((stamp, angles, self.push(stamp, angles, counted=True)))
+        except SampleRejected as exc:
+            self._imu_out.append(exc)
 
     def take_period(self) -> Period:
         """Counts since the previous call."""
@@ -237,6 +305,8 @@ class GaitStream:
         differ only in GAP_OPTIONS, which the estimator takes keeping its window."""
         self.config = config
         self.guard.restart_back_s = restart_threshold(config.max_gap_s)
+        if self.imu is not None:  # a sensor restarts where the stream does
+            self.imu.set_restart_back(self.guard.restart_back_s)
         if gaps_only and self.estimator is not None:
             self.estimator.set_gap_options(config)
 

@@ -39,8 +39,9 @@ from std_msgs.msg import Float64MultiArray
 from ..core.channels import Sample
 from ..core.errors import GaitEstimatorError
 from ..core.estimator import EstimatorConfig
-from ..core.gait_stream import GaitStream
+from ..core.gait_stream import GaitStream, Output
 from ..core.kernels import KernelLibrary
+from ..core.supervisor import Estimate
 from ..io.cdr import CdrError, Stamp, read_joint_state
 from ..io.outputs import INPUT_TOPIC
 from ..io.stream import ANGLE_MESSAGE_ONLY, MALFORMED, REASONS, AngleExtractor, SampleRejected
@@ -90,11 +91,15 @@ class EstimatorNode(Node):
                                      units=None if self.input_type == "imu" else self.units)
             self.imu: Any = None
             self._extract = AngleExtractor(tuple(get("joint_names").value), self.units)
-            self._log = StreamLog(self.get_logger(), "dropped IMU input: " if self.input_type == "imu" else "")
+            self._log = StreamLog(self.get_logger(), "dropped IMU input: ")
             self.add_post_set_parameters_callback(self._parameters_set)  # called after those added below
             self.parameters.attach(self.stream)
             TeachParameters(self, self.stream)
-        except (GaitEstimatorError, ValueError) as exc:
+            if self.input_type == "imu":  # four sensor_msgs/Imu subscriptions (ros/imu_input.py)
+                from .imu_input import ImuInput
+
+                self.imu = ImuInput(self, INPUT_QOS)
+        except (GaitEstimatorError, ParameterException, ValueError) as exc:
             self.destroy_node()
             raise StartupError(one_line(exc)) from None
         self.max_batch = MAX_BATCH
@@ -102,10 +107,7 @@ class EstimatorNode(Node):
         self.outputs = EstimateOutputs(self)
         self.diagnostics = NodeDiagnostics(self)
         self.library_changed()
-        if self.input_type == "imu":
-            self.imu = self._start_imu_input()
-            self._sub = self.imu.subscriptions[0]
-        else:
+        if self.imu is None:
             msg_type = JointState if self.input_type == "joint_state" else Float64MultiArray
             self._handle = self._handle_joint_state if msg_type is JointState else self._handle_array
             self._sub = self.create_subscription(
@@ -113,8 +115,7 @@ class EstimatorNode(Node):
                 qos_overriding_options=QoSOverridingOptions.with_default_policies(),
                 raw=msg_type is JointState)  # read from the CDR bytes (io/cdr.py): no message objects
         self.input_topics = ", ".join(sub.topic_name for sub in (self.imu.subscriptions if self.imu else [self._sub]))
-        if self.imu is None:
-            self._log.source = f"dropped sample on {self.input_topics}: "
+        self._log.source = "dropped IMU input: " if self.imu else f"dropped sample on {self.input_topics}: "
         NodeServices(self)
         lib = self.stream.library
         self.get_logger().info(
@@ -128,23 +129,11 @@ class EstimatorNode(Node):
         if get("thread_priority").value:
             set_priority(self, get("thread_priority").value)
 
-    def _start_imu_input(self) -> Any:
-        """``input_type: imu``: four sensor_msgs/Imu subscriptions (ros/imu_input.py)."""
-        from .imu_input import ImuInput
-
-        try:
-            return ImuInput(self, INPUT_QOS)
-        except (GaitEstimatorError, ParameterException) as exc:
-            self.destroy_node()
-            raise StartupError(one_line(exc)) from None
-
     def _parameters_set(self, params: list[Parameter]) -> None:
         if {p.name for p in params} & {"joint_names", "input_units"}:
             self.units = self.get_parameter("input_units").value
             self._extract = AngleExtractor(tuple(self.get_parameter("joint_names").value), self.units)
             self.stream.set_units(None if self.imu is not None else self.units)
-        if self.imu is not None:  # a sensor restarts where the stream does
-            self.imu.set_restart_back(self.stream.guard.restart_back_s)
         self.log_events()  # what a teach or library parameter did
 
     def library_changed(self) -> None:
@@ -216,24 +205,32 @@ class EstimatorNode(Node):
             return
         self.take_angles(angles, stamp, t0)
 
-    def take_angles(self, angles_deg: Sample, stamp: TimeMsg | Stamp, t0: float, counted: bool = False) -> None:
-        """A decoded sample to the stream, its estimate published; ``t0`` = callback start
-        (perf_counter); ``counted``: already counted as received (``GaitStream.push``)."""
-        stream = self.stream
-        est = stream.estimator
+    def take_angles(self, angles_deg: Sample, stamp: TimeMsg | Stamp, t0: float) -> None:
+        """A decoded sample to the stream, its estimate published; ``t0`` = callback start."""
         try:
-            estimate = stream.push(stamp, angles_deg, counted)
+            estimate = self.stream.push(stamp, angles_deg)
         except SampleRejected as exc:
             self._log.rejected(exc)
             return
+        self._publish(stamp, angles_deg, estimate, t0)
+
+    def publish_outputs(self, outputs: list[Output], t0: float) -> None:
+        """What ``GaitStream.push_imu`` gave: dropped inputs logged, estimates published."""
+        for out in outputs:
+            if isinstance(out, SampleRejected):
+                self._log.rejected(out)
+            else:
+                self._publish(*out, t0)
+        if self.stream.events:
+            self.log_events()
+
+    def _publish(self, stamp: Any, angles_deg: Sample, estimate: Estimate | None, t0: float) -> None:
         if estimate is not None:
             t1 = time.perf_counter()
             self.outputs.publish(estimate, stamp)
-            self.outputs.angles.add(stamp, angles_deg, est.sensor_offset_deg)
-            if stream.events:
-                self.log_events()
+            self.outputs.angles.add(stamp, angles_deg, self.stream.estimator.sensor_offset_deg)
             self.diagnostics.record(stamp, t0, t1, time.perf_counter())
-        elif stream.events:
+        if self.stream.events:
             self.log_events()
 
     def reject(self, exc: SampleRejected, received: bool = True) -> None:
@@ -244,7 +241,8 @@ class EstimatorNode(Node):
     def log_events(self) -> None:
         """Log what the stream reports; when teaching ended, lay the outputs out for the new
         library and set ``teach_mode`` back to ''."""
-        if self._log.events(self.stream.take_events()):
+        events = self.stream.take_events()
+        if self._log.events(self.imu.handle(events) if self.imu is not None else events):
             self.library_changed()
             self.set_parameters([Parameter("teach_mode", value="")])
 
