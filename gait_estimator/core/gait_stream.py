@@ -21,6 +21,7 @@ import numpy as np
 from .channels import Sample
 from .errors import GaitEstimatorError
 from .estimator import Estimator, EstimatorConfig
+from .gaps import NO_GAP
 from .imu_flow import IMU_NOT_FIT, NO_FUSION, ImuFlow
 from .kernels import KernelLibrary, make_mode
 from .stamps import SampleRejected, StreamGuard, restart_threshold
@@ -104,7 +105,7 @@ class GaitStream:
         self.received = 0
         self._resets_before = 0  # window restarts of estimators swapped out
         self._epoch_sec: int | None = None
-        self._period = [0, 0, 0]  # received, rejected, accepted
+        self._period_received = self._period_rejected = self._period_accepted = 0
         self._first: float | None = None
         self._last: float | None = None
         self.teaching: StrideCollector | None = None
@@ -138,7 +139,7 @@ class GaitStream:
         one. ``counted``: the input was already counted as received (``count_received``)."""
         if not counted:
             self.received += 1
-            self._period[0] += 1
+            self._period_received += 1
         t = self.seconds(stamp)
         guard = self.guard
         prev = guard.last_stamp
@@ -162,13 +163,13 @@ class GaitStream:
             self.events.append(StreamEvent(UNITS, f"input_units {self.units}: {units.problem}", warn=True))
         estimate = est.update(t, angles_deg)
         gap = est.last_gap
-        if gap.restart_window or gap.reset_calibration:
+        if gap is not NO_GAP:
             self._gap_events(t - (prev if prev is not None else t), gap.restart_window, gap.reset_calibration)
         self.last_estimate = estimate
         if self._first is None:
             self._first = t
         self._last = t
-        self._period[2] += 1
+        self._period_accepted += 1
         self._teach(t, angles_deg)  # may swap the library and the estimator
         return estimate
 
@@ -187,7 +188,7 @@ class GaitStream:
         """An input that will reach ``push`` with ``counted=True`` or nowhere (an IMU sample
         while the calibration is learnt)."""
         self.received += 1
-        self._period[0] += 1
+        self._period_received += 1
 
     def reject(self, exc: SampleRejected, received: bool = True) -> None:
         """Count an input dropped before ``push`` (undecodable, a missing joint, ...);
@@ -197,7 +198,7 @@ class GaitStream:
         self._count_rejection(exc)
 
     def _count_rejection(self, exc: SampleRejected) -> None:
-        self._period[1] += 1
+        self._period_rejected += 1
         self.guard.reject(exc)
 
     def take_events(self) -> list[StreamEvent]:
@@ -260,9 +261,10 @@ class GaitStream:
 
     def take_period(self) -> Period:
         """Counts since the previous call."""
-        (received, rejected, accepted), first, last = self._period, self._first, self._last
-        self._period, self._first, self._last = [0, 0, 0], None, None
-        return Period(received, rejected, accepted, first, last)
+        period = Period(self._period_received, self._period_rejected, self._period_accepted, self._first, self._last)
+        self._period_received = self._period_rejected = self._period_accepted = 0
+        self._first = self._last = None
+        return period
 
     # -- state
 
