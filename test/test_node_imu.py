@@ -32,9 +32,12 @@ from gait_estimator.core import ahrs
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, ImuCalibration, SegmentMount
 from gait_estimator.core.imu_learn import learn_calibration
+from gait_estimator.io.as_node import predict_as_node
 from gait_estimator.io.cdr import read_imu
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import ImuPairer, SensorInput, load_calibration, save_calibration
+from gait_estimator.io.outputs import estimate_array
+from gait_estimator.io.read_options import ReadOptions
 from gait_estimator.io.recording import Recording
 from gait_estimator.ros.imu_input import CALIBRATE_STANDING_SERVICE, NO_FUSION
 from gait_estimator.ros.node import RESET_CALIBRATION_SERVICE, SAVE_LIBRARY_SERVICE, StartupError
@@ -426,6 +429,8 @@ def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_
         pytest.skip(f"Imu messages lost on the way to the node (received {received} of {len(msgs)} each)")
     assert idx.size == len(rec)
     assert_same_trace(client.received.trace(lib.mode_names), offline(rec.angles_deg, lib, rec.stamp_ns))
+    as_node, _ = predict_as_node(bag, lib, options=ReadOptions(imu_calibration=path))  # the node's way offline
+    np.testing.assert_array_equal(np.array(client.received.estimate_values), estimate_array(as_node.trace))
 
 
 def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_input(ros, tmp_path, capfd):

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from ros_helpers import BASE_NS, in_process_factory, load_multispeed
 
+from gait_estimator.io.as_node import predict_as_node
 from gait_estimator.io.bag_write import write_input_bag
 from gait_estimator.io.outputs import estimate_array
-from gait_estimator.io.process import predict_as_node
 from gait_estimator.ros.player import playlist_from_bag
 
 

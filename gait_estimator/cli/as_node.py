@@ -12,7 +12,8 @@ from ..core.options import EstimatorConfig
 
 
 def process_as_node(args: argparse.Namespace, lib: KernelLibrary, config: EstimatorConfig, options: dict[str, Any]) -> int:
-    from ..io.process import format_summary, predict_as_node, write_predictions_csv
+    from ..io.as_node import predict_as_node
+    from ..io.process import format_summary, write_predictions_csv
     from ..io.read_options import ReadOptions
 
     for flag, given in (("--start", args.start), ("--stop", args.stop), ("--out-bag", args.out_bag),

@@ -14,15 +14,16 @@ delete) comes back as ``StreamEvent`` through ``on_event``.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from .channels import CHANNELS, N_CHANNELS
-from .imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, Vec3
+from .imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount, Vec3
 from .imu_angles import ImuAngles
 from .imu_calibrator import ImuCalibrator
-from .imu_learn import STILL_S, WALK_S, CalibrationCheck
+from .imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
 from .imu_pairing import UNPAIRED, ImuPairer, SensorInput
 from .stamps import SampleRejected
 
@@ -41,6 +42,10 @@ IMU_NO_FUSION = "imu_no_fusion"
 """Event: raw messages cannot be fused (the fusion extra is missing); an error line, once."""
 
 
+def _ignore(_kind: str, _line: str) -> None:
+    return None
+
+
 class ImuFlow:
     """See the module docstring.
 
@@ -53,20 +58,20 @@ class ImuFlow:
         tolerance_s: Largest stamp spread of the four messages of one sample.
         restart_back_s: A jump back of more than this (s) is a restarted sensor or stream.
         path: The calibration file's name, for the lines about a calibration from it.
-        on_event: Called with (kind, line) of what is worth a log line.
+        on_event: Called with (kind, line) of what is worth a log line (``GaitStream.attach_imu`` sets it).
     """
 
     def __init__(self, lateral: list[Vec3 | None], proximal: list[Vec3 | None], standing_deg: list[float],
                  saved: ImuCalibration | None, *, from_file: bool, configured: bool, frames: Sequence[str],
                  tolerance_s: float, restart_back_s: float, path: str,
-                 on_event: Callable[[str, str], None]) -> None:
+                 on_event: Callable[[str, str], None] | None = None) -> None:
         self.inputs = [SensorInput(None, f.strip(), fusion, restart_back_s)  # raw: rate from stamps
                        for f, fusion in zip(frames, FUSION_BY_CHANNEL, strict=True)]
         self.pairer = ImuPairer(tolerance_s)
         self.from_file = from_file
         self.configured = configured
         self.path = path
-        self.on_event = on_event
+        self.on_event: Callable[[str, str], None] = on_event or _ignore
         self.calibrator = ImuCalibrator(lateral, proximal, standing_deg, saved, check=True)
         self.check_problem = ""
         """Configured axes that do not fit the walking (they stay in use): the check's line."""
@@ -79,6 +84,27 @@ class ImuFlow:
         self.no_fusion = ""
         """Why raw messages (no orientation) cannot be used: the fusion extra is missing."""
         self._last_ns: int | None = None  # stamp of the last paired sample
+
+    @classmethod
+    def from_settings(cls, lateral_axes: Sequence[str], proximal_axes: Sequence[str], standing_deg: Sequence[float],
+                      from_file: ImuCalibration | None, *, frames: Sequence[str], tolerance_s: float,
+                      restart_back_s: float, path: str) -> ImuFlow:
+        """A flow from the node's settings: axis names per segment ('' = learn), standing angles,
+        a calibration read from ``path`` (None: none there). Configured axes with no file are the
+        calibration (nothing to learn, checked on the first walking). CalibrationError (one line)
+        for invalid settings."""
+        lateral, proximal = check_configured(list(lateral_axes), list(proximal_axes))
+        standing = [float(v) for v in standing_deg]
+        if len(standing) != N_CHANNELS or not all(math.isfinite(v) and abs(v) <= 90 for v in standing):
+            raise CalibrationError(f"imu_standing_angles_deg: needs {N_CHANNELS} angles within +-90 deg")
+        if len(frames) != N_CHANNELS:
+            raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
+        configured = all(a is not None for a in lateral) and all(p is not None for p in proximal)
+        saved = from_file
+        if saved is None and configured:  # nothing to learn (and nothing to save)
+            saved = ImuCalibration(tuple(SegmentMount(a, p, d) for a, p, d in zip(lateral, proximal, standing, strict=True)))
+        return cls(lateral, proximal, standing, saved, from_file=from_file is not None, configured=configured,
+                   frames=frames, tolerance_s=tolerance_s, restart_back_s=restart_back_s, path=path)
 
     def set_restart_back(self, seconds: float) -> None:
         """A jump back of more than ``seconds`` is a restarted sensor (the stream's threshold)."""

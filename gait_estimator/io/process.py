@@ -5,20 +5,15 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from ..core.channels import sample_values
-from ..core.errors import RecordingError, missing_extra
-from ..core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator, trace_from_estimates
+from ..core.errors import missing_extra
+from ..core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator
 from ..core.kernels import RESERVED_MODE_NAMES, KernelLibrary
-from ..core.stamps import MALFORMED, SampleRejected
-from ..core.supervisor import Estimate
 from .atomic import atomic_open
 from .library_io import load_library
 from .outputs import Predictions
-from .read_options import ReadOptions
 from .readers import read_recording
 from .recording import Recording
 from .resources import DEFAULT_LIBRARY
@@ -41,41 +36,6 @@ def predict(recording: Recording, library: KernelLibrary, config: EstimatorConfi
     est = Estimator(library, config, stamped=not recording.time_from_rate)
     trace = run_estimator(est, recording.time_s, recording.angles_deg, recording.index)
     return Predictions(trace.time_s, trace.sample, trace, est.adapted_library() if est.adapter else None)
-
-
-def predict_as_node(path: str | Path, library: KernelLibrary, config: EstimatorConfig | None = None,
-                    options: ReadOptions | None = None) -> tuple[Predictions, Any]:
-    """The node's way over a bag of angles: every message of its angle topic through one
-    ``GaitStream`` (``core/gait_stream.py``), as ``estimator_node`` takes it live (a stamp
-    jumping back restarts the stream instead of being dropped; a Float64MultiArray is timed by
-    its log time, as the node times it on arrival). One prediction per accepted message; the
-    stream keeps the counts and the events."""
-    from ..core.gait_stream import GaitStream, SampleStamp  # (imports core/teach: not at package import)
-    from .bag import JOINT_STATE, bag_samples
-
-    o = options or ReadOptions()
-    cfg = config or EstimatorConfig()
-    rows: list[tuple[int, Estimate]] = []
-    stamps: list[int] = []
-    with bag_samples(path, o) as (msgtype, samples):
-        stream = GaitStream(library, cfg, stamped=msgtype == JOINT_STATE, units=o.input_units)
-        for i, _log_ns, stamp_ns, _zero, sample in samples:
-            if sample is None or isinstance(sample, SampleRejected):
-                stream.reject(sample or SampleRejected(MALFORMED, "undecodable CDR"))
-                continue
-            try:
-                estimate = stream.push(SampleStamp(*divmod(stamp_ns, 1_000_000_000)), sample_values(sample))
-            except SampleRejected:
-                continue
-            if estimate is not None:
-                rows.append((i, estimate))
-                stamps.append(stamp_ns)
-    if not rows:
-        raise RecordingError(f"{path}: no usable samples")
-    trace = trace_from_estimates(library.mode_names, rows)
-    est = stream.estimator
-    adapted = est.adapted_library() if est is not None and est.adapter is not None else None
-    return Predictions((np.array(stamps) - stamps[0]) * 1e-9, trace.sample, trace, adapted), stream
 
 
 def run_recording(source: str | Path | Recording, kernels: str | Path | KernelLibrary = DEFAULT_LIBRARY,

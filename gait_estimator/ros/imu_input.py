@@ -39,9 +39,9 @@ from std_srvs.srv import Trigger
 from ..core.ahrs import warm_up
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.gait_stream import StreamEvent
-from ..core.imu import CalibrationError, ImuCalibration, SegmentMount
+from ..core.imu import CalibrationError
 from ..core.imu_flow import IMU_INFO, IMU_LEARNT, IMU_NO_FUSION, IMU_NOT_FIT, IMU_WRONG_AXES, NO_FUSION, ImuFlow
-from ..core.imu_learn import STILL_S, WALK_S, check_configured
+from ..core.imu_learn import STILL_S, WALK_S
 from ..core.imu_pairing import DEFAULT_TOLERANCE_S
 from ..core.teach import TAUGHT_LIBRARY
 from ..io.cdr import CdrError, read_imu
@@ -82,32 +82,21 @@ class ImuInput:
         topics = list(values["imu_topics"])
         if len(topics) != N_CHANNELS or not all(t.strip() for t in topics):
             raise CalibrationError(f"imu_topics: needs {N_CHANNELS} topic names ({', '.join(CHANNELS)})")
-        lateral, proximal = check_configured(list(values["imu_lateral_axes"]), list(values["imu_proximal_axes"]))
-        standing = [float(v) for v in values["imu_standing_angles_deg"]]
-        if len(standing) != N_CHANNELS or not all(math.isfinite(v) and abs(v) <= 90 for v in standing):
-            raise CalibrationError(f"imu_standing_angles_deg: needs {N_CHANNELS} angles within +-90 deg")
         for name in ("imu_pairing_tolerance_s", "imu_timeout_s"):
             if not (math.isfinite(values[name]) and values[name] >= 0):
                 raise CalibrationError(f"{name}: must be >= 0 s, got {values[name]!r}")
         lib = node.stream.library  # None: no library yet (kernels: ''), the modes are to be taught
         self.path = Path(values["imu_calibration_path"]).expanduser() if values["imu_calibration_path"] else \
             calibration_path_for(lib.path, lib.name) if lib is not None else calibration_path_for(None, TAUGHT_LIBRARY)
-        saved = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
-        self.configured = all(a is not None for a in lateral) and all(p is not None for p in proximal)
-        from_file = saved is not None
-        if saved is None and self.configured:  # nothing to learn (and nothing to save)
-            saved = ImuCalibration(tuple(SegmentMount(a, p, d) for a, p, d in zip(lateral, proximal, standing, strict=True)))
+        from_file = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
         self.timeout_s = float(values["imu_timeout_s"])
-        frames = list(values["imu_frame_ids"])
-        if len(frames) != N_CHANNELS:
-            raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
-        self.pairing_tolerance_s = float(values["imu_pairing_tolerance_s"])
+        self.flow = ImuFlow.from_settings(
+            values["imu_lateral_axes"], values["imu_proximal_axes"], values["imu_standing_angles_deg"], from_file,
+            frames=list(values["imu_frame_ids"]), tolerance_s=float(values["imu_pairing_tolerance_s"]),
+            restart_back_s=node.stream.guard.restart_back_s, path=str(self.path))
+        self.configured = self.flow.configured
+        saved = self.flow.calibrator.calibration
         warm_up()  # the raw fusion's compiled step, before the first message waits for it
-        self.flow = ImuFlow(lateral, proximal, standing, saved, from_file=from_file, configured=self.configured,
-                            frames=frames, tolerance_s=self.pairing_tolerance_s,
-                            restart_back_s=node.stream.guard.restart_back_s,
-                            path=str(self.path),
-                            on_event=lambda kind, line: None)
         node.stream.attach_imu(self.flow)
         self.calibrator, self.inputs, self.pairer = self.flow.calibrator, self.flow.inputs, self.flow.pairer
         self.last_arrival = [math.nan] * N_CHANNELS
@@ -120,8 +109,9 @@ class ImuInput:
         self._srv = node.create_service(Trigger, CALIBRATE_STANDING_SERVICE, self.calibrate_standing)
         log = node.get_logger()
         if saved is not None:
-            log.info(f"IMU calibration from {self.path if from_file else 'the configured axes'}: {saved.summary()}")
-            if from_file and self.configured:
+            log.info(f"IMU calibration from {self.path if from_file is not None else 'the configured axes'}: "
+                     f"{saved.summary()}")
+            if from_file is not None and self.configured:
                 log.warn(f"imu_lateral_axes/imu_proximal_axes are configured, but {self.path} is used; "
                          "~/reset_calibration deletes it")
         else:
