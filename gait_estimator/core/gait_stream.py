@@ -142,7 +142,7 @@ class GaitStream:
             self._period_received += 1
         t = self.seconds(stamp)
         guard = self.guard
-        prev = guard.last_stamp
+        prev = guard.check.last_time
         try:
             restart = guard.accept(t)
         except SampleRejected as exc:
@@ -213,7 +213,7 @@ class GaitStream:
         """Take four-IMU input through ``flow`` (``push_imu``); its events join ``events``."""
         self.imu = flow
         flow.on_event = self._imu_event
-        flow.set_restart_back(self.guard.restart_back_s)
+        flow.set_gaps(self.config.calibration_reset_gap_s, self.guard.restart_back_s)
 
     def _imu_event(self, kind: str, line: str) -> None:
         self.events.append(StreamEvent(kind, line, warn=kind == IMU_NOT_FIT))  # the caller knows the others' levels
@@ -242,7 +242,7 @@ class GaitStream:
         assert flow is not None
         self.count_received()
         out = self._imu_out = []
-        flow.sample(stamp_ns, items, self.config.calibration_reset_gap_s, self.guard.restart_back_s, self._emit)
+        flow.sample(stamp_ns, items, self._emit)
         if flow.not_fit:  # the window and learnt offsets came from wrong angles, the strides too
             flow.not_fit = False
             self.reset_calibration()
@@ -308,7 +308,7 @@ class GaitStream:
         self.config = config
         self.guard.restart_back_s = restart_threshold(config.max_gap_s)
         if self.imu is not None:  # a sensor restarts where the stream does
-            self.imu.set_restart_back(self.guard.restart_back_s)
+            self.imu.set_gaps(config.calibration_reset_gap_s, self.guard.restart_back_s)
         if gaps_only and self.estimator is not None:
             self.estimator.set_gap_options(config)
 

@@ -20,6 +20,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from .channels import CHANNELS, N_CHANNELS
+from .gaps import NO_GAP, GapCheck, GapParams
 from .imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount, Vec3
 from .imu_angles import ImuAngles
 from .imu_calibrator import ImuCalibrator
@@ -83,7 +84,7 @@ class ImuFlow:
         self.rejected: Counter = Counter()
         self.no_fusion = ""
         """Why raw messages (no orientation) cannot be used: the fusion extra is missing."""
-        self._last_ns: int | None = None  # stamp of the last paired sample
+        self.gaps = GapCheck(GapParams(0.0, 0.0, restart_back_s))  # GaitStream.attach_imu sets its thresholds
 
     @classmethod
     def from_settings(cls, lateral_axes: Sequence[str], proximal_axes: Sequence[str], standing_deg: Sequence[float],
@@ -105,11 +106,6 @@ class ImuFlow:
             saved = ImuCalibration(tuple(SegmentMount(a, p, d) for a, p, d in zip(lateral, proximal, standing, strict=True)))
         return cls(lateral, proximal, standing, saved, from_file=from_file is not None, configured=configured,
                    frames=frames, tolerance_s=tolerance_s, restart_back_s=restart_back_s, path=path)
-
-    def set_restart_back(self, seconds: float) -> None:
-        """A jump back of more than ``seconds`` is a restarted sensor (the stream's threshold)."""
-        for sensor in self.inputs:
-            sensor.restart_back_ns = round(seconds * 1e9)
 
     def convert(self, sensor: int, stamp_ns: int, orientation: Any, cov0: float, gyro: Any, acc: Any,
                 frame_id: str) -> list[tuple[int, list[Any]]]:
@@ -143,17 +139,26 @@ class ImuFlow:
         return [SampleRejected(UNPAIRED, f"{why} (dropped so far: {dict(pairer.dropped)})")
                 for _ in range(pairer.unpaired - before)]
 
-    def sample(self, stamp_ns: int, items: list, calibration_reset_gap_s: float, restart_back_s: float,
-               emit: Callable[[tuple[float, ...], int], None]) -> None:
+    def set_gaps(self, calibration_reset_gap_s: float, restart_back_s: float) -> None:
+        """A gap longer than ``calibration_reset_gap_s``, or a jump back by more than
+        ``restart_back_s`` (a restarted sensor or stream), has the calibration checked again."""
+        self.gaps.params = GapParams(0.0, calibration_reset_gap_s, restart_back_s)
+        for sensor in self.inputs:
+            sensor.restart_back_ns = round(restart_back_s * 1e9)
+
+    def sample(self, stamp_ns: int, items: list, emit: Callable[[tuple[float, ...], int], None]) -> None:
         """One paired sample: ``emit(angles, stamp_ns)`` once calibrated; a gap or restart first
-        has the calibration checked again."""
-        last, self._last_ns = self._last_ns, stamp_ns
-        if last is not None:
-            gap_s = calibration_reset_gap_s
-            if gap_s > 0 and stamp_ns - last > gap_s * 1e9:
-                self._recheck(f"gap of {(stamp_ns - last) * 1e-9:.3f} s in IMU stamps > calibration_reset_gap_s {gap_s:g} s")
-            elif last - stamp_ns > restart_back_s * 1e9:
-                self._recheck(f"IMU stamps jumped back by {(last - stamp_ns) * 1e-9:.3f} s (a restarted stream)")
+        has the calibration checked again (``GapCheck``'s stamp rule)."""
+        last = self.gaps.last_time
+        try:
+            gap = self.gaps.admit_stamp(stamp_ns * 1e-9)
+        except SampleRejected:  # a small step back: the pairer's business, not a restart
+            gap = NO_GAP
+        if gap.reset_calibration:
+            g = self.gaps.params.calibration_reset_gap_s
+            self._recheck(f"gap of {stamp_ns * 1e-9 - last:.3f} s in IMU stamps > calibration_reset_gap_s {g:g} s")
+        elif gap.jumped_back:
+            self._recheck(f"IMU stamps jumped back by {(last or 0.0) - stamp_ns * 1e-9:.3f} s (a restarted stream)")
         self.angles.sample(stamp_ns, items, emit)
 
     @property

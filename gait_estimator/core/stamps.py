@@ -9,32 +9,25 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import replace
 
+from .gaps import GapCheck, GapParams
 from .options import EstimatorConfig
-
-# Reason codes, as counted in diagnostics and summaries.
-NON_FINITE = "non_finite"
-MISSING_JOINT = "missing_joint"
-WRONG_LENGTH = "wrong_length"
-NON_INCREASING_STAMP = "non_increasing_stamp"
-OUT_OF_RANGE = "out_of_range"
-MALFORMED = "malformed"  # bytes that do not decode as the input message type (live streams)
-REASONS = (NON_FINITE, MISSING_JOINT, WRONG_LENGTH, NON_INCREASING_STAMP, OUT_OF_RANGE, MALFORMED)
-ANGLE_MESSAGE_ONLY = (MISSING_JOINT, WRONG_LENGTH)
-"""Reasons only a segment-angle message gives (not the IMU input)."""
+from .rejections import (  # noqa: F401  (re-exported)
+    ANGLE_MESSAGE_ONLY,
+    MALFORMED,
+    MISSING_JOINT,
+    NON_FINITE,
+    NON_INCREASING_STAMP,
+    OUT_OF_RANGE,
+    REASONS,
+    WRONG_LENGTH,
+    SampleRejected,
+)
 
 STREAM_RESTART_S = 1.0
 """Jump back (s) that restarts a live stream when ``max_gap_s`` is 0 (gap check off); see
 ``restart_threshold``."""
-
-
-class SampleRejected(ValueError):
-    """A message that cannot become a sample; ``reason`` is one of REASONS."""
-
-    def __init__(self, reason: str, detail: str) -> None:
-        super().__init__(detail)
-        self.reason = reason
 
 
 def restart_threshold(max_gap_s: float) -> float:
@@ -44,9 +37,9 @@ def restart_threshold(max_gap_s: float) -> float:
     return max_gap_s if 0 < max_gap_s < math.inf else STREAM_RESTART_S
 
 
-@dataclass
 class StreamGuard:
-    """Stamp checks and rejection counts for one input stream.
+    """Stamp checks and rejection counts for one input stream: ``GapCheck``'s stamp rule
+    (``core/gaps.py``, the one the estimator and the IMU flow use) with counts.
 
     Args:
         max_gap_s: A gap between accepted samples longer than this (seconds) means the window
@@ -59,45 +52,44 @@ class StreamGuard:
             reordered or duplicated sample: rejected (non_increasing_stamp).
     """
 
-    max_gap_s: float = EstimatorConfig.max_gap_s
-    restart_back_s: float = 0.0
-    rejected: Counter = field(default_factory=Counter)
-    last_detail: dict[str, str] = field(default_factory=dict)
-    """The latest rejection's text, by reason."""
-    _reported: Counter = field(default_factory=Counter, repr=False)
-    accepted: int = 0
-    resets: int = 0
-    restarts: int = 0
-    last_stamp: float | None = None
+    def __init__(self, max_gap_s: float = EstimatorConfig.max_gap_s, restart_back_s: float = 0.0) -> None:
+        self.check = GapCheck(GapParams(max_gap_s, 0.0, restart_back_s))
+        self.rejected: Counter = Counter()
+        self.last_detail: dict[str, str] = {}
+        """The latest rejection's text, by reason."""
+        self._reported: Counter = Counter()
+        self.accepted = 0
+        self.resets = 0
+        self.restarts = 0
 
-    def check_stamp(self, stamp_s: float) -> bool:
-        """Validate the stamp of the next sample; True if the matcher must be reset first.
+    @property
+    def max_gap_s(self) -> float:
+        return self.check.params.max_gap_s
 
-        Raises SampleRejected (non_increasing_stamp, non_finite) without changing state.
-        """
-        if not math.isfinite(stamp_s):
-            raise SampleRejected(NON_FINITE, f"non-finite stamp {stamp_s}")
-        last = self.last_stamp
-        if last is None:
-            return False
-        if stamp_s <= last:
-            if 0 < self.restart_back_s < last - stamp_s:
-                return True
-            raise SampleRejected(NON_INCREASING_STAMP, f"stamp {stamp_s:.6f} s is not after the previous {last:.6f} s")
-        return 0 < self.max_gap_s < math.inf and stamp_s - last > self.max_gap_s
+    @property
+    def restart_back_s(self) -> float:
+        return self.check.params.restart_back_s
+
+    @restart_back_s.setter
+    def restart_back_s(self, seconds: float) -> None:
+        self.check.params = replace(self.check.params, restart_back_s=seconds)
+
+    @property
+    def last_stamp(self) -> float | None:
+        """Stamp (s) of the last accepted sample."""
+        return self.check.last_time
 
     def accept(self, stamp_s: float) -> bool:
         """Record an accepted sample at ``stamp_s``; True if the window must restart before it
-        (a gap, counted in ``resets``, or a jump back, counted in ``restarts``)."""
-        last = self.last_stamp
-        reset = self.check_stamp(stamp_s)
-        if reset and last is not None and stamp_s <= last:
+        (a gap, counted in ``resets``, or a jump back, counted in ``restarts``). Raises
+        SampleRejected (non_increasing_stamp, non_finite) without changing state."""
+        verdict = self.check.admit_stamp(stamp_s)
+        if verdict.jumped_back:
             self.restarts += 1
-        elif reset:
+        elif verdict.restart_window:
             self.resets += 1
-        self.last_stamp = stamp_s
         self.accepted += 1
-        return reset
+        return verdict.restart_window
 
     def reject(self, exc: SampleRejected) -> None:
         self.rejected[exc.reason] += 1
