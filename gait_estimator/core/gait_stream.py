@@ -151,26 +151,36 @@ class GaitStream:
         if restart:
             self._teaching_restarted()
         est = self.estimator
-        if est is None:
-            self._teach(t, angles_deg)
-            return None
-        if restart:
-            est.reset()
-            self.events.append(StreamEvent(RESTART_BACK, f"input stamps jumped back by {(prev or t) - t:.3f} s "
-                                           f"(> {guard.restart_back_s:g} s)"))
-        units = self.units_check
-        if units.problem is None and self.units is not None and units.observe(t, angles_deg) is not None:
-            self.events.append(StreamEvent(UNITS, f"input_units {self.units}: {units.problem}", warn=True))
-        estimate = est.update(t, angles_deg)
-        gap = est.last_gap
-        if gap is not NO_GAP:
-            self._gap_events(t - (prev if prev is not None else t), gap.restart_window, gap.reset_calibration)
-        self.last_estimate = estimate
-        if self._first is None:
-            self._first = t
-        self._last = t
-        self._period_accepted += 1
-        self._teach(t, angles_deg)  # may swap the library and the estimator
+        estimate = None
+        if est is not None:
+            if restart:
+                est.reset()
+                self.events.append(StreamEvent(RESTART_BACK, f"input stamps jumped back by {(prev or t) - t:.3f} s "
+                                               f"(> {guard.restart_back_s:g} s)"))
+            units = self.units_check
+            if units.problem is None and self.units is not None and units.observe(t, angles_deg) is not None:
+                self.events.append(StreamEvent(UNITS, f"input_units {self.units}: {units.problem}", warn=True))
+            estimate = est.update(t, angles_deg)
+            gap = est.last_gap
+            if gap is not NO_GAP:
+                self._gap_events(t - (prev if prev is not None else t), gap.restart_window, gap.reset_calibration)
+            self.last_estimate = estimate
+            if self._first is None:
+                self._first = t
+            self._last = t
+            self._period_accepted += 1
+        # the samples a new library's estimator is filled from (``swap``), with or without a library
+        recent = self._recent
+        recent.append((t, angles_deg))
+        if est is not self._replay_for[0] or self.config is not self._replay_for[1]:
+            self._replay_for, self._replay_s = (est, self.config), self.replay_s()
+        keep_from = t - self._replay_s
+        while recent[0][0] < keep_from:
+            recent.popleft()
+        if self._origin is None:
+            self._origin = t
+        if self.teaching is not None:
+            self._collect(t, angles_deg)  # may swap the library and the estimator
         return estimate
 
     def _gap_events(self, gap_s: float, restart: bool, recalibrate: bool) -> None:
@@ -414,21 +424,10 @@ class GaitStream:
         longest = max(MAX_STRIDE_S, max((m.stride_duration_s for m in lib.modes), default=0.0) if lib else 0.0)
         return longest * max(self.config.time_scales) + REPLAY_MARGIN_S
 
-    def _teach(self, time_s: float, sample: Sample) -> None:
-        recent = self._recent
-        recent.append((time_s, sample))
-        est = self.estimator
-        if est is not self._replay_for[0] or self.config is not self._replay_for[1]:
-            self._replay_for, self._replay_s = (est, self.config), self.replay_s()
-        keep_from = time_s - self._replay_s
-        while recent[0][0] < keep_from:
-            recent.popleft()
-        if self._origin is None:
-            self._origin = time_s
+    def _collect(self, time_s: float, sample: Sample) -> None:
         session = self.teaching
-        if session is None:
-            return
-        for line in session.push(time_s - self._origin, sample):  # log times: s since the input started
+        assert session is not None
+        for line in session.push(time_s - (self._origin or 0.0), sample):  # log times: s since the input started
             self._teach_event(line)
         if session.result is not None:
             self._finish(session.result)
