@@ -17,8 +17,9 @@ import numpy as np
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, parse_axis
 from gait_estimator.core.imu_angles import ImuAngles
 from gait_estimator.core.imu_calibrator import ImuCalibrator
-from gait_estimator.io.imu_stream import ImuPairer, SensorInput
-from gait_estimator.io.stream import StreamGuard, restart_threshold
+from gait_estimator.core.imu_pairing import ImuPairer, SensorInput
+from gait_estimator.core.options import EstimatorConfig
+from gait_estimator.core.stamps import restart_threshold
 
 RIGHT = {"thigh": 0, "shank": 2}
 VIRTUAL_AXES = {"imu_lateral_axes": ["", "+z", "", "+z"], "imu_proximal_axes": ["", "+y", "", "+y"]}
@@ -32,7 +33,7 @@ def live_angles(time_s: np.ndarray, gyro_dps: np.ndarray, acc_g: np.ndarray,
     -> (the angles the node puts out (T, 4), nan elsewhere; the sample from which it fused with the
     standing pose's gyro biases, or None; its calibrator, for ``status`` and ``standing_s``)."""
     axes = {k: [parse_axis(a) if a else None for a in v] for k, v in VIRTUAL_AXES.items()}
-    back = restart_threshold(StreamGuard.max_gap_s)  # the node's default max_gap_s
+    back = restart_threshold(EstimatorConfig().max_gap_s)  # the node's default max_gap_s
     inputs = [SensorInput(None, "", FUSION_BY_CHANNEL[c], back) for c in range(4)]
     pairer, calibrator = ImuPairer(), ImuCalibrator(axes["imu_lateral_axes"], axes["imu_proximal_axes"], [0.0] * 4)
     gyro = np.radians(gyro_dps).tolist()  # Python floats, as the node reads them

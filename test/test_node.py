@@ -416,14 +416,14 @@ def test_preset_services_and_new_wearer_outputs(ros, multispeed_csv: Path, able_
     lib = load_library(path)
     assert lib.mode_names == able_bodied.mode_names and sum(
         lib.provenance["adaptation"]["accepted_strides"].values()) > 0
-    assert np.any(node._estimator.sensor_offset_deg != 0)
-    scale = node._estimator.cadence_scale
+    assert np.any(node.stream.estimator.sensor_offset_deg != 0)
+    scale = node.stream.estimator.cadence_scale
     assert 0.88 <= scale <= 1.12
     diag = client.latest_diagnostics(3.0)
     assert diag is not None and diag["cadence_scale"] == f"{scale:.3f}"
     reset = call("reset_calibration")
     assert reset.success and "reset to 0" in reset.message and f"time scale {scale:.3f} forgotten" in reset.message
-    assert not np.any(node._estimator.sensor_offset_deg) and math.isnan(node._estimator.cadence_scale)
+    assert not np.any(node.stream.estimator.sensor_offset_deg) and math.isnan(node.stream.estimator.cadence_scale)
     diag = client.latest_diagnostics(3.0)
     assert diag is not None and diag["sensor_offset_deg"] == "0.00,0.00,0.00,0.00" and int(diag["adapted_strides"]) > 0
     assert diag["cadence_scale"] == ""
@@ -435,9 +435,9 @@ def test_preset_services_and_new_wearer_outputs(ros, multispeed_csv: Path, able_
 
     # A gap in the stream longer than calibration_reset_gap_s forgets them too (the sensors may
     # have been re-donned); changing that threshold keeps the estimator and its window.
-    est = node._estimator
+    est = node.stream.estimator
     (result,) = node.set_parameters([Parameter("calibration_reset_gap_s", value=4.0)])
-    assert result.successful and node._estimator is est and est.config.calibration_reset_gap_s == 4.0
+    assert result.successful and node.stream.estimator is est and est.config.calibration_reset_gap_s == 4.0
     later = stamps_ns(rec) + (stamps_ns(rec)[-1] - stamps_ns(rec)[0]) + 10**8
     lockstep(client, np.radians(rec.angles_deg), 2000.0, later)
     assert np.any(est.sensor_offset_deg != 0) and est.calibration_resets == 0

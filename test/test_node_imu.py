@@ -31,9 +31,12 @@ from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, ImuCalibration, SegmentMount
 from gait_estimator.core.imu_learn import learn_calibration
+from gait_estimator.io.as_node import predict_as_node
 from gait_estimator.io.cdr import read_imu
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import ImuPairer, SensorInput, load_calibration, save_calibration
+from gait_estimator.io.outputs import estimate_array
+from gait_estimator.io.read_options import ReadOptions
 from gait_estimator.io.recording import Recording
 from gait_estimator.ros.imu_input import CALIBRATE_STANDING_SERVICE
 from gait_estimator.ros.node import RESET_CALIBRATION_SERVICE, SAVE_LIBRARY_SERVICE, StartupError
@@ -163,8 +166,8 @@ def test_a_saved_calibration_that_does_not_fit_the_sensors_is_learnt_again(ros, 
     node = h.estimator(input_type="imu", imu_calibration_path=str(path))
     client = h.client(node)
     pubs = publishers(client)
-    assert node._imu.calibrator.checking
-    est, forgotten = node._estimator, []
+    assert node.imu.calibrator.checking
+    est, forgotten = node.stream.estimator, []
     for name in ("reset_calibration", "reset"):  # count the estimator's resets (still done by the estimator)
         done = getattr(est, name)
         setattr(est, name, lambda done=done, name=name: (forgotten.append(name), done())[1])
@@ -201,7 +204,7 @@ def test_after_a_long_gap_the_calibration_is_checked_again(ros, tmp_path, capfd)
     pubs = publishers(client)
     stream(client, pubs, make_messages(s, len(s.time_s), raw=True), rate_hz=RATE / 2)
     client.spin_for(0.5)
-    assert path.is_file() and node._imu.calibrator.status == "calibrated", "learnt live and saved"
+    assert path.is_file() and node.imu.calibrator.status == "calibrated", "learnt live and saved"
     stream(client, pubs, make_messages(dataclasses.replace(moved, time_s=moved.time_s + gap_s), len(s.time_s), raw=True),
            rate_hz=RATE / 2)
     client.spin_for(0.5)
@@ -209,7 +212,7 @@ def test_after_a_long_gap_the_calibration_is_checked_again(ros, tmp_path, capfd)
     assert "(the sensors may have been re-donned): the IMU calibration is checked again on the next walking" in logs
     assert logs.count("IMU gyro bias measured at the standing pose") == 2, "at each standing pose: before and after the gap"
     assert f"IMU calibration from {path} does not fit the sensors now (right" in logs, logs
-    assert node._imu.calibrator.calibration is None, "learnt again from the next standing pose and strides"
+    assert node.imu.calibrator.calibration is None, "learnt again from the next standing pose and strides"
     got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
     assert (got > gap_s).any() and not (got > gap_s + 8.6).any(), "estimates after the gap until the verdict"
     stream(client, pubs, make_messages(s, 400, raw=True), rate_hz=RATE / 2)  # a restarted stream: stamps from 0 again
@@ -233,8 +236,8 @@ def test_configured_axes_that_do_not_fit_the_walking_are_reported(ros, tmp_path)
     assert "do not fit the walking" in client.received.diagnostics_message[-1]
     got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
     assert got.max() > 9.5, "configured axes stay in use (the user's statement), reported"
-    assert node._estimator.personaliser.paused, "kernels learn nothing from angles known to be wrong"
-    assert node._estimator.adapter.accepted.sum() == 0
+    assert node.stream.estimator.personaliser.paused, "kernels learn nothing from angles known to be wrong"
+    assert node.stream.estimator.adapter.accepted.sum() == 0
 
 
 def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tmp_path):
@@ -255,25 +258,25 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
         return [inputs[c].convert(stamp, s.quat_xyzw[c, k], 0.0, np.radians(s.gyro_dps[c, k]),
                                   s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
 
-    imu, adapter = node._imu, node._estimator.adapter
-    assert imu.from_file and imu.calibrator.checking
+    imu, adapter = node.imu, node.stream.estimator.adapter
+    assert imu.flow.from_file and imu.calibrator.checking
     for stamp, k in samples:
-        imu._sample(stamp, items(stamp, k), time.perf_counter())
+        imu.paired(stamp, items(stamp, k), time.perf_counter())
         if k == round(9.0 * RATE):
-            assert not path.exists() and not imu.from_file, "the file gave way after the first check"
+            assert not path.exists() and not imu.flow.from_file, "the file gave way after the first check"
             assert imu.calibrator.calibration == right and imu.calibrator.checking
             assert set(adapter.skipped) == {"unchecked"}, "no stride of unchecked angles reached the kernels"
     assert adapter.skipped["warmup"] >= 2, "checked, the strides are personalised again"
-    assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within") and not imu.check_problem
+    assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within") and not imu.flow.check_problem
     # ~/calibrate_standing before the file's verdict: the configured axes take over, and their
     # verdict is theirs (the file, never checked, is kept for the next start)
     path = save_calibration(turned(right, 0, 90.0), path)
-    imu = h.estimator(input_type="imu", imu_calibration_path=str(path), **configured)._imu
+    imu = h.estimator(input_type="imu", imu_calibration_path=str(path), **configured).imu
     inputs = [SensorInput() for _ in range(4)]
-    assert "then walk 4 s" in imu._calibrate_standing(Trigger.Request(), Trigger.Response()).message
+    assert "then walk 4 s" in imu.calibrate_standing(Trigger.Request(), Trigger.Response()).message
     for stamp, k in samples:
-        imu._sample(stamp, items(stamp, k), time.perf_counter())
-    assert not imu.from_file and imu.calibrator.calibration == right and path.exists()  # orientations: no bias
+        imu.paired(stamp, items(stamp, k), time.perf_counter())
+    assert not imu.flow.from_file and imu.calibrator.calibration == right and path.exists()  # orientations: no bias
     assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within")
 
 
@@ -295,18 +298,18 @@ def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path)
             save_calibration(saved, path)
         node = h.estimator(input_type="imu", imu_calibration_path=str(path),
                            imu_lateral_axes=["+z"] * 4, imu_proximal_axes=["-x"] * 4)
-        imu = node._imu
+        imu = node.imu
         angles = []
         for k, t in enumerate(s.time_s):
             stamp = BASE_NS + round(t * 1e9)
             items = [imu.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
                                            s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
-            imu._sample(stamp, items, time.perf_counter())
+            imu.paired(stamp, items, time.perf_counter())
             cal = imu.calibrator.calibration  # None for a sample after the file's misfit verdict
             angles.append(cal.angles_deg([i[0] for i in items]) if cal else (math.nan,) * 4)
             if t < 1.5:
                 assert not any(any(i.gyro_bias_dps) for i in imu.inputs), "no bias before the standing"
-        assert not imu.from_file and not path.exists(), "the misfit file gave way" if saved else "no file"
+        assert not imu.flow.from_file and not path.exists(), "the misfit file gave way" if saved else "no file"
         assert imu.calibrator.calibration.mounts[0].lateral == right.mounts[0].lateral
         got = np.array([i.gyro_bias_dps for i in imu.inputs])
         assert np.abs(got - true_bias).max() < 0.1, (saved, got, true_bias)
@@ -324,13 +327,13 @@ def test_learning_fuses_with_the_standing_biases_from_the_end_of_the_standing(ro
                    gyro_noise_dps=0.3, gyro_bias_dps=3.0)
     true_bias = s.gyro_dps[:, :round(1.9 * RATE)].mean(axis=1)
     node = ros(59).estimator(input_type="imu", imu_calibration_path=str(tmp_path / "user.imu.yaml"))
-    imu = node._imu
+    imu = node.imu
     biased_at = learnt_at = None
     for k, t in enumerate(s.time_s):
         stamp = BASE_NS + round(t * 1e9)
         items = [imu.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
                                        s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
-        imu._sample(stamp, items, time.perf_counter())
+        imu.paired(stamp, items, time.perf_counter())
         if biased_at is None and any(any(i.gyro_bias_dps) for i in imu.inputs):
             biased_at = t
             assert imu.calibrator.calibration is None
@@ -371,9 +374,9 @@ def test_benchmarks_replay_of_the_live_calibration_is_the_nodes(ros, tmp_path, m
     node = ros(58).estimator(input_type="imu", imu_calibration_path=str(tmp_path / "user.imu.yaml"),
                              **live.VIRTUAL_AXES)
     seen = []
-    monkeypatch.setattr(node, "_process", lambda angles, stamp, t0: seen.append(
-        (stamp.sec * 1_000_000_000 + stamp.nanosec, tuple(angles))))
-    imu, zero = node._imu, (0.0, 0.0, 0.0)
+    monkeypatch.setattr(node, "publish_outputs", lambda outputs, t0: seen.extend(
+        (o[0].sec * 1_000_000_000 + o[0].nanosec, tuple(o[1])) for o in outputs if isinstance(o, tuple)))
+    imu, zero = node.imu, (0.0, 0.0, 0.0)
     for k in range(len(t)):
         stamp = live.BASE_NS + round(float(t[k]) * 1e9)
         for c in range(4):
@@ -381,7 +384,7 @@ def test_benchmarks_replay_of_the_live_calibration_is_the_nodes(ros, tmp_path, m
                 (stamp, (0.0, 0.0, 0.0, 1.0), -1.0, tuple(np.radians(gyro[c, k]).tolist()),
                  tuple((acc[c, k] * STANDARD_GRAVITY).tolist()))
             for sample_ns, items in imu.pairer.push(c, stamp, imu.inputs[c].convert(*msg)):
-                imu._sample(sample_ns, items, time.perf_counter())
+                imu.paired(sample_ns, items, time.perf_counter())
     assert [s for s, _ in seen] == [live.BASE_NS + round(float(t[k]) * 1e9) for k in rows]
     assert np.array_equal(np.array([a for _, a in seen]), want[rows])
     assert imu.calibrator.standing_s == calibrator.standing_s
@@ -420,6 +423,8 @@ def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_
         pytest.skip(f"Imu messages lost on the way to the node (received {received} of {len(msgs)} each)")
     assert idx.size == len(rec)
     assert_same_trace(client.received.trace(lib.mode_names), offline(rec.angles_deg, lib, rec.stamp_ns))
+    as_node, _ = predict_as_node(bag, lib, options=ReadOptions(imu_calibration=path))  # the node's way offline
+    np.testing.assert_array_equal(np.array(client.received.estimate_values), estimate_array(as_node.trace))
 
 
 def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_input(ros, tmp_path, capfd):
@@ -484,12 +489,12 @@ def test_configured_axes_need_no_calibration_file(ros, tmp_path):
     path = tmp_path / "never.imu.yaml"
     node = h.estimator(input_type="imu", imu_calibration_path=str(path), imu_lateral_axes=["+z"] * 4,
                        imu_proximal_axes=["-x"] * 4, imu_standing_angles_deg=[5.0, 5.0, -6.0, -6.0])
-    cal = node._imu.calibrator.calibration
+    cal = node.imu.calibrator.calibration
     assert cal is not None and all(m.source == "configured" for m in cal.mounts)
-    assert [s.params for s in node._imu.inputs] == list(FUSION_BY_CHANNEL)  # thighs, then shanks: their fusion
+    assert [s.params for s in node.imu.inputs] == list(FUSION_BY_CHANNEL)  # thighs, then shanks: their fusion
     assert cal.angles_deg([(-1.0, 0.0, 0.0)] * 4) == (5.0, 5.0, -6.0, -6.0)  # segment vertical: standing angle
-    node._imu.reset_calibration()
-    assert node._imu.calibrator.add(0.0, [(-1.0, 0.0, 0.0)] * 4, [(0.0,) * 3] * 4, [(0.0, 0.0, 1.0)] * 4) is not None
+    node.imu.reset_calibration()
+    assert node.imu.calibrator.add(0.0, [(-1.0, 0.0, 0.0)] * 4, [(0.0,) * 3] * 4, [(0.0, 0.0, 1.0)] * 4) is not None
     assert not path.exists()
 
 
@@ -534,7 +539,7 @@ def test_save_library_writes_the_imu_calibration_where_the_next_start_reads_it(r
         assert np.allclose(a.lateral, b.lateral, atol=1e-6) and np.allclose(a.proximal, b.proximal, atol=1e-6)
     h.node_name = "restarted"
     again = h.estimator(input_type="imu", kernels=str(out))
-    assert again._imu.path == beside and again._imu.calibrator.calibration == load_calibration(beside)
+    assert again.imu.path == beside and again.imu.calibrator.calibration == load_calibration(beside)
 
 
 def test_raw_input_needs_no_imufusion_and_bad_imu_durations_stop_the_node(ros, tmp_path, monkeypatch):
@@ -632,11 +637,11 @@ def test_a_wearer_with_four_raw_imus_is_taught_live(ros, tmp_path, monkeypatch):
     assert client.spin_until(future.done, 5.0) and future.result().results[0].successful
     stream(client, pubs, msgs[split:])
     client.spin_for(0.3)
-    assert node.library.mode_names == ["Walk"], node._teacher.last_event
-    taught = node._teacher.last_taught
+    assert node.library.mode_names == ["Walk"], node.stream.teach_last_event
+    taught = node.stream.last_taught
     kernel = node.library.mode("Walk")
 
-    origin_s = node._epoch_sec - BASE_NS // 1_000_000_000  # node time 0: the whole second of its first sample
+    origin_s = node.stream.epoch_sec - BASE_NS // 1_000_000_000  # node time 0: the whole second of its first sample
     starts = origin_s + np.array([st.start_s for st in taught.strides])
     ends = starts + np.array([st.duration_s for st in taught.strides])
     labels = np.where((s.time_s >= starts.min()) & (s.time_s < ends.max()), "Walk", "")

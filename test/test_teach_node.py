@@ -86,7 +86,7 @@ def test_teach_from_an_empty_library_then_estimate(ros, multispeed: Recording, t
     assert node.get_parameter("teach_mode").value == ""
     assert node.library.mode_names == ["Slow"]
     slow = node.library.mode("Slow")
-    taught = node._teacher.last_taught
+    taught = node.stream.last_taught
     assert slow.info["strides"] == 4 and len(taught.strides) >= 4
     offline_slow = _offline_kernel(multispeed, taught, "Slow")
     if node.samples_accepted == node.samples_received == np.searchsorted(multispeed.time_s, 18.0):
@@ -101,7 +101,7 @@ def test_teach_from_an_empty_library_then_estimate(ros, multispeed: Recording, t
     assert result.successful
     client.received.clear()
     _stream(client, multispeed, 37.0, 44.5)
-    assert node.library.mode_names == ["Slow", "Fast"], node._teacher.last_event
+    assert node.library.mode_names == ["Slow", "Fast"], node.stream.teach_last_event
     np.testing.assert_array_equal(node.library.mode("Slow").samples, slow.samples)
     diag = client.latest_diagnostics(3.0)
     assert diag["modes"] == "2" and diag["teach_completed"] == "2" and diag["taught_modes"] == "Slow,Fast"
@@ -143,13 +143,13 @@ def test_teaching_goes_on_after_the_input_stream_restarts(ros, multispeed: Recor
     assert _set(client, remote, teach_mode="Slow")[0].successful
     _stream(client, multispeed, 8.0, 12.5)  # about two strides under the first stamps
     assert node.get_parameter("teach_mode").value == "Slow"
-    kept = node._teacher.session.good
+    kept = node.stream.teaching.good
     assert kept >= 1
     _stream(client, multispeed, 4.0, 6.0)  # the stream again from 4 s: stamps jump back 8.5 s
-    event = node._teacher.last_event
+    event = node.stream.teach_last_event
     assert f"Slow: {kept}/3 strides" in event and "kept, collecting on" in event, event
     _stream(client, multispeed, 6.0, 18.0)
-    assert node.get_parameter("teach_mode").value == "", node._teacher.last_event
+    assert node.get_parameter("teach_mode").value == "", node.stream.teach_last_event
     info = node.library.mode("Slow").info
     assert node.library.mode_names == ["Slow"] and info["strides"] >= 3  # more when an outlier is used again
     starts = [a for a, _ in info["candidate_strides_s"]]
@@ -171,7 +171,7 @@ def test_replace_a_mode_keeps_the_other_modes_state(ros, multispeed: Recording, 
     assert not bad.successful and "only at start" in bad.reason
     assert _set(client, remote, teach_mode="Med")[0].successful
     assert _set(client, remote, teach_mode="")[0].successful  # cancels
-    assert "Med: cancelled" in node._teacher.last_event and node._teacher.session is None
+    assert "Med: cancelled" in node.stream.teach_last_event and node.stream.teaching is None
 
     assert _set(client, remote, teach_mode="Slow")[0].successful
     _stream(client, multispeed, 9.0, 17.0)
@@ -219,13 +219,13 @@ def test_teaching_keeps_the_personalised_kernels(ros, multispeed: Recording, abl
     h = ros(76)
     node, client, remote = _teaching_node(h, teach_strides=3, adapt_rate=0.2)
     _stream(client, multispeed, 8.0, 20.0)
-    adapted = node._estimator.adapted_library()
+    adapted = node.stream.estimator.adapted_library()
     personalised = [m.name for m in adapted.modes if m.info["adapted_strides"]]
     assert personalised, "Slow strides were adopted"
     assert _set(client, remote, teach_mode="Taught")[0].successful
     _stream(client, multispeed, 20.0, 28.0)
-    assert node.library.mode_names == [*able_bodied.mode_names, "Taught"], node._teacher.last_event
-    assert "personalised kernels" in node._teacher.last_event and "kept" in node._teacher.last_event
+    assert node.library.mode_names == [*able_bodied.mode_names, "Taught"], node.stream.teach_last_event
+    assert "personalised kernels" in node.stream.teach_last_event and "kept" in node.stream.teach_last_event
     for name in personalised:
         assert node.library.mode(name).info["adapted_strides"] > 0
         assert not np.array_equal(node.library.mode(name).samples, able_bodied.mode(name).samples)

@@ -87,6 +87,10 @@ def cmd_process(args: argparse.Namespace) -> int:
         config = config_from_args(args, max_gap_s=options.get("max_gap_s"))
     except ValueError as exc:
         raise GaitEstimatorError(str(exc)) from None
+    if args.as_node:
+        from .as_node import process_as_node
+
+        return process_as_node(args, lib, config, {**reader_options(args), **options})
     rec = read_recording_args(args, args.recording, **options)
     if args.start is not None and args.stop is not None and args.stop <= args.start:
         raise GaitEstimatorError(f"--stop ({args.stop}) must be greater than --start ({args.start})")
@@ -226,6 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--quiet", "-q", action="store_true", help="no summary on stdout")
     proc.add_argument("--save-adapted", metavar="LIB", help="with --adapt-rate > 0: write the personalised kernel "
                       "library (.yaml or .npz) at the end")
+    proc.add_argument("--as-node", action="store_true", help="a bag of angles: every message through the node's "
+                      "stream object, as estimator_node takes it live (docs/bags.md)")
     from .bag_commands import add_process_options
     from .estimator_args import add_estimator_arguments
 

@@ -79,6 +79,9 @@ class Estimator:
         """Window restarts caused by gaps longer than ``max_gap_s``."""
         self.calibration_resets = 0
         """Gaps longer than ``calibration_reset_gap_s`` that made the calibrations start again."""
+        self.last_gap: GapVerdict = NO_GAP
+        """What the gap before the last accepted sample did (``GapCheck``): the window restarted,
+        the calibrations reset."""
         self.grid_estimate: Estimate | None = None
         """With resampling, the latest grid estimate (the one carried forward to input samples)."""
 
@@ -114,8 +117,7 @@ class Estimator:
         """
         x = sample_values(sample_deg)  # four floats: no numpy call per sample before the matcher
         gap = self.gaps.admit(time_s, x)
-        if gap is not NO_GAP:
-            self.on_gap(gap)
+        self.last_gap = gap if gap is NO_GAP else self.on_gap(gap)
         if self.resampler is None:
             return self._step(time_s, x)
         for t, p in self.resampler.push(time_s, x):
@@ -123,14 +125,17 @@ class Estimator:
         assert self.grid_estimate is not None  # the first sample of a stream is a grid point
         return self.grid_estimate.at(time_s)
 
-    def on_gap(self, gap: GapVerdict) -> None:
-        """Do what a gap in the stamps asks (``GapCheck``): restart the window, forget the calibrations."""
+    def on_gap(self, gap: GapVerdict) -> GapVerdict:
+        """Do what a gap in the stamps asks (``GapCheck``): restart the window, forget the
+        calibrations (when they learn); returns what was done."""
         if gap.restart_window:
             self._restart_window()
             self.resets += 1
-        if gap.reset_calibration and self.calibration.active:
+        recalibrated = gap.reset_calibration and self.calibration.active
+        if recalibrated:
             self.calibration.reset()
             self.calibration_resets += 1
+        return gap if recalibrated == gap.reset_calibration else GapVerdict(gap.restart_window, False)
 
     def _step(self, time_s: float, x: Sample) -> Estimate:
         """One sample on the library's clock through matcher, supervisor and the learning stages."""

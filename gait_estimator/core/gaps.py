@@ -11,6 +11,7 @@ import numpy as np
 
 from .channels import Sample
 from .options import EstimatorConfig
+from .rejections import NON_FINITE, NON_INCREASING_STAMP, SampleRejected
 
 
 @dataclass(frozen=True)
@@ -25,14 +26,19 @@ class GapParams:
 
     max_gap_s: float = EstimatorConfig.max_gap_s
     calibration_reset_gap_s: float = EstimatorConfig.calibration_reset_gap_s
+    restart_back_s: float = 0.0
+    """A stamp more than this (s) before the previous one is a restarted stream (accepted, the
+    window restarts); a smaller step back, or any while this is 0, is rejected."""
 
 
 class GapVerdict(NamedTuple):
     restart_window: bool
     reset_calibration: bool
+    jumped_back: bool = False
 
 
 NO_GAP = GapVerdict(False, False)
+JUMPED_BACK = GapVerdict(True, False, True)
 
 
 class GapCheck:
@@ -54,15 +60,26 @@ class GapCheck:
     def admit(self, time_s: float, x: Sample) -> GapVerdict:
         """Accept sample ``x`` (degrees) stamped ``time_s`` (seconds).
 
-        Raises ValueError for a non-finite sample or stamp, or a stamp not after the previous
-        one; the state is then unchanged.
+        Raises SampleRejected (a ValueError) for a non-finite sample or stamp, or a stamp not
+        after the previous one; the state is then unchanged.
         """
-        if not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]) and math.isfinite(x[3])
-                and math.isfinite(time_s)):
-            raise ValueError(f"non-finite sample {list(x)} at {time_s}")
+        if not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]) and math.isfinite(x[3])):
+            raise SampleRejected(NON_FINITE, f"non-finite sample {list(x)} at {time_s}")
+        return self.admit_stamp(time_s)
+
+    def admit_stamp(self, time_s: float) -> GapVerdict:
+        """The stamp rule of every stream (the estimator's, ``StreamGuard``'s, the IMU flow's):
+        accept ``time_s`` (seconds) and say what its gap does; a jump back by more than
+        ``restart_back_s`` restarts the stream. Raises SampleRejected (non_finite,
+        non_increasing_stamp) without changing state."""
+        if not math.isfinite(time_s):
+            raise SampleRejected(NON_FINITE, f"non-finite stamp {time_s}")
         last = self.last_time
         if last is not None and time_s <= last:
-            raise ValueError(f"stamp {time_s} is not after the previous {last}")
+            if 0 < self.params.restart_back_s < last - time_s:
+                self.last_time = time_s
+                return JUMPED_BACK
+            raise SampleRejected(NON_INCREASING_STAMP, f"stamp {time_s:.6f} s is not after the previous {last:.6f} s")
         self.last_time = time_s
         if last is None:
             return NO_GAP

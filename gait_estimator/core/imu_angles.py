@@ -21,7 +21,7 @@ from .imu_learn import CalibrationCheck
 
 
 class SensorInput(Protocol):
-    """One sensor's input (``io/imu_stream.SensorInput``) as far as the flow sets it."""
+    """One sensor's input (``core/imu_pairing.SensorInput``) as far as the flow sets it."""
 
     def set_gyro_bias(self, bias_dps: Vec3) -> None: ...
 

@@ -309,6 +309,56 @@ def read_bag(path: str | Path, options: ReadOptions | None = None, /, **values: 
             raise RecordingError(f"{p} (topic {name}): cannot read bag, truncated or corrupt? ({_one_line(exc)})") from None
 
 
+def decoded_samples(messages: Iterator[tuple[Any, int, bytes]], msgtype: str, joint_names: tuple[str, ...],
+                    units: str) -> Iterator[tuple[int, int, int, bool, np.ndarray | SampleRejected | None]]:
+    """Per message of an angle topic: (index, log time ns, stamp ns, the JointState's stamp was
+    zero, angles in degrees or why the message is dropped; None: undecodable CDR). The stamp is
+    the header's, or the log time when it is zero or the type has no header."""
+    deserialize = typestore().deserialize_cdr
+    is_joint_state = msgtype == JOINT_STATE
+    for i, (_conn, log_ns, raw) in enumerate(messages):
+        try:
+            msg = deserialize(raw, msgtype)
+        except Exception:  # corrupt CDR: skip the message, like a node that never received it
+            yield i, int(log_ns), 0, False, None
+            continue
+        try:
+            if is_joint_state:
+                sample = angles_from_named(msg.name, msg.position, joint_names, units)
+                stamp_ns = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+                fallback = stamp_ns == 0
+                if fallback:
+                    stamp_ns = int(log_ns)
+            else:
+                sample = angles_from_array(msg.data, units)
+                stamp_ns, fallback = int(log_ns), False
+        except SampleRejected as exc:
+            yield i, int(log_ns), 0, False, exc
+            continue
+        yield i, int(log_ns), stamp_ns, fallback, sample
+
+
+@contextmanager
+def bag_samples(path: str | Path, options: ReadOptions | None = None, /,
+                **values: Any) -> Iterator[tuple[str, Iterator[tuple[int, int, int, bool, Any]]]]:
+    """The angle topic of a bag as ``read_bag`` chooses it: (its message type, ``decoded_samples``
+    of all its messages), for a caller that takes each message as a live node would."""
+    p = Path(path)
+    o = ReadOptions.of(options, values)
+    if o.input_units not in UNITS:
+        raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {o.input_units!r}")
+    with open_bag(p, o.topic and normalize_topic(o.topic)) as reader:
+        topics = bag_topics(reader)
+        name = choose_topic(p, topics, o.topic)
+        msgtype = topics[name][0]
+        if msgtype not in INPUT_MSGTYPES.values():
+            raise RecordingError(f"{p}: topic {name} has message type {msgtype}; expected {JOINT_STATE} or "
+                                 f"{FLOAT64_MULTI_ARRAY}")
+        conns = [c for c in reader.connections if c.topic == name]
+        yield msgtype, decoded_samples(reader.messages(connections=conns), msgtype, parse_joint_names(o.joint_names),
+                                       o.input_units)
+
+
 def _read_samples(
     bag: Path,
     topic: str,
@@ -318,7 +368,6 @@ def _read_samples(
     units: str,
     max_gap_s: float,
 ) -> BagRecording:
-    deserialize = typestore().deserialize_cdr
     guard = StreamGuard(max_gap_s=max_gap_s)
     angles: list[np.ndarray] = []
     stamps: list[int] = []
@@ -326,24 +375,15 @@ def _read_samples(
     index: list[int] = []
     undecodable = 0
     fallbacks = 0
-    is_joint_state = msgtype == JOINT_STATE
     n = 0
-    for n, (_conn, log_ns, raw) in enumerate(messages, start=1):
-        try:
-            msg = deserialize(raw, msgtype)
-        except Exception:  # corrupt CDR: skip the message, like a node that never received it
+    for i, log_ns, stamp_ns, fallback, sample in decoded_samples(messages, msgtype, joint_names, units):
+        n = i + 1
+        if sample is None:
             undecodable += 1
             continue
-        fallback = False
         try:
-            if is_joint_state:
-                sample = angles_from_named(msg.name, msg.position, joint_names, units)
-                stamp_ns = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
-                if stamp_ns == 0:
-                    stamp_ns, fallback = int(log_ns), True
-            else:
-                sample = angles_from_array(msg.data, units)
-                stamp_ns = int(log_ns)
+            if isinstance(sample, SampleRejected):
+                raise sample
             guard.accept(stamp_ns * 1e-9)  # counts gaps > max_gap_s in guard.resets
         except SampleRejected as exc:
             guard.reject(exc)
@@ -351,8 +391,8 @@ def _read_samples(
         fallbacks += fallback
         angles.append(sample)
         stamps.append(stamp_ns)
-        logs.append(int(log_ns))
-        index.append(n - 1)
+        logs.append(log_ns)
+        index.append(i)
     skipped = {reason: int(c) for reason, c in guard.rejected.items() if c}
     if undecodable:
         skipped[UNDECODABLE] = undecodable

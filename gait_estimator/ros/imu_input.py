@@ -1,6 +1,6 @@
 """``input_type: imu`` for ``estimator_node``: four ``sensor_msgs/Imu`` topics -> segment angles.
 
-Each message becomes its sensor's up direction (``io/imu_stream.py``: from the orientation, or from
+Each message becomes its sensor's up direction (``core/imu_pairing.py``: from the orientation, or from
 gyro + accelerometer when ``orientation_covariance[0] == -1``); the four streams are paired by stamp
 (``imu_pairing_tolerance_s``); a paired sample becomes four angles through the mounting calibration
 (``core/imu_angles.ImuAngles``, which learns or checks it on the way; this module saves and logs what
@@ -14,9 +14,7 @@ check's verdict; logged), as a learnt calibration's are. After a gap in the pair
 than ``calibration_reset_gap_s``, or a restarted stream, the calibration in use is checked again
 (a learnt one is then treated as a saved one) and one being learnt starts again. A sensor silent
 for ``imu_timeout_s`` is named in the diagnostics and the estimate waits, since no sample pairs
-without it. Bad messages are dropped, counted and logged through the node (throttled); raw
-messages while the fusion (numba or imufusion, the ``imu`` extra) is missing are dropped and
-counted (``no_fusion``), with one error line.
+without it. Bad messages are dropped, counted and logged through the node (throttled).
 
 Services: ``~/calibrate_standing`` takes a new standing pose from the next still second (keeping
 learnt sagittal axes, unless the calibration was still to be checked: then strides too); the
@@ -27,8 +25,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import Counter
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -40,27 +36,18 @@ from std_srvs.srv import Trigger
 
 from ..core.ahrs import warm_up
 from ..core.channels import CHANNELS, N_CHANNELS
-from ..core.imu import FUSION_BY_CHANNEL, CalibrationError, ImuCalibration, SegmentMount, Vec3
-from ..core.imu_angles import ImuAngles
-from ..core.imu_calibrator import ImuCalibrator
-from ..core.imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
+from ..core.gait_stream import StreamEvent
+from ..core.imu import CalibrationError
+from ..core.imu_flow import IMU_INFO, IMU_LEARNT, IMU_NOT_FIT, IMU_WRONG_AXES, ImuFlow
+from ..core.imu_learn import STILL_S, WALK_S
+from ..core.imu_pairing import DEFAULT_TOLERANCE_S
 from ..core.teach import TAUGHT_LIBRARY
-from ..io.cdr import CdrError, Stamp, read_imu
+from ..io.cdr import CdrError, read_imu
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
-from ..io.imu_stream import (
-    DEFAULT_TOLERANCE_S,
-    UNPAIRED,
-    ImuPairer,
-    SensorInput,
-    calibration_path_for,
-    load_calibration,
-    save_calibration,
-)
+from ..io.imu_stream import calibration_path_for, load_calibration, save_calibration
 from ..io.stream import MALFORMED, SampleRejected
 
 CALIBRATE_STANDING_SERVICE = "~/calibrate_standing"
-NO_FUSION = "no_fusion"
-"""Rejection reason of raw messages (no orientation) while the fusion library is not installed."""
 PARAMETERS: dict[str, tuple[Any, str]] = {
     "imu_topics": (list(DEFAULT_IMU_TOPICS), "sensor_msgs/Imu topics of right_thigh, left_thigh, right_shank, left_shank."),
     "imu_pairing_tolerance_s": (DEFAULT_TOLERANCE_S, "Largest stamp spread (s) of the four messages of one sample."),
@@ -84,7 +71,7 @@ class ImuInput:
     invalid axes or an unreadable calibration file."""
 
     def __init__(self, node: Any, qos: QoSProfile) -> None:
-        """``node``: the EstimatorNode (its ``_process``, ``_reject`` and counters are used)."""
+        """``node``: the EstimatorNode (its stream, ``take_angles`` and ``reject`` are used)."""
         self.node = node
         values = {}
         for name, (default, text) in PARAMETERS.items():
@@ -93,42 +80,23 @@ class ImuInput:
         topics = list(values["imu_topics"])
         if len(topics) != N_CHANNELS or not all(t.strip() for t in topics):
             raise CalibrationError(f"imu_topics: needs {N_CHANNELS} topic names ({', '.join(CHANNELS)})")
-        lateral, proximal = check_configured(list(values["imu_lateral_axes"]), list(values["imu_proximal_axes"]))
-        standing = [float(v) for v in values["imu_standing_angles_deg"]]
-        if len(standing) != N_CHANNELS or not all(math.isfinite(v) and abs(v) <= 90 for v in standing):
-            raise CalibrationError(f"imu_standing_angles_deg: needs {N_CHANNELS} angles within +-90 deg")
         for name in ("imu_pairing_tolerance_s", "imu_timeout_s"):
             if not (math.isfinite(values[name]) and values[name] >= 0):
                 raise CalibrationError(f"{name}: must be >= 0 s, got {values[name]!r}")
-        lib = node._library  # None: no library yet (kernels: ''), the modes are to be taught
+        lib = node.stream.library  # None: no library yet (kernels: ''), the modes are to be taught
         self.path = Path(values["imu_calibration_path"]).expanduser() if values["imu_calibration_path"] else \
             calibration_path_for(lib.path, lib.name) if lib is not None else calibration_path_for(None, TAUGHT_LIBRARY)
-        saved = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
-        self.configured = all(a is not None for a in lateral) and all(p is not None for p in proximal)
-        from_file = saved is not None
-        if saved is None and self.configured:  # nothing to learn (and nothing to save)
-            saved = ImuCalibration(tuple(SegmentMount(a, p, d) for a, p, d in zip(lateral, proximal, standing, strict=True)))
+        from_file = load_calibration(self.path) if self.path.is_file() else None  # raises one line if bad
         self.timeout_s = float(values["imu_timeout_s"])
-        frames = list(values["imu_frame_ids"])
-        if len(frames) != N_CHANNELS:
-            raise CalibrationError(f"imu_frame_ids: needs {N_CHANNELS} entries ('' = any frame)")
-        back = node._guard.restart_back_s  # a sensor restarts where the node's stream does
-        self.inputs = [SensorInput(None, f.strip(), fusion, back)  # raw: rate from stamps
-                       for f, fusion in zip(frames, FUSION_BY_CHANNEL, strict=True)]
-        self.pairer = ImuPairer(float(values["imu_pairing_tolerance_s"]))
+        self.flow = ImuFlow.from_settings(
+            values["imu_lateral_axes"], values["imu_proximal_axes"], values["imu_standing_angles_deg"], from_file,
+            frames=list(values["imu_frame_ids"]), tolerance_s=float(values["imu_pairing_tolerance_s"]),
+            restart_back_s=node.stream.guard.restart_back_s, path=str(self.path))
+        self.configured = self.flow.configured
+        saved = self.flow.calibrator.calibration
         warm_up()  # the raw fusion's compiled step, before the first message waits for it
-        self.from_file = from_file
-        self.calibrator = ImuCalibrator(lateral, proximal, standing, saved, check=True)
-        self.check_problem = ""
-        """Configured axes that do not fit the walking (they stay in use): the check's line."""
-        self.angles = ImuAngles(self.inputs, self.calibrator, self._biases_measured, self._learnt, self._checked)
-        self._t0 = 0.0  # perf_counter at the callback of the sample being emitted
-        self._last_ns: int | None = None  # stamp of the last paired sample
-        if saved is not None:
-            self.angles.set_gyro_biases([m.gyro_bias_dps for m in saved.mounts])
-        self.rejected: Counter = Counter()
-        self.no_fusion = ""
-        """Why raw messages (no orientation) cannot be used: the fusion extra is missing."""
+        node.stream.attach_imu(self.flow)
+        self.calibrator, self.inputs, self.pairer = self.flow.calibrator, self.flow.inputs, self.flow.pairer
         self.last_arrival = [math.nan] * N_CHANNELS
         self.received = [0] * N_CHANNELS
         self.started = time.monotonic()
@@ -136,11 +104,12 @@ class ImuInput:
             node.create_subscription(Imu, topic, lambda msg, i=i: self._on_imu(i, msg), qos, raw=True)
             for i, topic in enumerate(topics)
         ]
-        self._srv = node.create_service(Trigger, CALIBRATE_STANDING_SERVICE, self._calibrate_standing)
+        self._srv = node.create_service(Trigger, CALIBRATE_STANDING_SERVICE, self.calibrate_standing)
         log = node.get_logger()
         if saved is not None:
-            log.info(f"IMU calibration from {self.path if from_file else 'the configured axes'}: {saved.summary()}")
-            if from_file and self.configured:
+            log.info(f"IMU calibration from {self.path if from_file is not None else 'the configured axes'}: "
+                     f"{saved.summary()}")
+            if from_file is not None and self.configured:
                 log.warn(f"imu_lateral_axes/imu_proximal_axes are configured, but {self.path} is used; "
                          "~/reset_calibration deletes it")
         else:
@@ -162,7 +131,8 @@ class ImuInput:
                 try:
                     msg = deserialize_message(msg, Imu)
                 except Exception:  # whatever rclpy raises for undecodable bytes
-                    self._rejected(sensor, SampleRejected(MALFORMED, f"cannot decode the Imu ({exc})"))
+                    self.flow.rejected[MALFORMED] += 1
+                    node.reject(SampleRejected(MALFORMED, f"{CHANNELS[sensor]}: cannot decode the Imu ({exc})"))
                     return
         if not isinstance(msg, bytes):
             o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
@@ -172,117 +142,50 @@ class ImuInput:
         stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         if stamp_ns == 0:
             stamp_ns = node.get_clock().now().nanoseconds
-        if self.no_fusion and cov0 == -1.0:  # raw, and known not to work
-            self._drop_raw(self.no_fusion)
-            return
-        try:
-            item = self.inputs[sensor].convert(stamp_ns, orientation, cov0, gyro, acc, frame_id)
-        except CalibrationError as exc:  # raw input without the fusion library (the 'imu' extra)
-            self._drop_raw(str(exc))
-            return
-        except SampleRejected as exc:
-            self._rejected(sensor, exc)
-            return
-        pairer = self.pairer
-        unpaired = pairer.unpaired
-        for sample_ns, items in pairer.push(sensor, stamp_ns, item):
-            self._sample(sample_ns, items, t0)
-        if pairer.unpaired == unpaired:
-            return
-        waiting = [c for c, q in zip(CHANNELS, pairer.queues, strict=True) if not q]
-        why = (f"no message from {', '.join(waiting)} within the pairing tolerance of the others" if waiting
-               else "a message without partners within the pairing tolerance")
-        for _ in range(pairer.unpaired - unpaired):
-            self.rejected[UNPAIRED] += 1
-            node._reject(SampleRejected(UNPAIRED, f"{why} (dropped so far: {dict(pairer.dropped)})"))
+        node.publish_outputs(node.stream.push_imu(sensor, stamp_ns, orientation, cov0, gyro, acc, frame_id), t0)
 
-    def _rejected(self, sensor: int, exc: SampleRejected) -> None:
-        """Count and log (throttled) a dropped message of ``sensor``."""
-        node = self.node
-        self.rejected[exc.reason] += 1
-        node._received += 1
-        node._period_received += 1
-        node._reject(SampleRejected(exc.reason, f"{CHANNELS[sensor]}: {exc}"))
+    def paired(self, stamp_ns: int, items: list, t0: float) -> None:
+        """One paired sample (``ImuPairer``): its angles, once calibrated, to the node's stream."""
+        self.node.publish_outputs(self.node.stream.push_paired(stamp_ns, items), t0)
 
-    def _drop_raw(self, why: str) -> None:
-        """Count a raw message that cannot be fused; say why once (an error, not a warning per
-        message: every raw message will fail the same way until the extra is installed)."""
-        node = self.node
-        self.rejected[NO_FUSION] += 1
-        node._received += 1
-        node._period_received += 1
-        node._period_rejected += 1
-        node._guard.reject(SampleRejected(NO_FUSION, why))
-        if not self.no_fusion:
-            self.no_fusion = why
-            node.get_logger().error(f"{why}; until then raw messages are dropped (counted as {NO_FUSION})")
-
-    def _sample(self, stamp_ns: int, items: list, t0: float) -> None:
-        node = self.node
-        node._received += 1
-        node._period_received += 1
-        self._t0 = t0
-        last, self._last_ns = self._last_ns, stamp_ns
-        if last is not None:
-            gap_s = node._config.calibration_reset_gap_s
-            if gap_s > 0 and stamp_ns - last > gap_s * 1e9:
-                self._recheck(f"gap of {(stamp_ns - last) * 1e-9:.3f} s in IMU stamps > calibration_reset_gap_s {gap_s:g} s")
-            elif last - stamp_ns > node._guard.restart_back_s * 1e9:
-                self._recheck(f"IMU stamps jumped back by {(last - stamp_ns) * 1e-9:.3f} s (a restarted stream)")
-        self.angles.sample(stamp_ns, items, self._emit)
-
-    def _emit(self, angles: tuple[float, ...], stamp_ns: int) -> None:
-        """The angles of a sample, to the node's estimator."""
-        node = self.node
-        est = node._estimator
-        if est is not None and est.personaliser is not None:  # kernels learn only from angles known to be right
-            est.pause_adaptation(self.calibrator.checking or bool(self.check_problem))
-        node._process(angles, Stamp(*divmod(stamp_ns, 1_000_000_000)), self._t0)
-
-    def _biases_measured(self, biases_dps: Sequence[Vec3]) -> None:
-        self.node.get_logger().info("IMU gyro bias measured at the standing pose (deg/s): " + "; ".join(
-            f"{c} ({', '.join(f'{v:+.2f}' for v in b)})" for c, b in zip(CHANNELS, biases_dps, strict=True)))
-
-    def _checked(self, found: CalibrationCheck) -> None:
-        """The check of a saved or configured calibration on the first walking: a saved one that
-        does not fit is forgotten and learnt again (or the configured axes used, and checked),
-        with what the estimator learnt from its angles; configured axes are kept and reported."""
-        node, log = self.node, self.node.get_logger()
-        source = str(self.path) if self.from_file else "imu_lateral_axes/imu_proximal_axes"
-        if found.fits:
-            self.check_problem = ""
-            log.info(f"IMU calibration from {source} checked on the walking: {found.summary()}")
-        elif self.from_file:
-            self._forget()
-            if node._estimator is not None:  # its window and learnt offsets came from wrong angles
-                node._estimator.reset_calibration()
-                node._estimator.reset()
-            node._teacher.drop_strides("the IMU calibration did not fit")
-            if self.configured:  # the configured axes take over; the file would be read again at the next start
-                try:
-                    self.path.unlink(missing_ok=True)
-                    then = "the file deleted, the configured axes used (and checked)"
-                except OSError as exc:
-                    then = f"the configured axes used (and checked); the file NOT deleted ({exc})"
+    def handle(self, events: list[StreamEvent]) -> list[StreamEvent]:
+        """Log the IMU flow's events (saving a learnt calibration, deleting one that does not
+        fit); the others are returned."""
+        log, rest = self.node.get_logger(), []
+        for event in events:
+            kind, line = event.kind, event.line
+            if kind == IMU_INFO:
+                log.info(line)
+            elif kind == IMU_WRONG_AXES:
+                log.error(line)
+            elif kind == IMU_LEARNT:
+                self._learnt(line)
+            elif kind == IMU_NOT_FIT:
+                if self.configured:  # the configured axes take over; the file would be read again at the next start
+                    try:
+                        self.path.unlink(missing_ok=True)
+                        then = "the file deleted, the configured axes used (and checked)"
+                    except OSError as exc:
+                        then = f"the configured axes used (and checked); the file NOT deleted ({exc})"
+                else:
+                    then = f"learning it again: stand still {STILL_S:g} s, then walk {WALK_S:g} s (the estimate waits)"
+                log.warn(f"IMU calibration from {self.path} does not fit the sensors now ({line}): {then}")
             else:
-                then = f"learning it again: stand still {STILL_S:g} s, then walk {WALK_S:g} s (the estimate waits)"
-            log.warn(f"IMU calibration from {self.path} does not fit the sensors now ({found.summary()}): {then}")
-        else:
-            self.check_problem = f"the configured {source} do not fit the walking: {found.summary()}"
-            log.error(self.check_problem + " (the angles are wrong; correct the parameters)")
+                rest.append(event)
+        return rest
 
-    def _learnt(self, cal: ImuCalibration) -> None:
-        self.from_file = False  # learnt now, or the configured axes: what a check reports is about them
+    def _learnt(self, summary: str) -> None:
         log = self.node.get_logger()
-        if self.configured:
-            log.info(f"IMU calibration from the configured axes: {cal.summary()}")
+        cal = self.calibrator.calibration
+        if self.configured or cal is None:
+            log.info(f"IMU calibration from the configured axes: {summary}")
             return
         try:
             save_calibration(cal, self.path)
             where = f"saved to {self.path}"
         except OSError as exc:
             where = f"NOT saved ({self.path}: {exc})"
-        log.info(f"IMU calibration learnt, {where}: {cal.summary()}")
+        log.info(f"IMU calibration learnt, {where}: {summary}")
 
     def save_beside(self, library_path: Path, library_name: str) -> str:
         """``~/save_library``: write the learnt calibration where a node started with ``kernels:
@@ -297,14 +200,9 @@ class ImuInput:
         except OSError as exc:
             return f"; IMU calibration NOT written ({path}: {' '.join(str(exc).split())})"
 
-    def set_restart_back(self, seconds: float) -> None:
-        """A jump back of more than ``seconds`` is a restarted sensor (the node's ``restart_back_s``)."""
-        for sensor in self.inputs:
-            sensor.restart_back_ns = round(seconds * 1e9)
-
     # -----------------------------------------------------------------------------------------
 
-    def _calibrate_standing(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def calibrate_standing(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         relearn = self.calibrator.checking
         self.calibrator.request_standing()
         response.success = True
@@ -314,32 +212,9 @@ class ImuInput:
         self.node.get_logger().info(response.message)
         return response
 
-    def _forget(self) -> None:
-        """Forget the calibration in use: back to the configured axes (the gyro biases last
-        measured at a standing pose stay), and what is learnt or configured next neither comes
-        from the file nor has a check's problem."""
-        self.calibrator.reset()
-        self.check_problem = ""
-        self.from_file = False
-        self.angles.set_gyro_biases(self.calibrator.gyro_biases or [(0.0, 0.0, 0.0)] * N_CHANNELS)
-
-    def _recheck(self, why: str) -> None:
-        """A gap longer than ``calibration_reset_gap_s`` or a restarted stream (``why``): the
-        sensors may have been taken off and put on again. A calibration in use is checked again on
-        the next walking, as a saved one is at start (one that does not fit is learnt again,
-        unless it is the configured axes); one being learnt starts again from the next standing
-        pose (learnt lateral axes kept by ~/calibrate_standing are forgotten)."""
-        if self.calibrator.calibration is not None:  # in use: the configured axes' only if configured and no file
-            self.from_file = self.from_file or not self.configured
-            then = "the IMU calibration is checked again on the next walking"
-        else:
-            then = f"the IMU calibration is learnt again: stand still {STILL_S:g} s, then walk {WALK_S:g} s"
-        self.calibrator.recheck()
-        self.node.get_logger().info(f"{why} (the sensors may have been re-donned): {then}")
-
     def reset_calibration(self) -> str:
         """Forget the IMU calibration (and its file); what happened, for the service reply."""
-        self._forget()
+        self.flow.forget()
         removed = ""
         try:
             self.path.unlink()
@@ -365,15 +240,13 @@ class ImuInput:
             "imu_calibration_path": str(self.path),
             "imu_messages": ",".join(str(n) for n in self.received),
             "imu_silent": ", ".join(silent),
-            **{f"imu_rejected_{r}": str(n) for r, n in sorted(self.rejected.items())},
+            **{f"imu_rejected_{r}": str(n) for r, n in sorted(self.flow.rejected.items())},
         }
         problems = []
         if silent:
             problems.append("IMU silent: " + ", ".join(silent) + " (estimate waits)")
         if cal is None:
             problems.append(f"IMU calibration: {self.calibrator.status}")
-        if self.check_problem:
-            problems.append("IMU calibration: " + self.check_problem)
-        if self.no_fusion:
-            problems.append(f"{self.rejected[NO_FUSION]} raw IMU message(s) dropped: {self.no_fusion}")
+        if self.flow.check_problem:
+            problems.append("IMU calibration: " + self.flow.check_problem)
         return values, problems

@@ -1,5 +1,5 @@
 """The parameters of ``estimator_node``: names, defaults, descriptions, validation at set time and
-how a change is applied (``NodeParameters``, a mixin of ``EstimatorNode``).
+how a change is applied (``NodeParameters``, owned by ``EstimatorNode``).
 
 Estimator options are parameters of the same name; the expert ones (``OPTIONS`` entries flagged
 advanced) are ``advanced.<name>`` (in a params file: an ``advanced:`` mapping under
@@ -15,19 +15,20 @@ from typing import Any
 
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import GaitEstimatorError
 from ..core.estimator import Estimator
+from ..core.gait_stream import GaitStream
 from ..core.kernels import KernelLibrary
 from ..core.options import GAP_OPTIONS, OPTIONS, PRESETS, EstimatorConfig
 from ..io.library_io import load_library
 from ..io.resources import DEFAULT_LIBRARY
-from ..io.stream import INPUT_TYPES, UNITS, AngleExtractor, restart_threshold
+from ..io.stream import INPUT_TYPES, UNITS
 from . import EXECUTORS
 from .priority import MAX_PRIORITY, process_priority, set_process_priority
-from .teach import NodeTeacher
 
 ADVANCED_PREFIX = "advanced."
 REMOVED_OPTIONS = ("window_fraction", "subsample_phase", "switch_evidence_deg2s", "min_dwell_samples")
@@ -148,28 +149,30 @@ def check_input_parameter(name: str, v: Any) -> str:
 
 
 class NodeParameters:
-    """Parameter handling of EstimatorNode (a mixin of it: uses rclpy.node.Node's methods)."""
+    """The parameters of ``node``: declared and validated by ``declare``; once the node's stream
+    exists (``attach``), valid changes are applied to it (another library or options: one
+    ``GaitStream.swap``)."""
 
-    _library: KernelLibrary | None
-    _config: EstimatorConfig
-    _config_preset: str
-    _estimator: Estimator | None
-
-    def _declare_parameters(self) -> None:
-        """Declare every parameter (the estimator options at the preset's values unless
-        overridden), validating each; raises StartupError."""
-        self._library = None
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self.preset = "default"
+        self.stream: GaitStream | None = None
+        self._library: KernelLibrary | None = None  # until attach: what declaring validated
         self._config = EstimatorConfig()
-        self._config_preset = "default"
         self._pending: tuple[KernelLibrary | None, EstimatorConfig, Estimator | None] | None = None
         self._last_rejection = ""
-        self.add_on_set_parameters_callback(self._validate_parameters)
+
+    def declare(self, overrides: dict[str, Any]) -> tuple[KernelLibrary | None, EstimatorConfig]:
+        """Declare every parameter (the estimator options at the preset's values unless
+        overridden), validating each; the library and options they name. Raises StartupError."""
+        node = self.node
+        node.add_on_set_parameters_callback(self._validate)
         try:
             for name, default in DEFAULTS.items():
                 self._last_rejection = ""
                 if name in OPTION_OF_PARAMETER:  # the preset's value unless overridden
-                    default = PRESETS[self._config_preset][OPTION_OF_PARAMETER[name]]
-                self.declare_parameter(name, default, ParameterDescriptor(
+                    default = PRESETS[self.preset][OPTION_OF_PARAMETER[name]]
+                node.declare_parameter(name, default, ParameterDescriptor(
                     description=DESCRIPTIONS[name], read_only=name in READ_ONLY,
                     # `-p resample:=on` and params files parse on/off as booleans (YAML 1.1)
                     dynamic_typing=name in DYNAMIC_TYPING))
@@ -178,32 +181,30 @@ class NodeParameters:
                     self._library, self._config = self._pending[0] or self._library, self._pending[1]
                 self._pending = None
                 if name == "preset":
-                    self._config_preset = self.get_parameter("preset").value
-                    self._config = EstimatorConfig.preset(self._config_preset)
-            self._estimator = None  # None: no library yet (kernels: ''), only teaching
-            if self._library is not None:
-                self._set_estimator(self._new_estimator(self._library, self._config))
-            self._teacher = NodeTeacher(self)
+                    self.preset = node.get_parameter("preset").value
+                    self._config = EstimatorConfig.preset(self.preset)
         except ParameterException as exc:
-            reason = self._last_rejection or parameter_error(exc)
-            self.destroy_node()
-            raise StartupError(f"invalid parameter {reason}") from None
-        except (GaitEstimatorError, ValueError) as exc:
-            self.destroy_node()
-            raise StartupError(one_line(exc)) from None
-        self._warn_stale_overrides()
-
-    def _warn_stale_overrides(self) -> None:
-        """One warning per override (params file, -p) of an option by a name it no longer has."""
-        for name in getattr(self, "_parameter_overrides", {}):
+            raise StartupError(f"invalid parameter {self._last_rejection or parameter_error(exc)}") from None
+        for name in overrides:
             if name in REMOVED_OPTIONS:
-                self.get_logger().warn(f"parameter {name} ignored: the option was removed (docs/options.md)")
+                node.get_logger().warn(f"parameter {name} ignored: the option was removed (docs/options.md)")
             elif name in PARAMETER_OF_OPTION and PARAMETER_OF_OPTION[name] != name:
-                self.get_logger().warn(f"parameter {name} ignored: it is {PARAMETER_OF_OPTION[name]} now")
+                node.get_logger().warn(f"parameter {name} ignored: it is {PARAMETER_OF_OPTION[name]} now")
+        return self._library, self._config
 
-    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+    def attach(self, stream: GaitStream) -> None:
+        """From now on changes go to ``stream`` (which owns the library and options)."""
+        self.stream = stream
+        self.node.add_post_set_parameters_callback(self._apply)
+
+    def _current(self) -> tuple[KernelLibrary | None, EstimatorConfig]:
+        s = self.stream
+        return (self._library, self._config) if s is None else (s.library, s.config)
+
+    def _validate(self, params: list[Parameter]) -> SetParametersResult:
         """on-set callback: reject invalid values with a reason; stash what they would build."""
-        lib = self._library
+        current, config = self._current()
+        lib = current
         values: dict[str, Any] = {}
         for p in params:
             reason = ""
@@ -215,85 +216,71 @@ class NodeParameters:
             else:
                 reason = check_input_parameter(p.name, p.value)
             if reason:
-                return self._reject_parameter(f"{p.name}: {reason}")
+                return self._reject(f"{p.name}: {reason}")
         try:
-            config = self._config.with_options(**values) if values else self._config
+            config = config.with_options(**values) if values else config
         except (ValueError, TypeError) as exc:
             names = ", ".join(PARAMETER_OF_OPTION[v] for v in values)
-            return self._reject_parameter(f"{names}: {one_line(exc)}")
+            return self._reject(f"{names}: {one_line(exc)}")
         estimator = None
-        if lib is not None and (values or lib is not self._library):
-            try:
-                estimator = self._new_estimator(lib, config)  # also reads a transitions file
+        if lib is not None and (values or lib is not current):
+            try:  # also reads a transitions file
+                estimator = self.stream.new_estimator(lib, config) if self.stream is not None else Estimator(
+                    lib, config, stamped=stamped_input(self.node.get_parameter("input_type").value
+                                                       if self.node.has_parameter("input_type") else "joint_state"))
             except (GaitEstimatorError, ValueError, OSError) as exc:
-                return self._reject_parameter(f"{', '.join(p.name for p in params)}: {one_line(exc)}")
-        self._pending = (lib if lib is not self._library else None, config, estimator)
+                return self._reject(f"{', '.join(p.name for p in params)}: {one_line(exc)}")
+        self._pending = (lib if lib is not current else None, config, estimator)
         return SetParametersResult(successful=True)
 
-    def _reject_parameter(self, reason: str) -> SetParametersResult:
+    def _reject(self, reason: str) -> SetParametersResult:
         self._last_rejection = reason
         return SetParametersResult(successful=False, reason=reason)
 
-    def _apply_parameters(self, params: list[Parameter]) -> None:
+    def _apply(self, params: list[Parameter]) -> None:
         """post-set callback: apply values that passed validation."""
         pending, self._pending = self._pending, None
         names = {p.name for p in params}
-        self._apply_input_parameters(params)
-        if pending is None:
+        if "thread_priority" in names:
+            set_priority(self.node, self.node.get_parameter("thread_priority").value)
+        stream = self.stream
+        if pending is None or stream is None:
             return
-        lib, config, estimator = pending
-        if lib is not None:
-            self._library = lib
-        self._config = config
-        self._guard.restart_back_s = restart_threshold(config.max_gap_s)
-        if self._imu is not None:
-            self._imu.set_restart_back(self._guard.restart_back_s)
+        _, config, estimator = pending
         options = {OPTION_OF_PARAMETER[n] for n in names if n in OPTION_OF_PARAMETER}
-        if ("kernels" in names or options - GAP_OPTIONS) and estimator is not None:
-            self._resets_before += self._estimator.resets if self._estimator is not None else 0
-            kept = ""
-            if "kernels" not in names and self._estimator is not None:  # same kernels, same sensors: keep what was learnt
-                estimator.adopt_calibration(self._estimator)
-                strides = estimator.adopt_adaptation(self._estimator)
-                if strides:
-                    kept = (f"; personalised kernels ({strides} strides) kept" if estimator.adapter is not None
-                            else f"; personalised kernels ({strides} strides) dropped: adapt_rate is 0")
-            self._set_estimator(estimator)
-            lib = self._library
-            self.get_logger().info(
-                f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: {self._options_summary()}: "
-                "window restarted" + kept
-            )
-        elif options & GAP_OPTIONS and self._estimator is not None:
-            self._estimator.set_gap_options(config)  # only gap thresholds changed: keep the window
+        swap = ("kernels" in names or bool(options - GAP_OPTIONS)) and estimator is not None
+        stream.set_config(config, gaps_only=not swap and bool(options & GAP_OPTIONS))
+        if "kernels" in names:
+            stream.forget_taught()  # another library: nothing of it was taught here
+        if not swap or estimator is None:
+            return
+        same = "kernels" not in names and stream.estimator is not None  # same kernels, same sensors: keep what was learnt
+        strides = stream.swap(estimator, keep_calibration=same, keep_adaptation=same)
+        kept = ""
+        if same and strides:
+            kept = (f"; personalised kernels ({strides} strides) kept" if estimator.adapter is not None
+                    else f"; personalised kernels ({strides} strides) dropped: adapt_rate is 0")
+        lib = estimator.library
+        self.node.get_logger().info(f"library '{lib.name}' ({len(lib)} modes) from {lib.path}; options: "
+                                    f"{self.options_summary()}: window restarted" + kept)
+        self.node.library_changed()
 
-    def _apply_input_parameters(self, params: list[Parameter]) -> None:
-        for p in params:
-            if p.name == "joint_names":
-                self._joint_names = tuple(p.value)
-            elif p.name == "input_units":
-                self._units = p.value
-            elif p.name == "thread_priority":
-                self._set_priority(p.value)
-        if {p.name for p in params} & {"joint_names", "input_units"}:
-            self._extract = AngleExtractor(self._joint_names, self._units)
-            self._units_check.reset()
-
-    def _set_priority(self, priority: int) -> None:
-        """Apply ``thread_priority`` to every thread of the process; a refusal is a warning (the
-        node runs on at the priority it has), as in ros2_control."""
-        try:
-            self.get_logger().info(f"thread_priority {priority}: {set_process_priority(priority)}")
-        except OSError as exc:
-            self.get_logger().warn(f"thread_priority {priority}: {exc}; running with {process_priority()} scheduling")
-
-    def _new_estimator(self, library: KernelLibrary, config: EstimatorConfig) -> Estimator:
-        """An estimator for this node's input: JointState carries stamps (``resample: auto``
-        resamples it), Float64MultiArray is timed on arrival (not resampled unless ``on``)."""
-        input_type = self.get_parameter("input_type").value if self.has_parameter("input_type") else "joint_state"
-        return Estimator(library, config, stamped=input_type in ("joint_state", "imu"))
-
-    def _options_summary(self) -> str:
-        changed = self._config.changed_from(self._config_preset)
-        return f"preset {self._config_preset}" + (
+    def options_summary(self) -> str:
+        changed = self._current()[1].changed_from(self.preset)
+        return f"preset {self.preset}" + (
             " with " + ", ".join(f"{PARAMETER_OF_OPTION[k]}={v}" for k, v in changed.items()) if changed else "")
+
+
+def stamped_input(input_type: str) -> bool:
+    """JointState and Imu carry stamps (``resample: auto`` resamples them); Float64MultiArray is
+    timed on arrival (not resampled unless ``on``)."""
+    return input_type in ("joint_state", "imu")
+
+
+def set_priority(node: Node, priority: int) -> None:
+    """Apply ``thread_priority`` to every thread of the process; a refusal is a warning (the
+    node runs on at the priority it has), as in ros2_control."""
+    try:
+        node.get_logger().info(f"thread_priority {priority}: {set_process_priority(priority)}")
+    except OSError as exc:
+        node.get_logger().warn(f"thread_priority {priority}: {exc}; running with {process_priority()} scheduling")
