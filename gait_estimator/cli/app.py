@@ -230,8 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
     proc.add_argument("--quiet", "-q", action="store_true", help="no summary on stdout")
     proc.add_argument("--save-adapted", metavar="LIB", help="with --adapt-rate > 0: write the personalised kernel "
                       "library (.yaml or .npz) at the end")
-    proc.add_argument("--as-node", action="store_true", help="a bag of angles: every message through the node's "
-                      "stream object, as estimator_node takes it live (docs/bags.md)")
+    proc.add_argument("--as-node", action="store_true", help="a bag (angles or four Imu topics): every message "
+                      "through the node's GaitStream, as estimator_node takes it live (docs/bags.md)")
     from .bag_commands import add_process_options
     from .estimator_args import add_estimator_arguments
 

@@ -118,7 +118,8 @@ def add_imu_reading_options(p: Any) -> None:
     p.add_argument(
         "--imu-calibration", dest="imu_calibration", metavar="YAML",
         help="bag of sensor_msgs/Imu topics: the IMU mounting to use, a file the node or --save-imu-calibration "
-        "wrote; checked on the walking, a misfit is an error (default: learnt from the bag; docs/imu.md)",
+        "wrote; checked on the walking, a misfit is an error (with process --as-node: learnt again, as the node "
+        "does) (default: learnt from the bag; docs/imu.md)",
     )
     p.add_argument(
         "--imu-lateral-axes", dest="imu_lateral_axes", type=_topic_list, metavar="RT,LT,RS,LS",

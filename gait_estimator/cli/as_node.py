@@ -1,5 +1,5 @@
-"""``process --as-node``: a bag of angles taken message by message as ``estimator_node`` takes
-them live (``io/process.predict_as_node``, the node's ``GaitStream``)."""
+"""``process --as-node``: a bag (angles or four Imu topics) taken message by message as
+``estimator_node`` takes it live (``io/as_node.predict_as_node``, the node's ``GaitStream``)."""
 
 from __future__ import annotations
 

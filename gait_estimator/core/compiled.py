@@ -18,6 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .shift_means import SHIFT_BLOCK
 from .stride_track import stride_step
 
 try:  # pragma: no cover - depends on the environment
@@ -287,7 +288,7 @@ def _scan_block(e, lo, hi, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, a
     """(best, bj) after scoring the shifts lo .. hi - 1 of one block (``_argmin_per_shift``), the
     kernel part's means from the block's first (anchor) on: m_j = lam m_{j-1} + (1 - lam) k_j."""
     c = 1.0 - lam
-    q = lo // 16
+    q = lo // SHIFT_BLOCK
     m0, m1, m2, m3 = anchor[0, q], anchor[1, q], anchor[2, q], anchor[3, q]
     v = _shift_score(e, lo, wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, m0, m1, m2, m3)
     if v < best or (v == best and lo < bj):
@@ -318,20 +319,20 @@ def _argmin_per_shift(e, n, wp, a0, a1, a2, a3, tau, anchor, k0, k1, k2, k3, lam
                   + _penalty_bound(a1, mu_range[0, 1], mu_range[1, 1], t1, f1)
                   + _penalty_bound(a2, mu_range[0, 2], mu_range[1, 2], t2, f2)
                   + _penalty_bound(a3, mu_range[0, 3], mu_range[1, 3], t3, f3))
-    first = (guess if 0 <= guess < n else 0) // 16 * 16  # where the last step's best shift moved to
-    best, bj = _scan_block(e, first, min(first + 16, n), wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, anchor,
+    first = (guess if 0 <= guess < n else 0) // SHIFT_BLOCK * SHIFT_BLOCK  # where the last step's best shift moved to
+    best, bj = _scan_block(e, first, min(first + SHIFT_BLOCK, n), wp, a0, a1, a2, a3, t0, t1, t2, t3, f0, f1, f2, f3, anchor,
                            k0, k1, k2, k3, lam, np.inf, first)
     slack = 1e-9 * (abs(best) + abs(bound))  # rounding of the scores and the bound
-    for lo in range(0, n, 16):  # in blocks of 16 shifts (SHIFT_BLOCK): one test per block
+    for lo in range(0, n, SHIFT_BLOCK):  # one test per block of shifts
         if lo == first:
             continue
-        hi = min(lo + 16, n)
+        hi = min(lo + SHIFT_BLOCK, n)
         low = e[lo]
         for j in range(lo + 1, hi):
             low = min(low, e[j])
         if low - bound > best + slack:
             continue
-        q = lo // 16  # the bound over this block's shifts only
+        q = lo // SHIFT_BLOCK  # the bound over this block's shifts only
         near = wp * (_penalty_bound(a0, mu_blocks[0, 0, q], mu_blocks[1, 0, q], t0, f0)
                      + _penalty_bound(a1, mu_blocks[0, 1, q], mu_blocks[1, 1, q], t1, f1)
                      + _penalty_bound(a2, mu_blocks[0, 2, q], mu_blocks[1, 2, q], t2, f2)

@@ -136,7 +136,9 @@ class GaitStream:
     def push(self, stamp: Stamp, angles_deg: Sample, counted: bool = False) -> Estimate | None:
         """One decoded sample (four angles, degrees, CHANNELS order): its estimate, or None while
         there is no library. Raises SampleRejected (counted) for a stamp not after the previous
-        one. ``counted``: the input was already counted as received (``count_received``)."""
+        one, unless it jumped back by more than ``restart_back_s`` (a restarted stream: the window
+        restarts with it). ``counted``: the input was already counted as received
+        (``count_received``)."""
         if not counted:
             self.received += 1
             self._period_received += 1
@@ -160,7 +162,11 @@ class GaitStream:
             units = self.units_check
             if units.problem is None and self.units is not None and units.observe(t, angles_deg) is not None:
                 self.events.append(StreamEvent(UNITS, f"input_units {self.units}: {units.problem}", warn=True))
-            estimate = est.update(t, angles_deg)
+            try:
+                estimate = est.update(t, angles_deg)
+            except SampleRejected as exc:  # non-finite angles: callers check them first
+                self._count_rejection(exc)
+                raise
             gap = est.last_gap
             if gap is not NO_GAP:
                 self._gap_events(t - (prev if prev is not None else t), gap.restart_window, gap.reset_calibration)
@@ -255,8 +261,7 @@ class GaitStream:
         flow.sample(stamp_ns, items, self._emit)
         if flow.not_fit:  # the window and learnt offsets came from wrong angles, the strides too
             flow.not_fit = False
-            self.reset_calibration()
-            self.drop_strides("the IMU calibration did not fit")
+            self.reset_calibration("the IMU calibration did not fit")
         return out
 
     def _emit(self, angles: Sample, stamp_ns: int) -> None:
@@ -349,12 +354,16 @@ class GaitStream:
         self.last_estimate = None
         return strides
 
-    def reset_calibration(self) -> None:
-        """Forget the learnt sensor offsets and cadence, restart the window (an IMU calibration
-        that did not fit: its angles were wrong)."""
+    def reset_calibration(self, mounting_lost: str = "") -> None:
+        """Forget the learnt sensor offsets and cadence. ``mounting_lost``: why the IMU mounting
+        the angles came from no longer holds; then the window and a teaching session's strides
+        start again too."""
         if self.estimator is not None:
             self.estimator.reset_calibration()
-            self.estimator.reset()
+            if mounting_lost:
+                self.estimator.reset()
+        if mounting_lost:
+            self.drop_strides(mounting_lost)
 
     # -- teaching
 

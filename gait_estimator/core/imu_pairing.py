@@ -87,19 +87,17 @@ class SensorInput:
         if self.frame_id and frame_id != self.frame_id:
             raise SampleRejected(WRONG_FRAME, f"frame_id {frame_id!r}, expected {self.frame_id!r}")
         last = self.last_ns
+        restarting = False  # committed (_restart) only once the message passes every check
         if last is not None and stamp_ns <= last:
-            candidate, self._restart_from = self._restart_from, None
+            candidate = self._restart_from
             if 0 < self.restart_back_ns < last - stamp_ns:
                 if candidate is None or stamp_ns <= candidate:  # a stray old message, until the next confirms
                     self._restart_from = stamp_ns
                     raise SampleRejected(NON_INCREASING_STAMP, f"stamp {stamp_ns * 1e-9:.6f} s is "
                                          f"{(last - stamp_ns) * 1e-9:.3f} s before the previous (a restart?)")
-                self.restarts += 1  # a second message after the first on the earlier stamps: restarted
-                self.fusion = None
-                if self._measured:  # the driver may come back at another rate
-                    self._steps = []
-                last = None
+                restarting, last = True, None  # a second message after the first on the earlier stamps
             else:
+                self._restart_from = None
                 raise SampleRejected(NON_INCREASING_STAMP,
                                      f"stamp {stamp_ns * 1e-9:.6f} s is not after the previous {last * 1e-9:.6f} s")
         elif self._restart_from is not None:
@@ -115,11 +113,15 @@ class SensorInput:
             up = (s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y))
             gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG) if gx * gx + gy * gy + gz * gz < _MAX_RATE2 \
                 else NO_RATES
+            if restarting:
+                self._restart()
             self.last_ns = stamp_ns
             return up, gyro, NO_RATES  # the accelerometer is the orientation filter's business
         ax, ay, az = acc_mps2
         if not (gx * gx + gy * gy + gz * gz < _MAX_RATE2 and 1e-6 <= ax * ax + ay * ay + az * az < _MAX_ACC2):
             self._reject_raw(gx, gy, gz, ax, ay, az)  # false for NaN too
+        if restarting:
+            self._restart()
         fusion = self.fusion
         if fusion is None:
             fusion = self.fusion = make_fusion(self._rate_hz, self.gyro_bias_dps, self.params)
@@ -129,6 +131,14 @@ class SensorInput:
         if self._steps is not None and last is not None:
             self._measure_rate(stamp_ns - last)
         return up, (gx, gy, gz), (ax, ay, az)
+
+    def _restart(self) -> None:
+        """The sensor restarted (a driver restart, a bag played again): its fusion starts afresh."""
+        self.restarts += 1
+        self._restart_from = None
+        self.fusion = None
+        if self._measured:  # the driver may come back at another rate
+            self._steps = []
 
     @staticmethod
     def _reject_raw(gx: float, gy: float, gz: float, ax: float, ay: float, az: float) -> NoReturn:

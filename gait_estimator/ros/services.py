@@ -57,13 +57,15 @@ class NodeServices:
     def reset_calibration(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """``~/reset_calibration``: forget the learnt sensor offsets and cadence (after
         re-donning, or for another wearer), and the IMU input's calibration."""
-        est, imu = self.node.stream.estimator, self.node.imu
+        stream, imu = self.node.stream, self.node.imu
+        est = stream.estimator
         if est is None:  # no library yet: only the IMU input may have learnt something
             response.success = imu is not None
-            response.message = "no library yet" + imu.reset_calibration() if imu else "no library yet: nothing calibrated"
+            response.message = ("no library yet" + imu.reset_calibration()) if imu else "no library yet: nothing calibrated"
+            stream.reset_calibration("the IMU calibration was reset" if imu else "")
         else:
             before, scale = est.sensor_offset_deg.copy(), est.cadence_scale
-            est.reset_calibration()
+            stream.reset_calibration("the IMU calibration was reset" if imu else "")
             response.success = True
             response.message = ("sensor offsets reset to 0 (were " + ", ".join(f"{v:.2f}" for v in before) + " deg)"
                                 + (f", learnt time scale {scale:.3f} forgotten" if math.isfinite(scale) else "")
