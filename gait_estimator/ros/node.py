@@ -48,7 +48,7 @@ from ..io.stream import ANGLE_MESSAGE_ONLY, MALFORMED, REASONS, AngleExtractor, 
 from .diagnostics import PROFILE_COLUMNS, NodeDiagnostics
 from .executors import run
 from .outputs import EstimateOutputs
-from .parameters import DEFAULTS, DESCRIPTIONS, NodeParameters, StartupError, one_line, set_priority, stamped_input
+from .parameters import DEFAULTS, DESCRIPTIONS, NodeParameters, StartupError, set_priority, stamped_input, startup_error
 from .services import RESET_CALIBRATION_SERVICE, SAVE_LIBRARY_SERVICE, NodeServices
 from .stream_log import StreamLog
 from .teach import TeachParameters
@@ -101,7 +101,7 @@ class EstimatorNode(Node):
                 self.imu = ImuInput(self, INPUT_QOS)
         except (GaitEstimatorError, ParameterException, ValueError) as exc:
             self.destroy_node()
-            raise StartupError(one_line(exc)) from None
+            raise startup_error(exc) from None
         self.max_batch = MAX_BATCH
         """Input messages handled per callback (1 = only the executor's own; see _on_input)."""
         self.outputs = EstimateOutputs(self)

@@ -106,6 +106,13 @@ def parameter_error(exc: ParameterException) -> str:
     return f"{names}: {what}" if what else names
 
 
+def startup_error(exc: Exception) -> StartupError:
+    """Why the node cannot start, in one line: a value of the wrong type names its parameter."""
+    if isinstance(exc, ParameterException):
+        return StartupError(f"invalid parameter {parameter_error(exc)}")
+    return StartupError(one_line(exc))
+
+
 def config_value(value: Any) -> Any:
     """A parameter value as EstimatorConfig wants it (lists become tuples)."""
     return tuple(value) if isinstance(value, (list, tuple, array.array)) else value
