@@ -20,10 +20,10 @@ from rclpy.parameter import Parameter
 
 from gait_estimator.core.estimator import Estimator, EstimatorConfig, trace_from_estimates
 from gait_estimator.core.kernels import KernelLibrary
+from gait_estimator.core.stamps import StreamGuard, restart_threshold
 from gait_estimator.io.process import predict
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import Recording
-from gait_estimator.io.stream import StreamGuard, restart_threshold
 from gait_estimator.ros.node import EstimatorNode
 from gait_estimator.ros.node_client import EstimatorClient, Received
 

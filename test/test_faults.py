@@ -43,8 +43,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from gait_estimator.core.channels import CHANNELS
+from gait_estimator.core.rejections import REASONS
 from gait_estimator.io.outputs import ESTIMATE_TOPIC
-from gait_estimator.io.stream import REASONS
 from gait_estimator.ros.node_client import (
     DIAGNOSTICS_TOPIC,
     EstimatorClient,

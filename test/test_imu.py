@@ -46,6 +46,7 @@ from gait_estimator.core.imu_learn import (
     learn_calibration,
     quiet_runs,
 )
+from gait_estimator.core.rejections import SampleRejected
 from gait_estimator.io.imu_bag import ImuBagRecording, read_imu_bag, write_imu_bag
 from gait_estimator.io.imu_stream import (
     NON_FINITE,
@@ -62,7 +63,6 @@ from gait_estimator.io.imu_stream import (
 from gait_estimator.io.read_options import ReadOptions
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import read_project_csv
-from gait_estimator.io.stream import SampleRejected
 
 RATE = 200.0
 BASE_NS = 1_700_000_000 * 1_000_000_000

@@ -33,7 +33,7 @@ from std_msgs.msg import Float64MultiArray
 from gait_estimator import load_library
 from gait_estimator.core.estimator import Estimator, EstimatorConfig
 from gait_estimator.core.options import ADVANCED
-from gait_estimator.io.stream import REASONS
+from gait_estimator.core.rejections import REASONS
 from gait_estimator.ros.imu_input import PARAMETERS as IMU_PARAMETERS
 from gait_estimator.ros.node import DEFAULTS, DESCRIPTIONS, EstimatorNode, StartupError
 from gait_estimator.ros.parameters import yaml_defaults

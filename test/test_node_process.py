@@ -32,7 +32,7 @@ from ros_helpers import (
 )
 from sensor_msgs.msg import JointState
 
-from gait_estimator.io.stream import REASONS
+from gait_estimator.core.rejections import REASONS
 from gait_estimator.ros.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
 
 

@@ -14,8 +14,8 @@ import yaml
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.options import ADVANCED, OPTIONS, EstimatorConfig
 from gait_estimator.core.pipeline import PipelineParams
+from gait_estimator.core.stamps import StreamGuard
 from gait_estimator.io.read_options import ReadOptions
-from gait_estimator.io.stream import StreamGuard
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -13,18 +13,10 @@ from hypothesis import strategies as st
 
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.estimator import Estimator
+from gait_estimator.core.rejections import NON_INCREASING_STAMP, SampleRejected
+from gait_estimator.core.stamps import STREAM_RESTART_S, StreamGuard, restart_threshold
 from gait_estimator.io.outputs import estimate_array, estimate_into, estimate_names, estimate_values
-from gait_estimator.io.stream import (
-    MAX_ABS_ANGLE_DEG,
-    NON_INCREASING_STAMP,
-    STREAM_RESTART_S,
-    AngleExtractor,
-    SampleRejected,
-    StreamGuard,
-    angles_from_array,
-    angles_from_named,
-    restart_threshold,
-)
+from gait_estimator.io.stream import MAX_ABS_ANGLE_DEG, AngleExtractor, angles_from_array, angles_from_named
 
 
 def test_stamps_going_back_small_steps_rejected_big_jumps_restart() -> None:

@@ -26,7 +26,7 @@ from .imu_angles import ImuAngles
 from .imu_calibrator import ImuCalibrator
 from .imu_learn import STILL_S, WALK_S, CalibrationCheck, check_configured
 from .imu_pairing import UNPAIRED, ImuPairer, SensorInput
-from .stamps import SampleRejected
+from .rejections import SampleRejected
 
 IMU_INFO = "imu_info"
 """Event: a line about the IMU calibration (biases measured, checked, rechecked)."""

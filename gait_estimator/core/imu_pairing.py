@@ -23,7 +23,8 @@ import numpy as np
 from .ahrs import CompiledFusion, make_fusion
 from .channels import CHANNELS, N_CHANNELS
 from .imu import DEFAULT_FUSION, STANDARD_GRAVITY, FusionParams, Vec3
-from .stamps import NON_FINITE, NON_INCREASING_STAMP, OUT_OF_RANGE, STREAM_RESTART_S, SampleRejected
+from .rejections import NON_FINITE, NON_INCREASING_STAMP, OUT_OF_RANGE, SampleRejected
+from .stamps import STREAM_RESTART_S
 
 ZERO_NORM = "zero_norm"
 UNPAIRED = "unpaired"

@@ -13,17 +13,7 @@ from dataclasses import replace
 
 from .gaps import GapCheck, GapParams
 from .options import EstimatorConfig
-from .rejections import (  # noqa: F401  (re-exported)
-    ANGLE_MESSAGE_ONLY,
-    MALFORMED,
-    MISSING_JOINT,
-    NON_FINITE,
-    NON_INCREASING_STAMP,
-    OUT_OF_RANGE,
-    REASONS,
-    WRONG_LENGTH,
-    SampleRejected,
-)
+from .rejections import SampleRejected
 
 STREAM_RESTART_S = 1.0
 """Jump back (s) that restarts a live stream when ``max_gap_s`` is 0 (gap check off); see

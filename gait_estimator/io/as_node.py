@@ -15,7 +15,7 @@ from ..core.errors import RecordingError
 from ..core.estimator import EstimatorConfig, trace_from_estimates
 from ..core.imu import ImuCalibration
 from ..core.kernels import KernelLibrary
-from ..core.stamps import MALFORMED, SampleRejected
+from ..core.rejections import MALFORMED, SampleRejected
 from ..core.supervisor import Estimate
 from .bag import JOINT_STATE, bag_samples, bag_topics, is_bag_path, open_bag
 from .cdr import CdrError, read_imu

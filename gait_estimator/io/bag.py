@@ -36,11 +36,13 @@ import numpy as np
 
 from ..core.channels import CHANNELS, N_CHANNELS
 from ..core.errors import RecordingError
+from ..core.rejections import SampleRejected
+from ..core.stamps import StreamGuard
 from . import bag_recover
 from .bag_recover import STORAGE_SUFFIXES, RawRecord
 from .read_options import DEFAULT_MAX_GAP_S, ReadOptions
 from .recording import Recording
-from .stream import UNITS, SampleRejected, StreamGuard, angles_from_array, angles_from_named
+from .stream import UNITS, angles_from_array, angles_from_named
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"

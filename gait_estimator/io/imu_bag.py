@@ -38,10 +38,10 @@ from ..core.imu_learn import (
     find_standing,
     learn_calibration,
 )
+from ..core.rejections import SampleRejected
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
 from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
 from .read_options import ReadOptions
-from .stream import SampleRejected
 
 IMU = "sensor_msgs/msg/Imu"
 DEFAULT_IMU_TOPICS = tuple(f"imu/{c}" for c in CHANNELS)

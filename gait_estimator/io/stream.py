@@ -17,20 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..core.channels import CHANNELS, N_CHANNELS, Sample, sample_values
-from ..core.stamps import (  # noqa: F401  (re-exported)
-    ANGLE_MESSAGE_ONLY,
-    MALFORMED,
-    MISSING_JOINT,
-    NON_FINITE,
-    NON_INCREASING_STAMP,
-    OUT_OF_RANGE,
-    REASONS,
-    STREAM_RESTART_S,
-    WRONG_LENGTH,
-    SampleRejected,
-    StreamGuard,
-    restart_threshold,
-)
+from ..core.rejections import MISSING_JOINT, NON_FINITE, OUT_OF_RANGE, WRONG_LENGTH, SampleRejected
 
 UNITS = ("rad", "deg")
 INPUT_TYPES = ("joint_state", "float64_multi_array", "imu")  # imu: four sensor_msgs/Imu (io/imu_stream.py)

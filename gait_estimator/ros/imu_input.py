@@ -41,11 +41,11 @@ from ..core.imu import CalibrationError
 from ..core.imu_flow import IMU_INFO, IMU_LEARNT, IMU_NOT_FIT, IMU_WRONG_AXES, ImuFlow
 from ..core.imu_learn import STILL_S, WALK_S
 from ..core.imu_pairing import DEFAULT_TOLERANCE_S
+from ..core.rejections import MALFORMED, SampleRejected
 from ..core.teach import TAUGHT_LIBRARY
 from ..io.cdr import CdrError, read_imu
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.imu_stream import calibration_path_for, load_calibration, save_calibration
-from ..io.stream import MALFORMED, SampleRejected
 
 CALIBRATE_STANDING_SERVICE = "~/calibrate_standing"
 PARAMETERS: dict[str, tuple[Any, str]] = {

@@ -41,10 +41,11 @@ from ..core.errors import GaitEstimatorError
 from ..core.estimator import EstimatorConfig
 from ..core.gait_stream import GaitStream, Output
 from ..core.kernels import KernelLibrary
+from ..core.rejections import ANGLE_MESSAGE_ONLY, MALFORMED, REASONS, SampleRejected
 from ..core.supervisor import Estimate
 from ..io.cdr import CdrError, Stamp, read_joint_state
 from ..io.outputs import INPUT_TOPIC
-from ..io.stream import ANGLE_MESSAGE_ONLY, MALFORMED, REASONS, AngleExtractor, SampleRejected
+from ..io.stream import AngleExtractor
 from .diagnostics import PROFILE_COLUMNS, NodeDiagnostics
 from .executors import run
 from .outputs import EstimateOutputs

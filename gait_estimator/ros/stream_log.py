@@ -10,7 +10,7 @@ from collections.abc import Iterable
 from typing import Any
 
 from ..core.gait_stream import RESTART_BACK, RESTART_GAP, TEACH, TEACH_DONE, StreamEvent
-from ..core.stamps import SampleRejected
+from ..core.rejections import SampleRejected
 from .teach import LOG_PREFIX
 
 WARN_THROTTLE_S = 2.0
