@@ -19,7 +19,8 @@ Default preset throughout, ``states`` on ("after") and off ("before", the estima
   next (``between_stops``: the first stride after starting and the last before stopping are
   transitions).
 * LG_2_Ramp (bundled able_bodied kernels): the standing 3.0-4.9 s and the stop and standing turn
-  12.5-17.9 s, whole and without its steps (``stepping``); accuracy on
+  12.5-17.9 s, whole and without its steps (``stepping``), and what those steps are: their swings'
+  knee flexion and the reported fit against the level kernels' and the labelled walking's; accuracy on
   data/swge/recordings/LG_2_Ramp_AB_Sample.labels.csv (level = Slow, Med or Fast).
 * Multispeed (able_bodied): the standing before the belt starts and after it stops.
 * Synthetic (test/synthetic.py, able_bodied): new wearers walking with stops (``with_stops``);
@@ -313,6 +314,19 @@ def stepping(rec: Recording) -> np.ndarray:
     return out
 
 
+def swings(rec: Recording, rows: np.ndarray) -> list[list[Any]]:
+    """The swings within ``rows``: [leg, time (s), knee flexion peak (thigh - shank, deg)], each a
+    knee flexion maximum of 15 deg prominence or more, 0.4 s or more from the next."""
+    from scipy.signal import find_peaks
+
+    knee = rec.angles_deg[:, :2] - rec.angles_deg[:, 2:]
+    out = []
+    for leg, name in enumerate(("R", "L")):
+        peaks = find_peaks(knee[:, leg], prominence=15.0, distance=max(1, int(0.4 * rec.median_rate_hz)))[0]
+        out += [[name, float(rec.time_s[i]), float(knee[i, leg])] for i in peaks if rows[i]]
+    return sorted(out, key=lambda s: s[1])
+
+
 def lg2(ab: KernelLibrary, tuning: dict[str, Any]) -> dict[str, Any]:
     from gait_estimator.analysis.strides import heel_strikes
 
@@ -330,9 +344,14 @@ def lg2(ab: KernelLibrary, tuning: dict[str, Any]) -> dict[str, Any]:
                      "still_stand_or_unknown": share(held, rows & ~steps),
                      "steps_walking": share(after.state == WALKING, rows & steps),
                      "steps_s": [[float(t[i]), float(t[j - 1])] for i, j in bouts(rows & steps)],
-                     "before_walking_modes": share(before.ready, rows)}
+                     "before_walking_modes": share(before.ready, rows),
+                     "swings": [[*w, bool(steps[np.searchsorted(t, w[1])])] for w in swings(rec, rows)],
+                     "steps_fit_rms_deg": [float(np.median(after.fit_rms_deg[i:j])) for i, j in bouts(rows & steps)]}
     lab = np.asarray(rec.labels, dtype=object)
     labelled = lab != ""
+    knees = [np.max(m.samples[:, :2] - m.samples[:, 2:], axis=0) for m in ab.modes if m.name in LEVEL]
+    out["level_kernel_knee_peak_deg"] = [float(np.min(knees)), float(np.max(knees))]
+    out["labelled_fit_rms_deg"] = [float(v) for v in np.percentile(after.fit_rms_deg[labelled & after.ready], [50, 95])]
     later = labelled & ~first_strides(rec, heel_strikes(rec, "right_foot").times_s)
     for key, tr in (("before", before), ("after", after)):
         ok = np.where(lab == "level", np.isin(tr.mode.astype(str), LEVEL), tr.mode == lab) & labelled
@@ -595,6 +614,13 @@ def write_tables(r: dict[str, Any], out: Path) -> str:
                              ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in v["steps_s"]) + f": {pct(v['steps'])}, "
                              f"{pct(v['steps_walking'])}; {pct(v['still_stand_or_unknown'])} of {v['still_rows']:,}",
                              "—", c])
+            if "swings" in v and v["steps"] > 0.05:
+                rows.append([f"LG_2_Ramp {name}: swings (knee flexion peaks; * within a step); each step's reported "
+                             "fit, median; the level kernels' knee peaks; labelled rows' fit, median / 95th pct",
+                             ", ".join(f"{leg} {s:.2f} s {k:.0f}°{'*' if st else ''}" for leg, s, k, st in v["swings"])
+                             + "; " + ", ".join(f"{f:.1f}°" for f in v["steps_fit_rms_deg"])
+                             + "; {:.0f}-{:.0f}°; {:.1f}° / {:.1f}°".format(*lg["level_kernel_knee_peak_deg"],
+                                                                          *lg["labelled_fit_rms_deg"]), "—", c])
     rows.append(["LG_2_Ramp labelled accuracy (able_bodied, level = Slow/Med/Fast), before → after; "
                  "without the first stride after each stop",
                  f"{pct(lg['accuracy_before'])} → {pct(lg['accuracy_after'])}; "
