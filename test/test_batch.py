@@ -47,7 +47,7 @@ def assert_same_state(a: Estimator, b: Estimator) -> None:
     np.testing.assert_array_equal(a.sensor_offset_deg, b.sensor_offset_deg)
     assert (a.cadence_scale, a.calibration.strides, a.resets, a.calibration_resets) == (
         b.cadence_scale, b.calibration.strides, b.resets, b.calibration_resets) or np.isnan(a.cadence_scale)
-    assert (a.supervisor._last, a.supervisor._current) == (b.supervisor._last, b.supervisor._current)
+    np.testing.assert_array_equal(np.array(a.supervisor._mem), np.array(b.supervisor._mem))
 
 
 @pytest.mark.parametrize("preset", ["default", "paper"])
@@ -68,6 +68,25 @@ def test_bulk_equals_streaming_on_the_bundled_recordings(swge: Path, able_bodied
     if preset == "default":
         assert b.calibration.strides >= 3 and b.matcher.recency_half_life > 0  # the calibrations acted
         assert set(ref.state.tolist()) == {0, 1, 2, 3}  # every state, decided alike (states.py)
+
+
+@pytest.mark.parametrize("stamped", [True, False], ids=["resampled", "not-resampled"])
+def test_bulk_equals_streaming_under_every_supervisor_option(multispeed_csv: Path, able_bodied, tmp_path: Path,
+                                                              stamped) -> None:
+    """Holds, dwell and transitions (the walking calibrations off: paper preset, states on): the
+    same decision in bulk as sample by sample."""
+    table = tmp_path / "transitions.yaml"
+    table.write_text("allowed_transitions:\n  Slow: [Med]\n  Fast: [Med]\n")
+    cfg = EstimatorConfig.preset("paper", min_confidence=0.02, min_dwell_s=0.08, transitions=str(table), states=True,
+                                 resample="auto")
+    rec = read_recording(multispeed_csv)
+    a, b = Estimator(able_bodied, cfg, stamped=stamped), Estimator(able_bodied, cfg, stamped=stamped)
+    assert batch_supported(b)
+    ref = streamed(a, rec.time_s, rec.angles_deg, rec.index)
+    got = run_batch(b, rec.time_s, rec.angles_deg, rec.index)
+    assert got is not None and got.held.any() and (got.mode_index != got.raw_mode_index).any()
+    assert_identical(ref, got)
+    assert_same_state(a, b)
 
 
 def test_bulk_continues_a_stream_and_restarts_at_gaps(multispeed_csv: Path, able_bodied) -> None:
@@ -92,8 +111,8 @@ def test_bulk_continues_a_stream_and_restarts_at_gaps(multispeed_csv: Path, able
 
 
 def test_bulk_hands_back_what_it_cannot_do(multispeed_csv: Path, able_bodied) -> None:
-    """Options the bulk path does not cover and bad input take the streaming path: same results,
-    the same error at the same sample."""
+    """Options the bulk path does not cover (supervisor holds with the walking calibrations on) and
+    bad input take the streaming path: same results, the same error at the same sample."""
     rec = read_recording(multispeed_csv)
     t, x = rec.time_s[:1500], rec.angles_deg[:1500].copy()
     held = EstimatorConfig.preset("default", min_confidence=0.1)

@@ -1,9 +1,9 @@
-"""Supervisor.decide_many, the bulk form of Supervisor.decide: the same decision, field by field."""
+"""Supervisor.decide and Supervisor.decide_many (supervise_step on Python floats and compiled): the same
+decision, field by field, under every option."""
 
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import fields
 from pathlib import Path
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gait_estimator.core.matcher import IncrementalMatcher, StepBlock, StepResult
-from gait_estimator.core.supervisor import Estimate, Supervisor, SupervisorParams, carry_forward
+from gait_estimator.core.supervisor import Estimate, Supervisor, SupervisorParams, carry_forward, transitions_matrix
 from gait_estimator.io.readers import read_recording
 
 
@@ -21,28 +21,43 @@ def block_of(results: list[StepResult], mode_names: list[str], n_scales: int) ->
     for g, r in enumerate(results):
         b = r.mode_index
         block.sse[g], block.phases[g], block.best[g], block.ready[g] = r.sse, r.phases, b, r.ready
-        block.variant[g] = 0 if r.variant is None else r.variant[b]
-        block.column[g], block.window[g] = r.column[b], r.window[b]
+        block.variant[g] = 0 if r.variant is None else r.variant
+        block.column[g], block.window[g] = r.column[b], r.window
     return block
 
 
+SETTINGS = {
+    "off": {},
+    "confidence": {"min_confidence": 0.05},
+    "dwell": {"min_dwell_s": 0.15},
+    "all": {"min_confidence": 0.02, "min_dwell_s": 0.08, "transitions": {"Slow": ["Med"], "Fast": ["Med"]}},
+}
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
 @pytest.mark.parametrize("scales", [(1.0,), (0.9, 1.0, 1.1)], ids=["one-scale", "three-scales"])
-def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales) -> None:
-    """In runs of any length (the phase-rate state carried from one to the next), every field of
-    every estimate and the state left behind equal decide's, sample by sample."""
+def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales, setting) -> None:
+    """In runs of any length (the state carried from one to the next), every field of every
+    estimate and the state left behind equal decide's, sample by sample, under each option."""
     rec = read_recording(multispeed_csv)
     matcher = IncrementalMatcher(able_bodied, time_scales=scales)
-    results = [matcher.step(rec.angles_deg[i]) for i in range(2600)]
-    t = rec.time_s[:2600].astype(np.float64)
+    results = [matcher.step(rec.angles_deg[i]) for i in range(5200)]
+    t = rec.time_s[:5200].astype(np.float64)
     t[1500:] += 0.3  # a longer interval: another smoothing weight
-    args = (able_bodied.mode_names, SupervisorParams(), None, matcher.active_channels, False, matcher.time_scales)
+    options = dict(SETTINGS[setting])
+    table = options.pop("transitions", None)
+    allowed = None if table is None else transitions_matrix(table, able_bodied.mode_names)
+    args = (able_bodied.mode_names, SupervisorParams(**options), allowed, matcher.active_channels, False,
+            matcher.time_scales)
     one, many = Supervisor(*args), Supervisor(*args)
     ref = [one.decide(float(t[g]), r) for g, r in enumerate(results)]
     block = block_of(results, able_bodied.mode_names, matcher.n_scales)
-    cuts = [0, 1, 700, 700, 1501, 2600]
+    cuts = [0, 1, 700, 700, 1501, 3333, 5200]
     parts = [many.decide_many(t[a:b], block.rows(a, b)) for a, b in itertools.pairwise(cuts)]
     got = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     assert np.isfinite(got["phase_rate"][-1]) and np.isfinite(got["cadence_ratio"]).all() == (len(scales) > 1)
+    supervised = got["mode_index"] != got["raw_mode_index"]
+    assert supervised.any() == (setting != "off") and got["held"].any() == (setting != "off")
     for f in fields(Estimate):
         if f.name == "mode":
             assert [able_bodied.mode_names[m] for m in got["mode_index"]] == [e.mode for e in ref]
@@ -52,8 +67,7 @@ def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales) ->
             continue
         want = np.array([getattr(e, f.name) for e in ref])
         np.testing.assert_array_equal(got[f.name], want, err_msg=f.name)
-    assert (many._last, many._current, many._pending) == (one._last, one._current, one._pending)
-    assert many._rate == one._rate
+    np.testing.assert_array_equal(np.array(many._mem), np.array(one._mem))  # nan == nan here
 
 
 def test_carry_forward_is_estimate_at(multispeed_csv: Path, able_bodied) -> None:
@@ -67,12 +81,3 @@ def test_carry_forward_is_estimate_at(multispeed_csv: Path, able_bodied) -> None
     for g in range(0, 1200, 7):
         want = Estimate.from_columns(cols, g, able_bodied.mode_names).at(float(later[g]))
         assert (got["time_s"][g], got["phase"][g]) == (want.time_s, want.phase)
-
-
-def test_decide_many_only_passes_the_matcher_choice_through(able_bodied) -> None:
-    """Holds, dwell and transitions have state per sample: decide alone does them."""
-    held = Supervisor(able_bodied.mode_names, SupervisorParams(min_confidence=0.1))
-    assert not held.passes_through and Supervisor(able_bodied.mode_names).passes_through
-    with pytest.raises(ValueError, match="min_confidence"):
-        held.decide_many(np.zeros(1), StepBlock.empty(able_bodied.mode_names, 1, 1))
-    assert math.isnan(held._rate)

@@ -5,7 +5,7 @@ The streaming path hands every sample through Python (gap check, resampler, matc
 supervisor, calibrations, an ``Estimate`` object). Here each stage runs its bulk form, in the
 order of ``update``: ``GapCheck.admit_many`` and ``UniformResampler.push_many`` for the whole
 recording, ``IncrementalMatcher.run_steps`` for many steps per compiled call, then
-``Supervisor.decide_many`` (the same decision as ``decide``) for those steps and
+``Supervisor.decide_many`` (``decide``'s step, compiled) for those steps and
 ``StateTracker.decide_many`` (``step``'s rule, compiled) for the states. A run of steps ends
 where the streaming path would do more than that: at a heel strike that ends a whole stride
 (``WalkingCalibration.observe`` reads it), at the matcher's resynchronisation steps, and at gaps
@@ -36,11 +36,12 @@ SHARED = ("sse", "phases")
 
 def batch_supported(estimator: Estimator) -> bool:
     """True when ``estimator``'s options allow bulk processing: the compiled matcher, no
-    supervisor holds, dwell or transitions, no personalisation."""
+    personalisation, and no supervisor holds, dwell or transitions while the walking calibrations
+    act (the compiled steps' stride tracker follows the matcher's choice)."""
     return (
         compiled.AVAILABLE
         and estimator.matcher.backend == "numba"
-        and estimator.supervisor.passes_through
+        and (estimator.supervisor.passes_through or not estimator.calibration.active)
         and estimator.personaliser is None
     )
 

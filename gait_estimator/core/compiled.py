@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import os
 import types
-from typing import NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -218,7 +219,7 @@ def step_rows(
     return best_mode
 
 
-def _compiled_copy(fn, name, parallel=False, **callees):  # type: ignore[no-untyped-def]
+def compiled_copy(fn: Callable[..., Any], name: str, parallel: bool = False, **callees: Any) -> Any:
     """A compiled copy of ``fn`` as a function of its own ``name`` (so that its cache does not
     collide with ``fn``'s), ``parallel``: prange over numba's threads; ``callees``: global names
     that refer to other functions in the copy (then a snapshot of the module's globals, else the
@@ -230,7 +231,7 @@ def _compiled_copy(fn, name, parallel=False, **callees):  # type: ignore[no-unty
 
 step_rows, step_rows_parallel = (  # serial (prange runs as range) and with the rows over threads
     njit(cache=True, nogil=True)(step_rows),
-    _compiled_copy(step_rows, "step_rows_parallel", parallel=True),
+    compiled_copy(step_rows, "step_rows_parallel", parallel=True),
 )
 
 
@@ -387,14 +388,13 @@ _stride_step = njit(cache=True, nogil=True, inline="always")(stride_step)
 
 def run_steps(  # pragma: no cover - compiled
     state, count, samples, squares, start, stop,
-    out_sse, out_phase, best, best_variant, best_column, best_window, variant, column, window,
-    track, near, mid_lo, mid_hi, ready_from,
+    out_sse, out_phase, out_variant, out_window, best, best_column, column, track, near, mid_lo, mid_hi, ready_from,
 ):
     """Matcher steps ``start`` .. ``stop`` - 1 of ``samples`` (G, 4) (weighted; ``squares`` their
     squared norms) through step_rows (``run_steps_parallel``: step_rows_parallel, the rows of each
     step over numba's threads), the matcher's ``state`` (``step_rows``) in place from ``count`` samples on. Per step:
-    every mode's score and phase into out_sse/out_phase (G, M), the best mode and its variant,
-    column and window.
+    every mode's score, phase, variant and window into out_sse/out_phase/out_variant/out_window
+    (G, M), the best mode and its column.
 
     The walking calibrations' stride tracker (``stride_track.stride_step``, as
     ``WalkingCalibration._confident_stride_end`` runs it, without its confidence test) runs
@@ -405,8 +405,8 @@ def run_steps(  # pragma: no cover - compiled
     for g in range(start, stop):
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
-        b = step_rows(state, i, d0, d1, d2, d3, dsq, out_sse[g], out_phase[g], variant, column, window)
-        best[g], best_variant[g], best_column[g], best_window[g] = b, variant[b], column[b], window[b]
+        b = step_rows(state, i, d0, d1, d2, d3, dsq, out_sse[g], out_phase[g], out_variant[g], column, out_window[g])
+        best[g], best_column[g] = b, column[b]
         if track.shape[0] == 0:
             continue
         phase = out_phase[g, b]
@@ -425,6 +425,6 @@ def run_steps(  # pragma: no cover - compiled
 
 run_steps, run_steps_parallel = (
     njit(cache=True, nogil=True)(run_steps),
-    _compiled_copy(run_steps, "run_steps_parallel", step_rows=step_rows_parallel),
+    compiled_copy(run_steps, "run_steps_parallel", step_rows=step_rows_parallel),
 )
 

@@ -58,37 +58,36 @@ class MatchTrace:
 @dataclass(frozen=True)
 class StepBlock:
     """The results of a run of matcher steps in bulk (``IncrementalMatcher.run_steps``; G steps,
-    M modes): what ``StepResult`` holds per step, with the variant, column and window of the best
-    mode only."""
+    M modes): what ``StepResult`` holds per step, with the column of the best mode only."""
 
     mode_names: list[str]
     n_scales: int
     sse: np.ndarray  # (G, M) every mode's score
     phases: np.ndarray  # (G, M) every mode's phase
+    variant: np.ndarray  # (G, M) int64: every mode's best time scale (index)
+    window: np.ndarray  # (G, M) int64: every mode's window's samples so far
     best: np.ndarray  # (G,) int64: the best mode
-    variant: np.ndarray  # (G,) int64: its best time scale (index)
     column: np.ndarray  # (G,) int64: its best kernel column
-    window: np.ndarray  # (G,) int64: its window's samples so far
     ready: np.ndarray  # (G,) bool
 
     @classmethod
     def empty(cls, mode_names: Sequence[str], n_scales: int, steps: int) -> StepBlock:
         """Room for ``steps`` steps."""
-        best, variant, column, window = np.empty((4, steps), dtype=np.int64)
         m = len(mode_names)
-        return cls(list(mode_names), n_scales, np.empty((steps, m)), np.empty((steps, m)), best, variant, column,
-                   window, np.empty(steps, dtype=bool))
+        variant, window = np.empty((2, steps, m), dtype=np.int64)
+        return cls(list(mode_names), n_scales, np.empty((steps, m)), np.empty((steps, m)), variant, window,
+                   np.empty(steps, dtype=np.int64), np.empty(steps, dtype=np.int64), np.empty(steps, dtype=bool))
 
     def rows(self, start: int, stop: int) -> StepBlock:
         """Steps ``start`` .. ``stop`` - 1 (views)."""
         s = slice(start, stop)
-        return replace(self, sse=self.sse[s], phases=self.phases[s], best=self.best[s], variant=self.variant[s],
-                       column=self.column[s], window=self.window[s], ready=self.ready[s])
+        return replace(self, sse=self.sse[s], phases=self.phases[s], variant=self.variant[s], window=self.window[s],
+                       best=self.best[s], column=self.column[s], ready=self.ready[s])
 
     def result(self, g: int) -> StepResult:
-        """Step ``g`` as a ``StepResult`` (the other modes' variant, column and window are 0)."""
+        """Step ``g`` as a ``StepResult`` (the other modes' column is 0)."""
         b = int(self.best[g])
-        variant, column, window = np.zeros((3, len(self.mode_names)), dtype=np.int64)
-        variant[b], column[b], window[b] = self.variant[g], self.column[g], self.window[g]
+        column = np.zeros(len(self.mode_names), dtype=np.int64)
+        column[b] = self.column[g]
         return StepResult(b, self.mode_names[b], float(self.phases[g, b]), self.sse[g], self.phases[g],
-                          bool(self.ready[g]), window, variant if self.n_scales > 1 else None, column)
+                          bool(self.ready[g]), self.window[g], self.variant[g] if self.n_scales > 1 else None, column)

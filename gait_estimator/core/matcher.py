@@ -329,13 +329,12 @@ class IncrementalMatcher(_MatcherBase):
             stop = min(stop, start + SEARCH_EVERY - self._count % SEARCH_EVERY)
         track = np.zeros(0) if tracker is None else tracker
         near = np.zeros((self.n_modes, self.n_modes), dtype=bool) if near is None else near
-        scratch_v, scratch_c, scratch_w = np.empty((3, self.n_modes), dtype=np.int64)
+        column = np.empty(self.n_modes, dtype=np.int64)
         count = self._count
         threaded = self._compiled_step is compiled.step_rows_parallel  # the rows' results do not depend on it
         done, ended = (compiled.run_steps_parallel if threaded else compiled.run_steps)(
-            self._step_state(), count, samples, squares, start, stop, out.sse, out.phases,
-            out.best, out.variant, out.column, out.window, scratch_v, scratch_c, scratch_w,
-            track, near, mid_stride[0], mid_stride[1], self.max_window,
+            self._step_state(), count, samples, squares, start, stop, out.sse, out.phases, out.variant, out.window,
+            out.best, out.column, column, track, near, mid_stride[0], mid_stride[1], self.max_window,
         )
         self._count = count + done - start
         out.ready[start:done] = count + 1 + np.arange(done - start) >= self.max_window

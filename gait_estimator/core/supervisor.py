@@ -13,11 +13,10 @@ estimate:
    ``min_dwell_s`` seconds;
 5. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
 
-``Supervisor.decide`` is the one place where the reported mode and phase are decided;
-``Supervisor.decide_many`` is its bulk form (offline, ``batch.py``), and both compute confidence,
-fit and phase rate with the same functions (``relative_margin``, ``fit_rms``,
-``phase_rate_step``; compiled for the bulk form). Every option off (the defaults) reports the
-matcher's choice unchanged.
+``supervise_step`` is the decision, on Python floats for ``Supervisor.decide`` (one matcher
+result) and compiled for ``Supervisor.decide_many`` (a run of them, offline: ``batch.py``); the
+hold and dwell rule is ``choose_mode``. Every option off (the defaults) reports the matcher's
+choice unchanged.
 """
 
 from __future__ import annotations
@@ -26,6 +25,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -210,38 +210,28 @@ class Supervisor:
         self.phase_rate_tau_s = float(params.phase_rate_tau_s)
         self.normalized = bool(normalized)
         self._inverse_scales: list[float] = (1.0 / np.asarray(time_scales, dtype=np.float64)).tolist()
+        self._settings = (self.min_confidence, self.min_dwell_s, self.phase_rate_tau_s, self.normalized,
+                          int(active_channels))
         self.reset()
 
     @property
     def passes_through(self) -> bool:
-        """Every option off: the reported mode is the matcher's choice (``decide_many`` needs it)."""
+        """Every option off: the reported mode is the matcher's choice."""
         return self.min_confidence == 0 and self.min_dwell_s == 0 and self.allowed is None
 
     def reset(self) -> None:
-        self._current: int | None = None
-        self._pending: int | None = None
-        self._pending_since = 0.0
-        self._last: tuple[float, int, float] | None = None  # time, mode, phase
-        self._rate = math.nan
+        self._mem: list[float] = [-1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan, math.nan, 0.0]  # supervise_step's
 
     def decide(self, time_s: float, result: StepResult) -> Estimate:
         """The reported mode and phase for one matcher result at ``time_s`` (seconds): the
         allowed candidate, held while unconfident or dwelling, with that mode's phase."""
         sse = result.sse
         values = sse.tolist()  # Python floats from here on: per-sample numpy calls are costly when cold
-        candidate = result.mode_index
-        if self._current is not None and self.allowed is not None:
-            masked = np.where(self.allowed[self._current], sse, np.inf)
-            candidate = int(masked.argmin())
-        confidence = _margin(values, sse, candidate, result.mode_index)
-        held = False
-        if not result.ready:
-            reported = candidate
-        else:
-            reported, held = self._choose(time_s, candidate, confidence)
-        fit = fit_rms(values[reported], int(result.window[reported]), self.normalized, self.active_channels)
-        phase = result.phase if reported == result.mode_index else float(result.phases[reported])
-        rate = self._phase_rate(time_s, reported, phase) if result.ready else math.nan
+        m = len(values)  # the second smallest error: a sort of a short list beats np.partition here
+        second = math.inf if m < 2 else sorted(values)[1] if m <= 64 else float(np.partition(sse, 1)[1])
+        reported, held, confidence, fit, phase, rate = supervise_step(
+            self._mem, time_s, values, sse, result.mode_index, second, result.phase, result.phases, result.window,
+            result.ready, self.allowed, self._settings)
         return Estimate(
             time_s=time_s,
             mode_index=reported,
@@ -259,82 +249,88 @@ class Supervisor:
         )
 
     def decide_many(self, time_s: np.ndarray, steps: StepBlock) -> dict[str, np.ndarray]:
-        """The bulk form of ``decide`` for a run of matcher steps at ``time_s`` (G,), seconds: the
-        fields of their estimates as columns (G,) or (G, M), the values ``decide`` gives, the state
-        left as it leaves it. Only while the supervisor passes the matcher's choice through."""
-        if not self.passes_through:
-            raise ValueError("decide_many needs min_confidence 0, min_dwell_s 0 and no transitions")
-        n, (best, ready) = time_s.shape[0], (steps.best, steps.ready)
-        rows = np.arange(n)
-        phase, err = steps.phases[rows, best], steps.sse[rows, best]
-        other = np.partition(steps.sse, 1, axis=1)[:, 1] if steps.sse.shape[1] > 1 else np.full(n, math.inf)
-        state = np.array([0.0, 0.0, 0.0, 0.0, self._rate])  # _last (known, time, mode, phase), _rate
-        if self._last is not None:
-            state[:4] = 1.0, *self._last
-        ready_t = time_s[ready]
-        alpha = np.zeros(n)
-        alpha[ready] = self._smoothing_weights(ready_t - np.concatenate([state[1:2], ready_t[:-1]]))
-        confidence, fit, rate = np.empty((3, n))
-        _decided_rows(time_s, err, best, phase, steps.window, ready, other, alpha, state, self.normalized,
-                      self.active_channels, confidence, fit, rate)
-        if state[0] > 0:
-            self._last = (float(state[1]), int(state[2]), float(state[3]))
-        self._rate = float(state[4])
-        if ready.any():  # what _choose leaves with every option off
-            self._current, self._pending = int(best[ready][-1]), None
-        cadence = np.asarray(self._inverse_scales)[steps.variant] if steps.n_scales > 1 else np.full(n, math.nan)
+        """``decide`` for a run of matcher steps at ``time_s`` (G,), seconds, in one compiled loop:
+        the fields of their estimates as columns (G,) or (G, M), the state left as ``decide``
+        leaves it."""
+        n, m = steps.sse.shape
+        second = np.partition(steps.sse, 1, axis=1)[:, 1] if m > 1 else np.full(n, math.inf)
+        reported, held = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool)
+        confidence, fit, phase, rate = np.empty((4, n))
+        mem = np.asarray(self._mem, dtype=np.float64)
+        _supervised_rows(mem, time_s, steps.sse, second, steps.best, steps.phases, steps.window, steps.ready, self.allowed,
+                         self._settings, reported, held, confidence, fit, phase, rate)
+        self._mem = mem.tolist()
+        variant = np.take_along_axis(steps.variant, reported[:, None], axis=1)[:, 0]
+        cadence = np.asarray(self._inverse_scales)[variant] if steps.n_scales > 1 else np.full(n, math.nan)
         return {
-            "time_s": time_s, "mode_index": best, "phase": phase, "ready": ready, "sse": steps.sse,
-            "phases": steps.phases, "raw_mode_index": best.copy(), "confidence": confidence, "fit_rms_deg": fit,
-            "held": np.zeros(n, dtype=bool), "phase_rate": rate, "cadence_ratio": cadence,
+            "time_s": time_s, "mode_index": reported, "phase": phase, "ready": steps.ready, "sse": steps.sse,
+            "phases": steps.phases, "raw_mode_index": steps.best, "confidence": confidence, "fit_rms_deg": fit,
+            "held": held, "phase_rate": rate, "cadence_ratio": cadence,
         }
 
-    def _smoothing_weights(self, dt: np.ndarray) -> np.ndarray:
-        """``smoothing_weight`` of each of ``dt`` (math.exp, as ``decide``), once per distinct dt."""
-        values, inverse = np.unique(dt, return_inverse=True)
-        alpha = np.array([smoothing_weight(v, self.phase_rate_tau_s) for v in values.tolist()])
-        return alpha[inverse.reshape(-1)] if values.size else np.zeros(0)
 
-    def _choose(self, time_s: float, candidate: int, confidence: float) -> tuple[int, bool]:
-        low = self.min_confidence > 0 and confidence < self.min_confidence
-        if self._current is None:
-            self._current = candidate
-            return candidate, low
-        if low:
-            self._pending = None
-            return self._current, True
-        if candidate == self._current:
-            self._pending = None
-            return candidate, False
-        if candidate != self._pending:
-            self._pending, self._pending_since = candidate, time_s
-        if time_s - self._pending_since >= self.min_dwell_s - 1e-9:
-            self._current, self._pending = candidate, None
-            return candidate, False
-        return self._current, True
-
-    def _phase_rate(self, time_s: float, mode: int, phase: float) -> float:
-        last = self._last
-        self._last = (time_s, mode, phase)
-        if last is not None:
-            alpha = smoothing_weight(time_s - last[0], self.phase_rate_tau_s)
-            self._rate = phase_rate_step(self._rate, last[0], last[1], last[2], time_s, mode, phase, alpha)
-        return self._rate
+MEMORY = 10
+"""supervise_step's memory: the current mode (-1: none yet), the pending mode (-1: none) and since
+when; the last ready step (known, time, mode, phase); the phase rate; the last interval between
+ready steps and its smoothing weight."""
 
 
-def _margin(values: list[float], sse: np.ndarray, candidate: int, argmin: int) -> float:
-    """(SSE of the best mode other than ``candidate`` - SSE of ``candidate``) / SSE of
-    ``candidate``; ``values`` = ``sse`` as a list."""
-    if len(values) < 2:
-        return math.inf
-    if candidate == argmin:  # the second smallest; a sort of a short list beats np.partition here
-        best_other = sorted(values)[1] if len(values) <= 64 else float(np.partition(sse, 1)[1])
-    else:
-        best_other = values[argmin]
-    return relative_margin(values[candidate], best_other)
+def supervise_step(mem: Any, time_s: float, values: Any, sse: np.ndarray, argmin: int, second: float, best_phase: float,
+                   phases: np.ndarray, window: np.ndarray, ready: bool, allowed: np.ndarray | None,
+                   settings: tuple[float, float, float, bool, int]) -> tuple[int, bool, float, float, float, float]:
+    """The supervisor's decision on one matcher step at ``time_s`` (s): errors ``sse`` (M,)
+    (``values``: the same as a list, or the array), their ``argmin`` and ``second`` smallest
+    (inf with one mode), the argmin's phase ``best_phase``, every mode's ``phases`` and
+    ``window``; ``allowed`` (M, M) the transitions (None: any); ``settings`` = (min_confidence,
+    min_dwell_s, phase_rate_tau_s, normalized, active channels); ``mem`` (MEMORY,) updated in
+    place. Returns the reported mode, held, confidence, fit (deg RMS), phase and phase rate: moved
+    by 1 - exp(-dt / tau) towards the phase change over the dt since the last ready step if that
+    reported the same mode (the first such reading sets it), else unchanged."""
+    min_confidence, min_dwell_s, tau, normalized, channels = settings
+    candidate = argmin
+    if allowed is not None and mem[0] >= 0.0:
+        candidate = int(np.argmin(np.where(allowed[int(mem[0])], sse, math.inf)))
+    confidence = relative_margin(values[candidate], second if candidate == argmin else values[argmin])
+    reported, held = candidate, False
+    if ready:
+        reported, held = choose_mode(mem, time_s, candidate, confidence, min_confidence, min_dwell_s)
+    error = values[reported]  # the RMS error per sample and channel:
+    fit = math.sqrt((0.0 if error < 0.0 else error) / (1 if normalized else max(int(window[reported]), 1)) / channels)
+    phase = best_phase if reported == argmin else float(phases[reported])
+    if not ready:
+        return reported, held, confidence, fit, phase, math.nan
+    if mem[3] > 0.0 and int(mem[5]) == reported and time_s > mem[4]:  # the phase change since the last ready step
+        dt = time_s - mem[4]
+        if dt != mem[8]:  # resampled input repeats one interval
+            mem[8], mem[9] = dt, 1.0 - math.exp(-dt / tau) if tau > 0 else 1.0
+        inst = ((phase - mem[6] + 0.5) % 1.0 - 0.5) / dt
+        mem[7] = inst if math.isnan(mem[7]) else mem[7] + mem[9] * (inst - mem[7])
+    mem[3], mem[4], mem[5], mem[6] = 1.0, time_s, reported, phase
+    return reported, held, confidence, fit, phase, mem[7]
 
 
-# The formulas of the decision, one each for decide (Python floats) and decide_many (compiled).
+def choose_mode(mem: Any, time_s: float, candidate: int, confidence: float, min_confidence: float,
+                min_dwell_s: float) -> tuple[int, bool]:
+    """The reported mode of a ready step and whether it is held: the current one (``mem[0]``)
+    while the ``candidate``'s ``confidence`` is below ``min_confidence``, or until the candidate
+    has been pending (``mem[1]``, since ``mem[2]``) for ``min_dwell_s`` seconds."""
+    low = min_confidence > 0 and confidence < min_confidence
+    current = int(mem[0])
+    if current < 0:
+        mem[0] = candidate
+        return candidate, low
+    if low:
+        mem[1] = -1.0
+        return current, True
+    if candidate == current:
+        mem[1] = -1.0
+        return candidate, False
+    if candidate != int(mem[1]):
+        mem[1], mem[2] = candidate, time_s
+    if time_s - mem[2] >= min_dwell_s - 1e-9:
+        mem[0], mem[1] = candidate, -1.0
+        return candidate, False
+    return current, True
 
 
 def relative_margin(own: float, best_other: float) -> float:
@@ -345,30 +341,6 @@ def relative_margin(own: float, best_other: float) -> float:
     return (best_other - own) / own
 
 
-def fit_rms(error: float, window: int, normalized: bool, channels: int) -> float:
-    """RMS error per sample and channel, degrees, of a mode whose matcher error is ``error`` over
-    a window of ``window`` samples (``normalized``: per window sample already) and ``channels``
-    channels."""
-    per_sample = (0.0 if error < 0.0 else error) / (1 if normalized else max(window, 1))
-    return math.sqrt(per_sample / channels)
-
-
-def smoothing_weight(dt: float, tau: float) -> float:
-    """Weight 1 - exp(-dt / tau) of a phase-rate reading ``dt`` s after the previous one."""
-    return 1.0 - math.exp(-dt / tau) if tau > 0 else 1.0
-
-
-def phase_rate_step(rate: float, last_time: float, last_mode: int, last_phase: float, time_s: float, mode: int,
-                    phase: float, alpha: float) -> float:
-    """The smoothed phase rate (strides/s) after a ready step: ``rate`` moved by ``alpha``
-    (``smoothing_weight``) towards the phase change over the time since the previous ready step
-    if both report the same mode (the first such reading sets it); else unchanged."""
-    if last_mode != mode or time_s <= last_time:
-        return rate
-    inst = ((phase - last_phase + 0.5) % 1.0 - 0.5) / (time_s - last_time)
-    return inst if math.isnan(rate) else rate + alpha * (inst - rate)
-
-
 def advanced_phase(phase: float, rate: float, dt: float) -> float:
     """``phase`` advanced at ``rate`` (strides/s) over ``dt`` seconds, wrapped to [0, 1)."""
     phase = (phase + rate * dt) % 1.0
@@ -376,27 +348,20 @@ def advanced_phase(phase: float, rate: float, dt: float) -> float:
 
 
 _compile = compiled.njit(cache=True, nogil=True)
-_relative_margin, _fit_rms, _phase_rate_step, _advanced_phase = (
-    _compile(f) for f in (relative_margin, fit_rms, phase_rate_step, advanced_phase))
+_advanced_phase = _compile(advanced_phase)
+_choose_mode = compiled.compiled_copy(choose_mode, "_choose_mode")
+_supervise_step = compiled.compiled_copy(supervise_step, "_supervise_step", choose_mode=_choose_mode,
+                                         relative_margin=_compile(relative_margin))
 
 
 @_compile
-def _decided_rows(time_s, err, best, phase, window, ready, other, alpha, state, normalized, channels,
-                  confidence, fit, rate):  # pragma: no cover - compiled
-    """decide's confidence, fit and phase rate for the reported mode ``best`` of each step (its
-    error ``err``, the best other error ``other``); ``state`` = the phase-rate state (known, last
-    time, mode, phase, rate), in place; ``alpha`` per step the smoothing weight."""
+def _supervised_rows(mem, time_s, sse, second, best, phases, window, ready, allowed, settings, reported, held,
+                     confidence, fit, phase, rate):  # pragma: no cover - compiled
+    """``supervise_step`` of each step g, its results into row g of the outputs (G,)."""
     for g in range(time_s.shape[0]):
-        confidence[g] = _relative_margin(err[g], other[g])
-        fit[g] = _fit_rms(err[g], window[g], normalized, channels)
-        if not ready[g]:
-            rate[g] = np.nan
-            continue
-        if state[0] > 0.0:
-            state[4] = _phase_rate_step(state[4], state[1], int(state[2]), state[3], time_s[g], best[g], phase[g],
-                                        alpha[g])
-        state[0], state[1], state[2], state[3] = 1.0, time_s[g], best[g], phase[g]
-        rate[g] = state[4]
+        b = best[g]
+        reported[g], held[g], confidence[g], fit[g], phase[g], rate[g] = _supervise_step(
+            mem, time_s[g], sse[g], sse[g], b, second[g], phases[g, b], phases[g], window[g], ready[g], allowed, settings)
 
 
 @_compile
