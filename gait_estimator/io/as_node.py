@@ -88,9 +88,8 @@ def read_as_node(path: str | Path, config: EstimatorConfig | None = None,
     (``time_s``: ``time_ns``, stamped from the first sample's stamp; ``index``), and the stream."""
     rows, stream = _accepted(path, None, config, options)
     index, logs, stamps, times, angles, _ = (np.array(c) for c in zip(*rows, strict=True))
-    return BagRecording(times * 1e-9, angles.astype(np.float64), source=str(path), index=index,
-                        skipped={r: n for r, n in stream.guard.rejected.items() if n}, stamp_ns=stamps[0] + times,
-                        log_time_ns=logs, bag=str(path), messages=stream.received), stream
+    return BagRecording(times * 1e-9, angles.astype(np.float64), source=str(path), index=index, skipped={
+        r: n for r, n in stream.guard.rejected.items() if n}, stamp_ns=stamps[0] + times, log_time_ns=logs), stream
 
 
 def _accepted(path: str | Path, library: KernelLibrary | None, config: EstimatorConfig | None,
