@@ -26,7 +26,7 @@ from ..core.rejections import MALFORMED, SampleRejected
 from ..core.supervisor import Estimate
 from .bag import JOINT_STATE, BagRecording, bag_samples, bag_topics, is_bag_path, open_bag
 from .cdr import CdrError, read_imu
-from .imu_bag import imu_topics_of, is_imu_bag
+from .imu_bag import ImuBagRecording, imu_topics_of, is_imu_bag
 from .imu_stream import DEFAULT_TOLERANCE_S, load_calibration
 from .outputs import Predictions
 from .read_options import ReadOptions
@@ -85,11 +85,14 @@ def predict_as_node(path: str | Path, library: KernelLibrary, config: EstimatorC
 def read_as_node(path: str | Path, config: EstimatorConfig | None = None,
                  options: ReadOptions | None = None) -> tuple[BagRecording, Any]:
     """The angles the node's stream feeds its estimator (degrees, CHANNELS order) as a recording
-    (``time_s``: ``time_ns``, stamped from the first sample's stamp; ``index``), and the stream."""
+    (``time_s``: ``time_ns``, stamped from the first sample's stamp; ``index``; Imu topics: with
+    the calibration in use at the end), and the stream."""
     rows, stream = _accepted(path, None, config, options)
     index, logs, stamps, times, angles, _ = (np.array(c) for c in zip(*rows, strict=True))
-    return BagRecording(times * 1e-9, angles.astype(np.float64), source=str(path), index=index, skipped={
-        r: n for r, n in stream.guard.rejected.items() if n}, stamp_ns=stamps[0] + times, log_time_ns=logs), stream
+    imu = {} if stream.imu is None else {"calibration": stream.imu.calibrator.calibration}
+    return (ImuBagRecording if imu else BagRecording)(times * 1e-9, angles.astype(np.float64), source=str(path),
+                                                      index=index, stamp_ns=stamps[0] + times, log_time_ns=logs,
+                                                      **imu), stream
 
 
 def _accepted(path: str | Path, library: KernelLibrary | None, config: EstimatorConfig | None,
