@@ -62,6 +62,12 @@ def test_train_as_node_by_label_ranges_and_what_is_refused(tmp_path: Path, multi
     out = str(tmp_path / "o.yaml")
     assert main(["train", str(bag), "--as-node", "--labels", str(ranges), "--strides", "4", "-o", out]) == 0
     assert load_library(out).mode("Slow").info["strides"] == 4
+    later = write_input_bag(load_multispeed(multispeed_csv, 20 * 230, 30 * 230), tmp_path / "later", start_ns=BASE_NS)
+    for bags, name in (([bag], "one.npz"), ([bag, later], "two.npz"), ([later], "later.npz")):
+        assert main(["train", *map(str, bags), "--as-node", "--mode", "Slow", "--strides", "4", "-o", str(tmp_path / name)]) == 0
+    one, two, other = (load_library(tmp_path / n).mode("Slow").samples for n in ("one.npz", "two.npz", "later.npz"))
+    np.testing.assert_array_equal(one, two)  # a mode is taught once: from the first bag
+    assert one.shape != other.shape or not np.array_equal(one, other)
     ranges.write_text("start_s,end_s,mode\n0,3,Slow\n3,10,Med\n")  # 3 s: too short for 3 strides
     assert main(["train", str(bag), "--as-node", "--labels", str(ranges), "--strides", "3", "-o", out]) == 1
     printed = capsys.readouterr().out

@@ -78,7 +78,7 @@ def train_as_node(args: argparse.Namespace, detection: Any) -> int:
     """``train BAG... --as-node``: the bags played one after another to a node (each started with the
     library taught so far) whose ``teach_mode`` is ``--mode`` from the start, or each ``--labels``
     range's mode from its start_s to its end_s (seconds from the bag's first sample, as ``convert
-    --as-node`` times it); exit 1 when a mode was not taught."""
+    --as-node`` times it), each mode until it is taught; exit 1 when a mode was not taught."""
     from ..analysis.labels import read_label_ranges
     from ..core.channels import CHANNELS
     from ..core.teach import HEEL_STRIKE_CHANNEL, TeachOptions
@@ -102,7 +102,8 @@ def train_as_node(args: argparse.Namespace, detection: Any) -> int:
     lib, config = None, _config(args)
     for path in args.recordings:
         with bag_as_node(path, lib, config, ReadOptions.of(None, reader_options(args))) as (stream, samples):
-            todo, end = list(ranges), math.inf
+            taught = lib.provenance.get("taught", []) if lib is not None else []
+            todo, end = [r for r in ranges if r[2] not in taught], math.inf
             for t in chain([-math.inf], (s.time_ns * 1e-9 for s in samples)):
                 if t >= end:
                     stream.cancel_teaching()
