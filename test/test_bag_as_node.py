@@ -76,6 +76,8 @@ def test_train_as_node_by_label_ranges_and_what_is_refused(tmp_path: Path, multi
                            ([], "give the mode(s) to teach")):
         assert main(["train", str(bag), "--as-node", "-o", out, *(extra or []), *([] if not extra else ["--mode", "A"])]) == 2
         assert message in capsys.readouterr().err
+    assert main(["train", str(bag), "--mode", "Slow", "--strides", "4", "-o", out]) == 2
+    assert "--strides is for --as-node" in capsys.readouterr().err
 
 
 def test_convert_as_node_angles_equal_convert_without_restarts(tmp_path: Path, multispeed_csv: Path, capsys) -> None:

@@ -94,6 +94,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         from .as_node import train_as_node
 
         return train_as_node(args, detection_options(args))
+    if args.strides is not None:
+        raise GaitEstimatorError("--strides is for --as-node (train averages every usable stride of a mode)")
     recs = [_read_labelled(p, args)[0] for p in args.recordings]
     opts = TrainOptions(
         heel_strikes=args.heel_strikes,
@@ -251,8 +253,8 @@ def add_commands(sub: Any) -> None:
     add_imu_reading_options(t)
     t.add_argument("--as-node", action="store_true", help="bags: the kernels the node's teaching builds as the bags "
                    "play, teach_mode = --mode, or each --labels range's mode in its range (docs/teach.md)")
-    t.add_argument("--strides", type=int, default=TEACH_STRIDES, help="--as-node: good strides a taught kernel "
-                   "averages, as teach_strides (default %(default)s)")
+    t.add_argument("--strides", type=int, help="--as-node: good strides a taught kernel averages, as teach_strides "
+                   f"(default {TEACH_STRIDES})")
     t.set_defaults(func=cmd_train)
 
     e = sub.add_parser("evaluate", help="accuracy, confusion, phase error and figures of predictions vs truth")

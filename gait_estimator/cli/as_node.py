@@ -81,7 +81,7 @@ def train_as_node(args: argparse.Namespace, detection: Any) -> int:
     --as-node`` times it), each mode until it is taught; exit 1 when a mode was not taught."""
     from ..analysis.labels import read_label_ranges
     from ..core.channels import CHANNELS
-    from ..core.teach import HEEL_STRIKE_CHANNEL, TeachOptions
+    from ..core.teach import HEEL_STRIKE_CHANNEL, TEACH_STRIDES, TeachOptions
     from ..core.training import OutlierRule
     from ..io.as_node import bag_as_node
     from ..io.library_io import save_library
@@ -96,7 +96,7 @@ def train_as_node(args: argparse.Namespace, detection: Any) -> int:
         raise GaitEstimatorError("--as-node: give the mode(s) to teach: --mode NAME or --labels RANGES.csv")
     ranges = [(-math.inf, math.inf, args.mode)] if args.mode else sorted(
         (r.start_s, r.end_s, r.mode) for r in read_label_ranges(args.labels) if r.mode)
-    teach = TeachOptions(strides=args.strides, channel=channel, min_strides=args.min_strides,
+    teach = TeachOptions(strides=args.strides or TEACH_STRIDES, channel=channel, min_strides=args.min_strides,
                          detection=detection,
                          outliers=OutlierRule(duration_floor=args.duration_tolerance))
     lib, config = None, _config(args)
