@@ -102,14 +102,14 @@ def train_as_node(args: argparse.Namespace, detection: Any) -> int:
     lib, config = None, _config(args)
     for path in args.recordings:
         with bag_as_node(path, lib, config, ReadOptions.of(None, reader_options(args))) as (stream, samples):
-            taught = lib.provenance.get("taught", []) if lib is not None else []
-            todo, end = [r for r in ranges if r[2] not in taught], math.inf
+            todo, end = list(ranges), math.inf
             for t in chain([-math.inf], (s.time_ns * 1e-9 for s in samples)):
                 if t >= end:
                     stream.cancel_teaching()
                 if todo and t >= todo[0][0]:
                     _, end, mode = todo.pop(0)
-                    stream.start_teaching(mode, teach)
+                    if mode not in _taught(stream.library):
+                        stream.start_teaching(mode, teach)
                 _print_teaching(stream)
             stream.cancel_teaching()
             _print_teaching(stream)
@@ -117,12 +117,16 @@ def train_as_node(args: argparse.Namespace, detection: Any) -> int:
         finish(args, stream, path, quiet=True)
     if lib is None:
         raise GaitEstimatorError(f"no mode taught from {', '.join(args.recordings)}: too few good strides")
-    missing = sorted({m for _, _, m in ranges} - set(lib.provenance.get("taught", [])))
+    missing = sorted({m for _, _, m in ranges} - set(_taught(lib)))
     out = save_library(replace(lib, name=args.name or Path(args.out).stem), args.out)
     print(f"wrote {out} ({len(lib)} modes: {', '.join(lib.mode_names)})")
     if missing:
         print(f"not taught: {', '.join(missing)}")
     return 1 if missing else 0
+
+
+def _taught(lib: KernelLibrary | None) -> list[str]:
+    return lib.provenance.get("taught", []) if lib is not None else []
 
 
 def _print_teaching(stream: Any) -> None:
