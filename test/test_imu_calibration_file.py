@@ -102,7 +102,7 @@ def test_a_calibration_file_that_cannot_be_used_is_one_line_naming_it(bags, tmp_
     assert not (tmp_path / "x.csv").exists()
     csv = Path(__file__).resolve().parents[1] / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.csv"
     assert main(["convert", str(csv), *out, "--save-imu-calibration", str(tmp_path / "c.yaml")]) == 2
-    assert "is not a bag of sensor_msgs/Imu topics (no IMU calibration to save)" in error_line(capsys)
+    assert "no IMU calibration to save (not a bag of sensor_msgs/Imu topics" in error_line(capsys)
     assert main(["train", str(bags["whole"]), str(bags["cut"]), "--out", str(tmp_path / "l.yaml"),
                  "--save-imu-calibration", str(tmp_path / "c.yaml")]) == 2
     assert "one recording's calibration is saved, 2 recordings given" in error_line(capsys)

@@ -14,6 +14,7 @@ import numpy as np
 from ..analysis.strides import HEEL_STRIKE_SOURCES, heel_strikes, nearest_index, resample_uniform
 from ..core.errors import GaitEstimatorError
 from ..core.strides import MAX_STRIDE_S, MIN_PROMINENCE_DEG, MIN_STRIDE_S, DetectionOptions, stride_bounds
+from ..core.teach import TEACH_STRIDES
 from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.recording import Recording, write_project_csv
 from ..io.resources import DEFAULT_LIBRARY
@@ -54,7 +55,7 @@ def _time_rate_arg(p: argparse.ArgumentParser, default: float | None = DEFAULT_R
                    f"sample / HZ (default {default if default is not None else 'the library rate'})")
 
 
-def _detection(args: argparse.Namespace) -> DetectionOptions:
+def detection_options(args: argparse.Namespace) -> DetectionOptions:
     if args.max_stride_s <= args.min_stride_s:
         raise GaitEstimatorError(f"--max-stride-s ({args.max_stride_s}) must exceed --min-stride-s ({args.min_stride_s})")
     return DetectionOptions(args.min_stride_s, args.max_stride_s, args.prominence)
@@ -89,12 +90,18 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.save_imu_calibration and len(args.recordings) > 1:
         raise GaitEstimatorError(f"--save-imu-calibration: one recording's calibration is saved, {len(args.recordings)} "
                                  "recordings given (convert one of them with --save-imu-calibration)")
+    if args.as_node:
+        from .as_node import train_as_node
+
+        return train_as_node(args, detection_options(args))
+    if args.strides is not None:
+        raise GaitEstimatorError("--strides is for --as-node (train averages every usable stride of a mode)")
     recs = [_read_labelled(p, args)[0] for p in args.recordings]
     opts = TrainOptions(
         heel_strikes=args.heel_strikes,
         rate_hz=args.rate,
         min_strides=args.min_strides,
-        detection=_detection(args),
+        detection=detection_options(args),
         outliers=OutlierRule(duration_floor=args.duration_tolerance),
     )
     result = train_library(recs, args.name or Path(args.out).stem, opts)
@@ -118,7 +125,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     truth, labels_from = _read_labelled(args.truth, args)
     if truth.labels is None:
         raise GaitEstimatorError(f"{args.truth}: no 'mode' column (give --labels RANGES.csv or --mode NAME)")
-    det = _detection(args)
+    det = detection_options(args)
     hs = None if args.heel_strikes == "none" else heel_strikes(truth, args.heel_strikes, None, det)
     ev = evaluate(pred, truth, hs, label_map, det)
     ev.metrics["labels_from"] = labels_from
@@ -157,7 +164,7 @@ def cmd_resample(args: argparse.Namespace) -> int:
     uni = resample_uniform(rec, rate)
     note = ""
     if args.heel_strikes != "none":
-        hs = heel_strikes(rec, args.heel_strikes, rate, _detection(args))
+        hs = heel_strikes(rec, args.heel_strikes, rate, detection_options(args))
         flags = np.zeros(len(uni), dtype=bool)
         if hs.times_s.size:
             flags[nearest_index(uni.time_s, hs.times_s)] = True
@@ -188,7 +195,7 @@ def cmd_label_strides(args: argparse.Namespace) -> int:
     except KeyError as exc:
         raise GaitEstimatorError(str(exc.args[0])) from None
     rec = read_recording_args(args, args.recording, rate_hz=args.time_rate or lib.sample_rate_hz)
-    det = _detection(args)
+    det = detection_options(args)
     hs = heel_strikes(rec, args.heel_strikes, None, det)
     bounds, _ = stride_bounds(hs.times_s, det)
     if len(bounds) == 0:
@@ -244,6 +251,10 @@ def add_commands(sub: Any) -> None:
     _detection_args(t)
     _time_rate_arg(t)
     add_imu_reading_options(t)
+    t.add_argument("--as-node", action="store_true", help="bags: the kernels the node's teaching builds as the bags "
+                   "play, teach_mode = --mode, or each --labels range's mode in its range (docs/teach.md)")
+    t.add_argument("--strides", type=int, help="--as-node: good strides a taught kernel averages, as teach_strides "
+                   f"(default {TEACH_STRIDES})")
     t.set_defaults(func=cmd_train)
 
     e = sub.add_parser("evaluate", help="accuracy, confusion, phase error and figures of predictions vs truth")

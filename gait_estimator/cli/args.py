@@ -155,24 +155,22 @@ def read_recording_args(args: argparse.Namespace, path: str | Path, **options: A
     from ..io.readers import read_recording
 
     rec = read_recording(path, **{**reader_options(args), **options})
-    save_imu_calibration(args, rec, path)
+    save_imu_calibration(args, getattr(rec, "calibration", None), path)
     return rec
 
 
-def save_imu_calibration(args: argparse.Namespace, rec: Any, source: str | Path) -> None:
-    """``--save-imu-calibration``: write the calibration ``rec`` (read from ``source``) was made
-    with, as the node saves its own (``io/imu_stream.save_calibration``); a recording that is not
-    a bag of Imu topics has none: one-line error."""
+def save_imu_calibration(args: argparse.Namespace, calibration: Any, source: str | Path) -> None:
+    """``--save-imu-calibration``: write ``calibration`` (the ImuCalibration ``source`` was read
+    with; None: none) as the node saves its own (``io/imu_stream.save_calibration``); none: one-line error."""
     path = getattr(args, "save_imu_calibration", None)
     if not path:
         return
-    from ..io.imu_bag import ImuBagRecording
     from ..io.imu_stream import save_calibration
 
-    if not isinstance(rec, ImuBagRecording) or rec.calibration is None:
-        raise GaitEstimatorError(f"--save-imu-calibration: {source} is not a bag of sensor_msgs/Imu topics "
-                                 "(no IMU calibration to save)")
+    if calibration is None:
+        raise GaitEstimatorError(f"--save-imu-calibration: {source}: no IMU calibration to save (not a bag of "
+                                 "sensor_msgs/Imu topics, or none learnt from it)")
     try:
-        print(f"wrote IMU calibration {save_calibration(rec.calibration, path)}")
+        print(f"wrote IMU calibration {save_calibration(calibration, path)}")
     except OSError as exc:
         raise GaitEstimatorError(f"--save-imu-calibration {path}: {exc.strerror or exc}") from None

@@ -30,7 +30,7 @@ from ..io.bag import (
     read_bag,
 )
 from ..io.bag_write import STORAGES
-from ..io.imu_bag import ImuBagRecording, is_imu_bag
+from ..io.imu_bag import ImuBagRecording
 from ..io.library_io import DEFAULT_REFERENCE_RATE_HZ
 from ..io.process import Predictions, predict
 from ..io.readers import read_recording
@@ -135,7 +135,8 @@ def cmd_convert(args: argparse.Namespace) -> int:
     if bool(args.out_bag) == bool(args.out):
         raise GaitEstimatorError("give exactly one of --out-bag DIR (write a bag) or --out CSV (write a CSV)")
     rec = _read_source(args)
-    save_imu_calibration(args, rec, args.source)
+    if not args.as_node:  # (--as-node: the stream's, saved on the way)
+        save_imu_calibration(args, getattr(rec, "calibration", None), args.source)
     warn_units(rec, args.source, args.units)
     if args.out_bag:
         start_ns = None if args.start_time is None else round(args.start_time * 1e9)
@@ -153,11 +154,12 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def _read_source(args: argparse.Namespace) -> Recording:
-    p = Path(args.source)
-    if is_bag_path(p) and not is_imu_bag(p) and not args.imu_topics:
-        return read_bag(p, topic=args.topic, joint_names=args.joint_names, input_units=args.units,
-                        **reader_options(args, ("max_gap_s",)))
-    return read_recording(p, rate_hz=args.sample_rate, **reader_options(args))
+    options = {"input_units": args.units, **reader_options(args, ("topic", "joint_names", "max_gap_s", *IMU_READING_OPTIONS))}
+    if args.as_node:
+        from .as_node import convert_as_node
+
+        return convert_as_node(args, options)
+    return read_recording(args.source, rate_hz=args.sample_rate, **options)
 
 
 def _print_reading_notes(rec: Recording) -> None:
@@ -305,6 +307,8 @@ def add_commands(sub: Any) -> None:
         "--sample-rate", type=positive_float, default=DEFAULT_REFERENCE_RATE_HZ, metavar="HZ",
         help="time base of a reference CSV without time column (default %(default)g)",
     )
+    conv.add_argument("--as-node", action="store_true", help="a bag (angles or four Imu topics): the angles the node's "
+                      "GaitStream feeds its estimator, IMU calibration learnt as the node learns it (docs/bags.md)")
     conv.set_defaults(func=cmd_convert)
 
     play = sub.add_parser(
