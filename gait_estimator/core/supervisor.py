@@ -9,9 +9,11 @@ estimate:
 2. confidence: margin = (SSE of the best other mode - SSE of the candidate) / SSE of the
    candidate; fit quality = RMS error per sample and channel, degrees;
 3. hold: below ``min_confidence`` the last confident mode stays reported, flagged ``held``;
-4. dwell (hysteresis): a new mode is reported only after it has been the candidate for
-   ``min_dwell_s`` seconds;
-5. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
+4. switch-back margin (hysteresis against flicker between close modes): a return to the mode
+   reported before the current one needs its error below (1 - ``switch_back_margin``) x the
+   current mode's (``switch_candidate``);
+5. dwell: a new mode is reported only after it has been the candidate for ``min_dwell_s`` seconds;
+6. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
 
 ``Supervisor.decide`` is the one place where the reported mode and phase are decided;
 ``Supervisor.decide_many`` is its bulk form (offline, ``batch.py``), and both compute confidence,
@@ -168,12 +170,15 @@ class SupervisorParams:
     Attributes:
         min_confidence: Hold the last confident mode below this margin; 0 = off.
         min_dwell_s: Seconds a new mode must win before it is reported; 0 = off.
+        switch_back_margin: Relative error margin by which the mode reported before the current
+            one must beat it to be reported again, [0, 1); 0 = off.
         transitions: YAML file of allowed transitions; '' = any.
         phase_rate_tau_s: Time constant of the phase-rate smoothing, seconds.
     """
 
     min_confidence: float = EstimatorConfig.min_confidence
     min_dwell_s: float = EstimatorConfig.min_dwell_s
+    switch_back_margin: float = EstimatorConfig.switch_back_margin
     transitions: str = EstimatorConfig.transitions
     phase_rate_tau_s: float = EstimatorConfig.phase_rate_tau_s
 
@@ -207,6 +212,7 @@ class Supervisor:
         self.active_channels = active_channels
         self.min_confidence = float(params.min_confidence)
         self.min_dwell_s = float(params.min_dwell_s)
+        self.switch_back_margin = float(params.switch_back_margin)
         self.phase_rate_tau_s = float(params.phase_rate_tau_s)
         self.normalized = bool(normalized)
         self._inverse_scales: list[float] = (1.0 / np.asarray(time_scales, dtype=np.float64)).tolist()
@@ -215,10 +221,11 @@ class Supervisor:
     @property
     def passes_through(self) -> bool:
         """Every option off: the reported mode is the matcher's choice (``decide_many`` needs it)."""
-        return self.min_confidence == 0 and self.min_dwell_s == 0 and self.allowed is None
+        return self.min_confidence == 0 and self.min_dwell_s == 0 and self.switch_back_margin == 0 and self.allowed is None
 
     def reset(self) -> None:
         self._current: int | None = None
+        self._previous: int | None = None  # the mode reported before _current
         self._pending: int | None = None
         self._pending_since = 0.0
         self._last: tuple[float, int, float] | None = None  # time, mode, phase
@@ -233,12 +240,17 @@ class Supervisor:
         if self._current is not None and self.allowed is not None:
             masked = np.where(self.allowed[self._current], sse, np.inf)
             candidate = int(masked.argmin())
+        kept = False
+        if self._current is not None and self.switch_back_margin > 0 and result.ready:
+            chosen = switch_candidate(values, self._current, self._previous, candidate, self.switch_back_margin)
+            candidate, kept = chosen, chosen != candidate
         confidence = _margin(values, sse, candidate, result.mode_index)
         held = False
         if not result.ready:
             reported = candidate
         else:
             reported, held = self._choose(time_s, candidate, confidence)
+            held = held or kept
         fit = fit_rms(values[reported], int(result.window[reported]), self.normalized, self.active_channels)
         phase = result.phase if reported == result.mode_index else float(result.phases[reported])
         rate = self._phase_rate(time_s, reported, phase) if result.ready else math.nan
@@ -263,7 +275,7 @@ class Supervisor:
         fields of their estimates as columns (G,) or (G, M), the values ``decide`` gives, the state
         left as it leaves it. Only while the supervisor passes the matcher's choice through."""
         if not self.passes_through:
-            raise ValueError("decide_many needs min_confidence 0, min_dwell_s 0 and no transitions")
+            raise ValueError("decide_many needs min_confidence 0, min_dwell_s 0, switch_back_margin 0 and no transitions")
         n, (best, ready) = time_s.shape[0], (steps.best, steps.ready)
         rows = np.arange(n)
         phase, err = steps.phases[rows, best], steps.sse[rows, best]
@@ -309,7 +321,7 @@ class Supervisor:
         if candidate != self._pending:
             self._pending, self._pending_since = candidate, time_s
         if time_s - self._pending_since >= self.min_dwell_s - 1e-9:
-            self._current, self._pending = candidate, None
+            self._previous, self._current, self._pending = self._current, candidate, None
             return candidate, False
         return self._current, True
 
@@ -335,6 +347,15 @@ def _margin(values: list[float], sse: np.ndarray, candidate: int, argmin: int) -
 
 
 # The formulas of the decision, one each for decide (Python floats) and decide_many (compiled).
+
+
+def switch_candidate(errors: Sequence[float], current: int, previous: int | None, candidate: int, margin: float) -> int:
+    """The mode to follow: ``candidate``, unless it is the ``previous`` mode (reported before
+    ``current``) and its error is not below (1 - ``margin``) x the current mode's (``errors`` per
+    mode): two close modes then do not take turns on noise, and a change to a third is not delayed."""
+    if candidate != previous or errors[candidate] < (1.0 - margin) * errors[current]:
+        return candidate
+    return current
 
 
 def relative_margin(own: float, best_other: float) -> float:
