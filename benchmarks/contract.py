@@ -2,7 +2,7 @@
 """What a controller can trust (docs/controller.md): the states beside the mode, the units check
 and the mode switches, measured. One command:
 
-    python benchmarks/contract.py                # ~3 min: writes benchmarks/results/contract/contract.json, tables.md
+    python benchmarks/contract.py                # ~4 min: writes benchmarks/results/contract/contract.json, tables.md
     python benchmarks/contract.py --tables-only  # only tables.md, from the saved contract.json (make docs)
     git worktree add /tmp/old 1d47482            # then, Estimator.update here and there, interleaved:
     taskset -c 0 python benchmarks/contract.py --update-cost /tmp/old
@@ -22,14 +22,15 @@ Default preset throughout, ``states`` on ("after") and off ("before", the estima
   12.5-17.9 s, whole and without its steps (``stepping``), and what those steps are: their swings'
   knee flexion and the reported fit against the level kernels' and the labelled walking's; accuracy on
   data/swge/recordings/LG_2_Ramp_AB_Sample.labels.csv (level = Slow, Med or Fast).
-* Multispeed (able_bodied): the standing before the belt starts and after it stops.
+* Multispeed (able_bodied): the standing before the belt starts and after it stops; switches
+  against benchmarks/accuracy.py's cadence labels (every stride, ``label-strides --all-strides``).
 * Synthetic (test/synthetic.py, able_bodied): new wearers walking with stops (``with_stops``);
   running-like strides (knee flexion x1.6 over 0.7 of the stride time), sit-to-stand and back,
   stepping while turning in place.
 * Switches: a change of the reported mode (``stand`` and ``unknown`` included) is false when no
   labelled change came in the ``SWITCH_WINDOW_S`` before it (``evaluate.switch_metrics``); per
   minute of labelled walking; delay = from a labelled change to the first row reporting the new
-  label's mode.
+  label's mode. Trade-off curves: each option in ``SWEEPS`` over its values, per set.
 * Update cost (``--update-cost``): ``Estimator.update`` per sample (default preset, able_bodied,
   Multispeed stamped at 230 Hz) in this checkout and another, one process per round, alternating;
   the median and p99 over all rounds and their ratios (printed, not saved: machine load).
@@ -79,13 +80,14 @@ CAMARGO = REPO / "data" / "camargo_ab06"
 LG2 = REPO / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.csv"
 MULTISPEED = REPO / "data" / "swge" / "recordings" / "Multispeed_Walk_AB.csv"
 LG2_LABELS = REPO / "data" / "swge" / "recordings" / "LG_2_Ramp_AB_Sample.labels.csv"
+MULTISPEED_LABELS = REPO / "benchmarks" / "results" / "accuracy" / "multispeed_labels_all.csv"
 COMMAND = "`python benchmarks/contract.py`"
 GRACE_S = 0.5
 LEVEL = ("Slow", "Med", "Fast")
 
 
 OPTIONS: dict[str, Any] = {}
-"""Estimator options on top of the default preset (``--options``, and the dwell sweep)."""
+"""Estimator options on top of the default preset (``--options``, and the switch sweeps)."""
 
 
 def estimator(lib: KernelLibrary, states: bool = True, **tuning: Any) -> Estimator:
@@ -97,24 +99,28 @@ def run(lib: KernelLibrary, rec: Recording, states: bool = True, **tuning: Any) 
     return run_estimator(estimator(lib, states, **tuning), rec.time_s, rec.angles_deg)
 
 
-DWELLS = (0.0, 0.1, 0.2, 0.3, 0.5, 0.75)
-"""``min_dwell_s`` values of the switch trade-off curve."""
+SWEEPS = {"min_dwell_s": (0.0, 0.1, 0.2, 0.3, 0.5, 0.75), "switch_back_margin": (0.0, 0.1, 0.2, 0.3, 0.5, 0.7, 0.9)}
+"""The switch trade-off curves: values of each option, the others as ``--options`` leaves them."""
 
 
-def dwell_curve(sets: dict[str, tuple[KernelLibrary, list[tuple[Recording, np.ndarray]]]],
-                tuning: dict[str, Any]) -> dict[str, Any]:
-    """False switches per minute and mean delay (states on) for each ``min_dwell_s`` in DWELLS, per
-    set of (recording, truth labels as ``switch_metrics`` takes them)."""
+def switch_curves(sets: dict[str, tuple[KernelLibrary, list[tuple[Recording, np.ndarray]]]],
+                  tuning: dict[str, Any]) -> dict[str, Any]:
+    """False switches per minute and mean delay (states on) for each value of each option in
+    SWEEPS, per set of (recording, truth labels as ``switch_metrics`` takes them)."""
     out: dict[str, Any] = {}
-    for name, (lib, recs) in sets.items():
-        out[name] = []
-        for dwell in DWELLS:
-            OPTIONS["min_dwell_s"] = dwell
-            rows = [{"after": switch_metrics(r.time_s, tr.mode, tr.ready, labels)}
-                    for r, labels in recs for tr in [run(lib, r, True, **tuning)]]
-            pooled = pool_switches(rows, ("after",))["after"]
-            out[name].append({"min_dwell_s": dwell, **pooled})
-        OPTIONS.pop("min_dwell_s")
+    for option, values in SWEEPS.items():
+        kept = OPTIONS.pop(option, None)
+        out[option] = {}
+        for name, (lib, recs) in sets.items():
+            out[option][name] = []
+            for value in values:
+                OPTIONS[option] = value
+                rows = [{"after": switch_metrics(r.time_s, tr.mode, tr.ready, labels)}
+                        for r, labels in recs for tr in [run(lib, r, True, **tuning)]]
+                out[option][name].append({option: value, **pool_switches(rows, ("after",))["after"]})
+        OPTIONS.pop(option)
+        if kept is not None:
+            OPTIONS[option] = kept
     return out
 
 
@@ -362,9 +368,16 @@ def lg2(ab: KernelLibrary, tuning: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def multispeed_labelled(ab: KernelLibrary) -> tuple[Recording, np.ndarray]:
+    """Multispeed labelled with benchmarks/accuracy.py's cadence labels (every stride: Slow, Med,
+    Fast by the nearest kernel stride duration), and the labels."""
+    rec = with_ranges(read_recording(MULTISPEED, rate_hz=ab.sample_rate_hz), read_label_ranges(MULTISPEED_LABELS))
+    return rec, rec.labels
+
+
 def multispeed(ab: KernelLibrary, tuning: dict[str, Any]) -> dict[str, Any]:
-    rec = read_recording(MULTISPEED, rate_hz=ab.sample_rate_hz)
-    after = run(ab, rec, True, **tuning)
+    rec, labels = multispeed_labelled(ab)
+    before, after = run(ab, rec, False), run(ab, rec, True, **tuning)
     t = rec.time_s
     moving = np.flatnonzero(np.abs(np.diff(rec.angles_deg, axis=0)).max(axis=1) * ab.sample_rate_hz > 20.0)
     start, end = t[moving[0]], t[moving[-1]]
@@ -373,7 +386,9 @@ def multispeed(ab: KernelLibrary, tuning: dict[str, Any]) -> dict[str, Any]:
     last = t > end + GRACE_S
     return {"moves_from_s": float(start), "still_after_s": float(end),
             "start_stand": share(after.state == STANDING, first), "start_rows": int(first.sum()),
-            "end_stand": share(after.state == STANDING, last), "end_rows": int(last.sum())}
+            "end_stand": share(after.state == STANDING, last), "end_rows": int(last.sum()),
+            "switches": pool_switches([{k: switch_metrics(t, tr.mode, tr.ready, labels) for k, tr in
+                                        (("before", before), ("after", after))}])}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -573,7 +588,8 @@ def compute(seeds: int, tuning: dict[str, Any]) -> dict[str, Any]:
     sets["LG_2_Ramp"] = (ab, [lg2_labelled()])
     wearers = [generate(ab, ROUTE, new_wearer(s), seed=1000 + s).recording for s in range(seeds)]
     sets["synthetic new wearers"] = (ab, [(r, r.labels) for r in wearers])
-    result["dwell_curve"] = dwell_curve(sets, tuning)
+    sets["Multispeed"] = (ab, [multispeed_labelled(ab)])
+    result["switch_curves"] = switch_curves(sets, tuning)
     return result
 
 
@@ -651,7 +667,8 @@ def write_tables(r: dict[str, Any], out: Path) -> str:
               _s(v["moves_from_s"]), _s(v["first_stride_s"]), _s(_after(v["rad_read_as_deg_s"], v["first_stride_s"]))]
              for name, v in u.items()]
     sw = [["camargo_ab06 motion capture", cam["mocap"]["switches"]], ["camargo_ab06 IMU", cam["imu"]["switches"]],
-          ["LG_2_Ramp (able_bodied)", lg["switches"]], ["synthetic new wearers", nw["switches"]]]
+          ["LG_2_Ramp (able_bodied)", lg["switches"]], ["Multispeed (able_bodied, cadence labels)", ms["switches"]],
+          ["synthetic new wearers", nw["switches"]]]
     srows = []
     for name, s in sw:
         b, a = s["before"], s["after"]
@@ -664,8 +681,6 @@ def write_tables(r: dict[str, Any], out: Path) -> str:
         "## Summary", "",
         f"{COMMAND} (deterministic), AMD EPYC 2 vCPU host, {r['date']}; default preset, before = `states: false`.", "",
         summary(r), "",
-        f"Measured {r['date']} on an AMD EPYC 2 vCPU host ({r['machine']['processor']}); default preset, "
-        "`states` off (before) and on (after).", "",
         "## Targets", "",
         md_table(["measure", "result", "target", "measured with"], rows), "",
         "## Switches", "",
@@ -674,12 +689,7 @@ def write_tables(r: dict[str, Any], out: Path) -> str:
         f"first row with its mode. {COMMAND}.", "",
         md_table(["recording", "labelled min", "labelled changes", "false switches / min", "mean delay",
                   "changes missed"], srows), "",
-        "### Dwell", "",
-        "States on, `min_dwell_s` (a new mode must win this long before it is reported) from 0: false switches per "
-        f"minute / mean delay. {COMMAND}.", "",
-        md_table(["recording", *(f"{d:g} s" for d in DWELLS)],
-                 [[name, *(f"{p['false_per_minute']:.1f} / {_s(p['mean_delay_s'])}" for p in points)]
-                  for name, points in r["dwell_curve"].items()]), "",
+        *curve_sections(r["switch_curves"]),
         "## Units", "",
         "Each recording through `UnitsCheck` as it is (a verdict: false warning) and in the wrong unit: seconds "
         "from the start to the verdict; the first 5° from the first sample's angles; the first step (a segment "
@@ -692,6 +702,28 @@ def write_tables(r: dict[str, Any], out: Path) -> str:
     out.mkdir(parents=True, exist_ok=True)
     (out / "tables.md").write_text(text, encoding="utf-8")
     return text
+
+
+CURVES = {"min_dwell_s": ("Dwell", "a new mode must win this long before it is reported", "{:g} s"),
+          "switch_back_margin": ("Switch-back margin", "the mode reported before the current one is reported again "
+                                 "only when its error is below (1 − margin) × the current mode's", "{:g}")}
+"""Per swept option: section title, meaning, column format."""
+
+
+def curve_sections(curves: dict[str, Any]) -> list[str]:
+    """One section per swept option: false switches per minute / mean delay per set and value."""
+    out = []
+    for option, by_set in curves.items():
+        title, meaning, fmt = CURVES[option]
+        values = [p[option] for p in next(iter(by_set.values()))]
+        out += [f"### {title}", "",
+                f"States on, `{option}` ({meaning}) from 0, other options as given: false switches per minute / mean "
+                f"delay (labelled changes not reported within {SWITCH_WINDOW_S:g} s: missed). {COMMAND}.", "",
+                md_table(["recording", *(fmt.format(v) for v in values)],
+                         [[name, *(f"{p['false_per_minute']:.1f} / {_s(p['mean_delay_s'])}"
+                                   + (f" ({p['missed_changes']} missed)" if p["missed_changes"] else "") for p in points)]
+                          for name, points in by_set.items()]), ""]
+    return out
 
 
 def summary(r: dict[str, Any]) -> str:

@@ -73,11 +73,12 @@ def test_bulk_equals_streaming_on_the_bundled_recordings(swge: Path, able_bodied
 @pytest.mark.parametrize("stamped", [True, False], ids=["resampled", "not-resampled"])
 def test_bulk_equals_streaming_under_every_supervisor_option(multispeed_csv: Path, able_bodied, tmp_path: Path,
                                                               stamped) -> None:
-    """Holds, dwell and transitions (the walking calibrations off: paper preset, states on): the
+    """Holds, dwell, switch-back margin and transitions (the walking calibrations off: paper preset, states on): the
     same decision in bulk as sample by sample."""
     table = tmp_path / "transitions.yaml"
     table.write_text("allowed_transitions:\n  Slow: [Med]\n  Fast: [Med]\n")
-    cfg = EstimatorConfig.preset("paper", min_confidence=0.02, min_dwell_s=0.08, transitions=str(table), states=True,
+    cfg = EstimatorConfig.preset("paper", min_confidence=0.02, min_dwell_s=0.08, switch_back_margin=0.1,
+                                 transitions=str(table), states=True,
                                  resample="auto")
     rec = read_recording(multispeed_csv)
     a, b = Estimator(able_bodied, cfg, stamped=stamped), Estimator(able_bodied, cfg, stamped=stamped)

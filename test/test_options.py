@@ -82,3 +82,9 @@ def test_docs_tables_hold_the_option_defaults(doc, first, advanced):
     for o in OPTIONS:
         if o.advanced == advanced:
             assert rows[o.name] == (o.default, o.paper_value), o.name
+
+
+@pytest.mark.parametrize("margin", [-0.1, 1.0, float("nan"), True, "0.2"])
+def test_switch_back_margin_is_below_one(margin):
+    with pytest.raises(ValueError, match="switch_back_margin"):
+        EstimatorConfig(switch_back_margin=margin)

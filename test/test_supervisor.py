@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from gait_estimator.core.matcher import IncrementalMatcher, StepBlock, StepResult
-from gait_estimator.core.supervisor import Estimate, Supervisor, SupervisorParams, carry_forward, transitions_matrix
+from gait_estimator.core.supervisor import (
+    Estimate,
+    Supervisor,
+    SupervisorParams,
+    carry_forward,
+    switch_candidate,
+    transitions_matrix,
+)
 from gait_estimator.io.readers import read_recording
 
 
@@ -30,7 +37,9 @@ SETTINGS = {
     "off": {},
     "confidence": {"min_confidence": 0.05},
     "dwell": {"min_dwell_s": 0.15},
-    "all": {"min_confidence": 0.02, "min_dwell_s": 0.08, "transitions": {"Slow": ["Med"], "Fast": ["Med"]}},
+    "switch-back": {"switch_back_margin": 0.3},
+    "all": {"min_confidence": 0.02, "min_dwell_s": 0.08, "switch_back_margin": 0.1,
+            "transitions": {"Slow": ["Med"], "Fast": ["Med"]}},
 }
 
 
@@ -81,3 +90,33 @@ def test_carry_forward_is_estimate_at(multispeed_csv: Path, able_bodied) -> None
     for g in range(0, 1200, 7):
         want = Estimate.from_columns(cols, g, able_bodied.mode_names).at(float(later[g]))
         assert (got["time_s"][g], got["phase"][g]) == (want.time_s, want.phase)
+
+
+def test_switch_candidate_needs_the_margin_only_to_go_back() -> None:
+    errors = [10.0, 9.5, 7.5]  # current 0, previous 1
+    assert switch_candidate(errors, 0, 1, 1, 0.1) == 0  # back to 1: 9.5 is not below 0.9 x 10
+    assert switch_candidate(errors, 0, 1, 1, 0.04) == 1
+    assert switch_candidate(errors, 0, 1, 2, 0.3) == 2  # a third mode: no margin
+    assert switch_candidate(errors, 0, -1, 1, 0.3) == 1
+
+
+def step(errors: list[float], ready: bool = True) -> StepResult:
+    sse = np.asarray(errors)
+    best = int(sse.argmin())
+    return StepResult(best, str(best), 0.5, sse, np.full(sse.size, 0.5), ready, np.full(sse.size, 100))
+
+
+def test_switch_back_margin_stops_two_close_modes_taking_turns() -> None:
+    """Modes 0 and 1 within 5 % of each other, alternately best: off, every turn is reported;
+    with a 0.1 margin the first change only, the kept mode flagged held. A change to mode 2 comes
+    at the same sample either way, and a clear return (error 20 % lower) is not held back."""
+    flicker = [[10.0, 10.5, 30.0], [10.5, 10.0, 30.0]] * 4
+    seq = [step([10.0, 10.5, 30.0], ready=False)] + [step(e) for e in flicker]
+    seq += [step(e) for e in ([10.0, 9.8, 9.0], [10.0, 9.8, 9.0], [12.0, 8.0, 10.0])]
+    off, on = (Supervisor(["a", "b", "c"], SupervisorParams(switch_back_margin=m)) for m in (0.0, 0.1))
+    got = {name: [sup.decide(0.01 * g, r) for g, r in enumerate(seq)] for name, sup in (("off", off), ("on", on))}
+    modes = {name: [e.mode_index for e in ests] for name, ests in got.items()}
+    assert modes["off"] == [0, 0, 1] + [0, 1] * 3 + [2, 2, 1]
+    assert modes["on"] == [0, 0, 1, 1, 1, 1, 1, 1, 1, 2, 2, 1]
+    assert [e.held for e in got["on"]] == [False] * 3 + [True, False] * 3 + [False] * 3
+    assert not any(e.held for e in got["off"])

@@ -82,6 +82,8 @@ class EstimatorConfig:
     min_confidence: float = option(0.0, "hold the last confident mode below this margin (error_2nd - error_best) "
                                    "/ error_best; 0 = off")
     min_dwell_s: float = option(0.0, "a new mode must win this long (s) before it is reported; 0 = off")
+    switch_back_margin: float = option(0.0, "the mode reported before the current one is reported again only when its "
+                                       "error is below (1 - this) x the current mode's, [0, 1); 0 = off")
     transitions: str = option("", "YAML file of allowed transitions (allowed_transitions: {MODE: [MODE, ...]}); "
                               "'' = any")
     adapt_rate: float = option(0.0, "online personalisation: weight of one confident stride in its mode's kernel, "
@@ -130,6 +132,9 @@ class EstimatorConfig:
             _check_number(name, getattr(self, name))
         for name in ("offset_calibration_rate", "cadence_calibration_rate", "adapt_rate"):
             _check_number(name, getattr(self, name), 0.0, 1.0)
+        margin = self.switch_back_margin
+        if isinstance(margin, bool) or not (isinstance(margin, (int, float)) and 0.0 <= margin < 1.0):
+            raise ValueError(f"switch_back_margin must be a number in [0, 1), got {self.switch_back_margin!r}")
         if not (self.phase_rate_tau_s > 0 and math.isfinite(self.phase_rate_tau_s)):
             raise ValueError(f"phase_rate_tau_s must be > 0, got {self.phase_rate_tau_s!r}")
         if not (self.adapt_max_step_deg > 0 and math.isfinite(self.adapt_max_step_deg)):

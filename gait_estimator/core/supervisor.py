@@ -9,9 +9,11 @@ estimate:
 2. confidence: margin = (SSE of the best other mode - SSE of the candidate) / SSE of the
    candidate; fit quality = RMS error per sample and channel, degrees;
 3. hold: below ``min_confidence`` the last confident mode stays reported, flagged ``held``;
-4. dwell (hysteresis): a new mode is reported only after it has been the candidate for
-   ``min_dwell_s`` seconds;
-5. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
+4. switch-back margin (hysteresis against flicker between close modes): a return to the mode
+   reported before the current one needs its error below (1 - ``switch_back_margin``) x the
+   current mode's (``switch_candidate``);
+5. dwell: a new mode is reported only after it has been the candidate for ``min_dwell_s`` seconds;
+6. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
 
 ``supervise_step`` is the decision, on Python floats for ``Supervisor.decide`` (one matcher
 result) and compiled for ``Supervisor.decide_many`` (a run of them, offline: ``batch.py``); the
@@ -168,12 +170,15 @@ class SupervisorParams:
     Attributes:
         min_confidence: Hold the last confident mode below this margin; 0 = off.
         min_dwell_s: Seconds a new mode must win before it is reported; 0 = off.
+        switch_back_margin: Relative error margin by which the mode reported before the current
+            one must beat it to be reported again, [0, 1); 0 = off.
         transitions: YAML file of allowed transitions; '' = any.
         phase_rate_tau_s: Time constant of the phase-rate smoothing, seconds.
     """
 
     min_confidence: float = EstimatorConfig.min_confidence
     min_dwell_s: float = EstimatorConfig.min_dwell_s
+    switch_back_margin: float = EstimatorConfig.switch_back_margin
     transitions: str = EstimatorConfig.transitions
     phase_rate_tau_s: float = EstimatorConfig.phase_rate_tau_s
 
@@ -207,20 +212,21 @@ class Supervisor:
         self.active_channels = active_channels
         self.min_confidence = float(params.min_confidence)
         self.min_dwell_s = float(params.min_dwell_s)
+        self.switch_back_margin = float(params.switch_back_margin)
         self.phase_rate_tau_s = float(params.phase_rate_tau_s)
         self.normalized = bool(normalized)
         self._inverse_scales: list[float] = (1.0 / np.asarray(time_scales, dtype=np.float64)).tolist()
         self._settings = (self.min_confidence, self.min_dwell_s, self.phase_rate_tau_s, self.normalized,
-                          int(active_channels))
+                          int(active_channels), self.switch_back_margin)
         self.reset()
 
     @property
     def passes_through(self) -> bool:
         """Every option off: the reported mode is the matcher's choice."""
-        return self.min_confidence == 0 and self.min_dwell_s == 0 and self.allowed is None
+        return self.min_confidence == 0 and self.min_dwell_s == 0 and self.switch_back_margin == 0 and self.allowed is None
 
     def reset(self) -> None:
-        self._mem: list[float] = [-1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan, math.nan, 0.0]  # supervise_step's
+        self._mem: list[float] = [-1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan, math.nan, 0.0, -1.0]  # supervise_step's
 
     def decide(self, time_s: float, result: StepResult) -> Estimate:
         """The reported mode and phase for one matcher result at ``time_s`` (seconds): the
@@ -269,31 +275,36 @@ class Supervisor:
         }
 
 
-MEMORY = 10
+MEMORY = 11
 """supervise_step's memory: the current mode (-1: none yet), the pending mode (-1: none) and since
 when; the last ready step (known, time, mode, phase); the phase rate; the last interval between
-ready steps and its smoothing weight."""
+ready steps and its smoothing weight; the mode reported before the current one (-1: none)."""
 
 
 def supervise_step(mem: Any, time_s: float, values: Any, sse: np.ndarray, argmin: int, second: float, best_phase: float,
                    phases: np.ndarray, window: np.ndarray, ready: bool, allowed: np.ndarray | None,
-                   settings: tuple[float, float, float, bool, int]) -> tuple[int, bool, float, float, float, float]:
+                   settings: tuple[float, float, float, bool, int, float]) -> tuple[int, bool, float, float, float, float]:
     """The supervisor's decision on one matcher step at ``time_s`` (s): errors ``sse`` (M,)
     (``values``: the same as a list, or the array), their ``argmin`` and ``second`` smallest
     (inf with one mode), the argmin's phase ``best_phase``, every mode's ``phases`` and
     ``window``; ``allowed`` (M, M) the transitions (None: any); ``settings`` = (min_confidence,
-    min_dwell_s, phase_rate_tau_s, normalized, active channels); ``mem`` (MEMORY,) updated in
+    min_dwell_s, phase_rate_tau_s, normalized, active channels, switch_back_margin); ``mem`` (MEMORY,) updated in
     place. Returns the reported mode, held, confidence, fit (deg RMS), phase and phase rate: moved
     by 1 - exp(-dt / tau) towards the phase change over the dt since the last ready step if that
     reported the same mode (the first such reading sets it), else unchanged."""
-    min_confidence, min_dwell_s, tau, normalized, channels = settings
+    min_confidence, min_dwell_s, tau, normalized, channels, margin = settings
     candidate = argmin
     if allowed is not None and mem[0] >= 0.0:
         candidate = int(np.argmin(np.where(allowed[int(mem[0])], sse, math.inf)))
+    kept = False
+    if ready and margin > 0.0 and mem[0] >= 0.0:
+        chosen = switch_candidate(values, int(mem[0]), int(mem[10]), candidate, margin)
+        candidate, kept = chosen, chosen != candidate
     confidence = relative_margin(values[candidate], second if candidate == argmin else values[argmin])
     reported, held = candidate, False
     if ready:
         reported, held = choose_mode(mem, time_s, candidate, confidence, min_confidence, min_dwell_s)
+        held = held or kept
     error = values[reported]  # the RMS error per sample and channel:
     fit = math.sqrt((0.0 if error < 0.0 else error) / (1 if normalized else max(int(window[reported]), 1)) / channels)
     phase = best_phase if reported == argmin else float(phases[reported])
@@ -328,9 +339,19 @@ def choose_mode(mem: Any, time_s: float, candidate: int, confidence: float, min_
     if candidate != int(mem[1]):
         mem[1], mem[2] = candidate, time_s
     if time_s - mem[2] >= min_dwell_s - 1e-9:
-        mem[0], mem[1] = candidate, -1.0
+        mem[10], mem[0], mem[1] = current, candidate, -1.0
         return candidate, False
     return current, True
+
+
+def switch_candidate(errors: Any, current: int, previous: int, candidate: int, margin: float) -> int:
+    """The mode to follow: ``candidate``, unless it is the ``previous`` mode (reported before
+    ``current``; -1: none) and its error is not below (1 - ``margin``) x the current mode's
+    (``errors`` per mode): two close modes then do not take turns on noise, and a change to a
+    third is not delayed."""
+    if candidate != previous or errors[candidate] < (1.0 - margin) * errors[current]:
+        return candidate
+    return current
 
 
 def relative_margin(own: float, best_other: float) -> float:
@@ -351,7 +372,8 @@ _compile = compiled.njit(cache=True, nogil=True)
 _advanced_phase = _compile(advanced_phase)
 _choose_mode = compiled.compiled_copy(choose_mode, "_choose_mode")
 _supervise_step = compiled.compiled_copy(supervise_step, "_supervise_step", choose_mode=_choose_mode,
-                                         relative_margin=_compile(relative_margin))
+                                         relative_margin=_compile(relative_margin),
+                                         switch_candidate=_compile(switch_candidate))
 
 
 @_compile
