@@ -40,6 +40,7 @@ from ..core.rejections import SampleRejected
 from ..core.stamps import StreamGuard
 from . import bag_recover
 from .bag_recover import STORAGE_SUFFIXES, RawRecord
+from .cdr import stamp_to_ns
 from .read_options import DEFAULT_MAX_GAP_S, ReadOptions
 from .recording import Recording
 from .stream import UNITS, angles_from_array, angles_from_named
@@ -67,17 +68,6 @@ def normalize_topic(topic: str) -> str:
     """Absolute topic name as stored in bags: ``segment_angles`` -> ``/segment_angles``."""
     topic = topic.strip()
     return topic if topic.startswith("/") else "/" + topic
-
-
-def stamp_to_ns(sec: int, nanosec: int) -> int:
-    """builtin_interfaces/Time -> integer nanoseconds since the epoch."""
-    return int(sec) * 1_000_000_000 + int(nanosec)
-
-
-def ns_to_stamp(ns: int) -> tuple[int, int]:
-    """Integer nanoseconds -> (sec, nanosec) of builtin_interfaces/Time."""
-    sec, nanosec = divmod(int(ns), 1_000_000_000)
-    return sec, nanosec
 
 
 # ---------------------------------------------------------------------------------------------
@@ -327,7 +317,7 @@ def decoded_samples(messages: Iterator[tuple[Any, int, bytes]], msgtype: str, jo
         try:
             if is_joint_state:
                 sample = angles_from_named(msg.name, msg.position, joint_names, units)
-                stamp_ns = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+                stamp_ns = stamp_to_ns(msg.header.stamp)
                 fallback = stamp_ns == 0
                 if fallback:
                     stamp_ns = int(log_ns)

@@ -39,7 +39,8 @@ from ..core.imu_learn import (
     learn_calibration,
 )
 from ..core.rejections import SampleRejected
-from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
+from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, typestore
+from .cdr import stamp_to_ns
 from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
 from .read_options import ReadOptions
 
@@ -108,7 +109,7 @@ def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list 
     rejected: Counter = Counter()
     paired = []
     for sensor, log_ns, m in messages:
-        stamp_ns = stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) or log_ns
+        stamp_ns = stamp_to_ns(m.header.stamp) or log_ns
         o, w, a = m.orientation, m.angular_velocity, m.linear_acceleration
         try:
             up, gyro, acc = inputs[sensor].convert(stamp_ns, (o.x, o.y, o.z, o.w), float(m.orientation_covariance[0]),
@@ -239,7 +240,7 @@ def _measured_tolerance(messages: list[tuple[int, int, Any]]) -> float:
     """``auto_tolerance_s`` from the header stamps (log times when zero) of the first messages."""
     stamps: list[list[int]] = [[] for _ in range(N_CHANNELS)]
     for sensor, log_ns, m in messages[:4000]:
-        stamps[sensor].append(stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) or log_ns)
+        stamps[sensor].append(stamp_to_ns(m.header.stamp) or log_ns)
     try:
         return auto_tolerance_s(stamps)
     except ValueError:
@@ -248,7 +249,7 @@ def _measured_tolerance(messages: list[tuple[int, int, Any]]) -> float:
 
 def _rate_hz(messages: list[tuple[int, int, Any]]) -> float:
     """The first sensor's message rate (Hz) from its first stamps; 200 Hz if too few."""
-    stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for s, _, m in messages[:800] if s == 0]
+    stamps = [stamp_to_ns(m.header.stamp) for s, _, m in messages[:800] if s == 0]
     d = float(np.median(np.diff(np.array(stamps, dtype=np.int64)))) * 1e-9 if len(stamps) > 8 else 0.0
     return 1.0 / d if d > 0 else 200.0
 

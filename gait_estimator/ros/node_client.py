@@ -30,7 +30,7 @@ from ..core.channels import CHANNELS
 from ..core.estimator import EstimateTrace
 from ..core.kernels import KernelLibrary
 from ..core.states import name_index, reported_names
-from ..io.cdr import read_stamp
+from ..io.cdr import read_stamp, stamp_to_ns
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.outputs import ESTIMATE_TAIL, ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
 from .node_process import (  # noqa: F401 - re-exported: the node client's users start nodes too
@@ -117,10 +117,6 @@ def drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscript
             callback(taken[0], taken[1])
 
     return on_message
-
-
-def stamp_to_ns(stamp: Any) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def _double_array(values: np.ndarray) -> array.array:

@@ -23,7 +23,6 @@ Timing and stamps:
 from __future__ import annotations
 
 import importlib
-import struct
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -36,6 +35,7 @@ from ..core.channels import CHANNELS
 from ..core.errors import GaitEstimatorError, RecordingError
 from ..io.bag import format_topics, is_bag_path, normalize_topic, open_bag, typestore
 from ..io.bag_write import serialize_inputs
+from ..io.cdr import read_stamp, stamp_to_ns, with_stamp
 from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, OUTPUT_TOPICS
 from ..io.recording import Recording
 
@@ -184,24 +184,6 @@ def load_playlist(
     return playlist_from_recording(rec, topics[0] if topics else INPUT_TOPIC, msg_type, units, joint_names)
 
 
-def with_stamp(raw: bytes, stamp_ns: int) -> bytes:
-    """``raw`` (CDR of a message starting with std_msgs/Header) with header.stamp = stamp_ns.
-
-    The stamp is the first field after the 4-byte encapsulation header: int32 sec, uint32
-    nanosec, in the byte order named by the encapsulation (0x0001 little endian).
-    """
-    buf = bytearray(raw)
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    struct.pack_into("<iI" if buf[1] == 1 else ">iI", buf, 4, sec, nanosec)
-    return bytes(buf)
-
-
-def stamp_of(raw: bytes) -> int:
-    """header.stamp (ns) of a CDR message starting with std_msgs/Header."""
-    sec, nanosec = struct.unpack_from("<iI" if raw[1] == 1 else ">iI", raw, 4)
-    return sec * 1_000_000_000 + nanosec
-
-
 def _ros_message_class(msgtype: str) -> Any:
     pkg, _, name = msgtype.split("/")
     try:
@@ -330,7 +312,7 @@ def _publish_loop(playlist: Playlist, pubs: list[Any], clock_pub: Any, clock_cls
                 clock_msg.clock.sec, clock_msg.clock.nanosec = sec, nanosec
                 clock_pub.publish(clock_msg)
             if shift and has_header[tr]:
-                raw = with_stamp(raw, stamp_of(raw) + shift)
+                raw = with_stamp(raw, stamp_to_ns(read_stamp(raw)) + shift)
             published[0] += 1  # counted first: a Ctrl-C inside publish() still counts this message
             pubs[tr].publish(raw)
         if not loop:
