@@ -27,10 +27,10 @@ import math
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -106,6 +106,7 @@ class BagRecording(Recording):
     max_gap_s: float = DEFAULT_MAX_GAP_S
     recovered: str = ""
     """One line on what was recovered from a damaged bag ('' for an intact bag)."""
+    PER_SAMPLE: ClassVar[tuple[str, ...]] = (*Recording.PER_SAMPLE, "stamp_ns", "log_time_ns")
 
     @property
     def notes(self) -> list[str]:
@@ -124,17 +125,6 @@ class BagRecording(Recording):
                 "the matcher window restarted there (as in the live node)"
             )
         return out
-
-    def select(self, keep: np.ndarray, skipped: dict[str, int] | None = None) -> BagRecording:
-        """The samples where ``keep`` is true, with their stamps (``slice`` uses this too); the
-        same type, its other fields kept."""
-        base = super().select(keep, skipped)
-        return replace(
-            self,
-            **{f: getattr(base, f) for f in Recording.__dataclass_fields__},
-            stamp_ns=None if self.stamp_ns is None else self.stamp_ns[keep],
-            log_time_ns=None if self.log_time_ns is None else self.log_time_ns[keep],
-        )
 
 
 # ---------------------------------------------------------------------------------------------
