@@ -264,24 +264,12 @@ def read_bag(path: str | Path, options: ReadOptions | None = None, /, **values: 
     """
     p = Path(path)
     o = ReadOptions.of(options, values)
-    topic, input_units, max_gap_s = o.topic, o.input_units, o.max_gap_s
-    names = parse_joint_names(o.joint_names)
-    if input_units not in UNITS:
-        raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {input_units!r}")
-    max_gap = float(max_gap_s)
+    max_gap = float(o.max_gap_s)
     if math.isnan(max_gap):
-        raise RecordingError(f"max_gap_s must be a number of seconds, got {max_gap_s!r}")
-    with open_bag(p, topic and normalize_topic(topic)) as reader:
-        topics = bag_topics(reader)
-        name = choose_topic(p, topics, topic)
-        msgtype = topics[name][0]
-        if msgtype not in INPUT_MSGTYPES.values():
-            raise RecordingError(
-                f"{p}: topic {name} has message type {msgtype}; expected {JOINT_STATE} or {FLOAT64_MULTI_ARRAY}"
-            )
-        conns = [c for c in reader.connections if c.topic == name]
+        raise RecordingError(f"max_gap_s must be a number of seconds, got {o.max_gap_s!r}")
+    with _angle_topic(p, o) as (reader, name, msgtype, samples):
         try:
-            rec = _read_samples(p, name, msgtype, reader.messages(connections=conns), names, input_units, max_gap)
+            rec = _read_samples(p, name, msgtype, samples, max_gap)
             recovery = getattr(reader, "recovery", None)
             rec.recovered = recovery.line() if recovery else ""
             return rec
@@ -321,12 +309,10 @@ def decoded_samples(messages: Iterator[tuple[Any, int, bytes]], msgtype: str, jo
 
 
 @contextmanager
-def bag_samples(path: str | Path, options: ReadOptions | None = None, /,
-                **values: Any) -> Iterator[tuple[str, Iterator[tuple[int, int, int, bool, Any]]]]:
-    """The angle topic of a bag as ``read_bag`` chooses it: (its message type, ``decoded_samples``
-    of all its messages), for a caller that takes each message as a live node would."""
-    p = Path(path)
-    o = ReadOptions.of(options, values)
+def _angle_topic(p: Path, o: ReadOptions) -> Iterator[tuple[Any, str, str, Iterator[tuple[int, int, int, bool, Any]]]]:
+    """The open bag, its angle topic (``choose_topic``), that topic's message type and its
+    ``decoded_samples``."""
+    names = parse_joint_names(o.joint_names)
     if o.input_units not in UNITS:
         raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {o.input_units!r}")
     with open_bag(p, o.topic and normalize_topic(o.topic)) as reader:
@@ -337,19 +323,20 @@ def bag_samples(path: str | Path, options: ReadOptions | None = None, /,
             raise RecordingError(f"{p}: topic {name} has message type {msgtype}; expected {JOINT_STATE} or "
                                  f"{FLOAT64_MULTI_ARRAY}")
         conns = [c for c in reader.connections if c.topic == name]
-        yield msgtype, decoded_samples(reader.messages(connections=conns), msgtype, parse_joint_names(o.joint_names),
-                                       o.input_units)
+        yield reader, name, msgtype, decoded_samples(reader.messages(connections=conns), msgtype, names, o.input_units)
 
 
-def _read_samples(
-    bag: Path,
-    topic: str,
-    msgtype: str,
-    messages: Iterator[tuple[Any, int, bytes]],
-    joint_names: tuple[str, ...],
-    units: str,
-    max_gap_s: float,
-) -> BagRecording:
+@contextmanager
+def bag_samples(path: str | Path, options: ReadOptions | None = None, /,
+                **values: Any) -> Iterator[tuple[str, Iterator[tuple[int, int, int, bool, Any]]]]:
+    """The angle topic of a bag as ``read_bag`` chooses it: (its message type, ``decoded_samples``
+    of all its messages), for a caller that takes each message as a live node would."""
+    with _angle_topic(Path(path), ReadOptions.of(options, values)) as (_, _, msgtype, samples):
+        yield msgtype, samples
+
+
+def _read_samples(bag: Path, topic: str, msgtype: str, samples: Iterator[tuple[int, int, int, bool, Any]],
+                  max_gap_s: float) -> BagRecording:
     guard = StreamGuard(max_gap_s=max_gap_s)
     angles: list[np.ndarray] = []
     stamps: list[int] = []
@@ -358,7 +345,7 @@ def _read_samples(
     undecodable = 0
     fallbacks = 0
     n = 0
-    for i, log_ns, stamp_ns, fallback, sample in decoded_samples(messages, msgtype, joint_names, units):
+    for i, log_ns, stamp_ns, fallback, sample in samples:
         n = i + 1
         if sample is None:
             undecodable += 1
