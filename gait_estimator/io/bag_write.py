@@ -26,6 +26,7 @@ import numpy as np
 
 from ..core.channels import CHANNELS
 from ..core.errors import GaitEstimatorError
+from .atomic import fsync_path
 from .bag import (
     DEFAULT_TOPIC,
     FLOAT64_MULTI_ARRAY,
@@ -109,19 +110,11 @@ def staged_writer(path: str | Path, storage: str) -> Iterator[Any]:
         with Writer(staged, version=BAG_VERSION, storage_plugin=plugin) as writer:
             yield writer
         for f in staged.iterdir():
-            _fsync(f)
+            fsync_path(f)
         os.rename(staged, target)
-        _fsync(target.parent)
+        fsync_path(target.parent)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-
-
-def _fsync(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def recording_stamps(rec: Recording, start_ns: int | None = None) -> tuple[np.ndarray, np.ndarray]:
