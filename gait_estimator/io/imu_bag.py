@@ -40,7 +40,7 @@ from ..core.imu_learn import (
 )
 from ..core.rejections import SampleRejected
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, typestore
-from .cdr import stamp_to_ns
+from .cdr import stamp_to_ns, write_imu
 from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
 from .read_options import ReadOptions
 
@@ -350,27 +350,6 @@ def _check_note(p: Path, paired: list, cal: ImuCalibration, params: ImuLearnPara
     return "; WARNING: the configured axes do not fit the walking (the angles are wrong): " + found.summary(), checked
 
 
-def imu_msg(ts: Any, stamp_ns: int, frame_id: str, quat_xyzw: Any | None, gyro_rps: Any, acc_mps2: Any) -> Any:
-    """A rosbags ``sensor_msgs/msg/Imu``; ``quat_xyzw`` None = no orientation (covariance[0] -1)."""
-    t = ts.types
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    vec, quat = t["geometry_msgs/msg/Vector3"], t["geometry_msgs/msg/Quaternion"]
-    ocov = np.zeros(9)
-    if quat_xyzw is None:
-        ocov[0] = -1.0
-        quat_xyzw = (0.0, 0.0, 0.0, 1.0)
-    x, y, z, w = (float(v) for v in quat_xyzw)
-    return t[IMU](
-        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame_id),
-        orientation=quat(x=x, y=y, z=z, w=w),
-        orientation_covariance=ocov,
-        angular_velocity=vec(x=float(gyro_rps[0]), y=float(gyro_rps[1]), z=float(gyro_rps[2])),
-        angular_velocity_covariance=np.zeros(9),
-        linear_acceleration=vec(x=float(acc_mps2[0]), y=float(acc_mps2[1]), z=float(acc_mps2[2])),
-        linear_acceleration_covariance=np.zeros(9),
-    )
-
-
 def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray, acc_mps2: np.ndarray,
                   quat_xyzw: np.ndarray | None = None, topics: list[str] | None = None, storage: str = "mcap") -> Path:
     """Write four IMU streams as ``sensor_msgs/msg/Imu`` topics of a new bag.
@@ -381,6 +360,8 @@ def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray,
         quat_xyzw: (4, T, 4) orientations (world <- sensor), or None for raw IMUs (also per
             sensor: a list of four (T, 4) arrays or None).
         topics: Four topic names (default ``/imu/<channel>``).
+
+    Messages are those of io/cdr.py ``write_imu`` (no orientation: ``orientation_covariance[0]`` -1).
     """
     from .bag_write import offered_qos, staged_writer
 
@@ -391,8 +372,9 @@ def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray,
         conns = [writer.add_connection(n, IMU, typestore=ts, offered_qos_profiles=offered_qos(100)) for n in names]
         for k in range(stamps.shape[1]):
             for c in range(N_CHANNELS):
-                q = None if quat_xyzw is None or quat_xyzw[c] is None else quat_xyzw[c][k]
-                msg = imu_msg(ts, int(stamps[c, k]), CHANNELS[c], q,
-                              gyro_rps[c, k], acc_mps2[c, k])
-                writer.write(conns[c], int(stamps[c, k]), ts.serialize_cdr(msg, IMU))
+                no_orientation = quat_xyzw is None or quat_xyzw[c] is None
+                q = (0.0, 0.0, 0.0, 1.0) if no_orientation else [float(v) for v in quat_xyzw[c][k]]
+                data = write_imu(int(stamps[c, k]), CHANNELS[c], q, -1.0 if no_orientation else 0.0,
+                                 [float(v) for v in gyro_rps[c, k]], [float(v) for v in acc_mps2[c, k]])
+                writer.write(conns[c], int(stamps[c, k]), data)
     return Path(path)
