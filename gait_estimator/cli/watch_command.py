@@ -40,7 +40,7 @@ def cmd_watch(args: argparse.Namespace) -> int:
                   f"diagnostics every {1 / args.rate:g} s; Ctrl-C stops", flush=True)
             seen, start, counted = client.seen, time.monotonic(), 0
             while args.duration is None or time.monotonic() - start < args.duration:
-                client.spin_for(1.0 / args.rate)
+                client.spin_until(lambda: False, 1.0 / args.rate)
                 now = time.monotonic()
                 fresh = seen.estimates > counted
                 counted = seen.estimates

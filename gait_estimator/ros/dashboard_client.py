@@ -36,7 +36,6 @@ from ..io.outputs import ESTIMATE_TOPIC
 from .angles_output import ANGLES_TOPIC
 from .node_client import drained
 from .teach_client import TeachClient
-from .watch_client import LEVELS
 
 DISPLAY_QOS = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST, depth=100)
 WAKE_PERIOD_S = 0.01
@@ -226,15 +225,10 @@ class DashboardLink:
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         st = self.client.target_status(msg)
-        if st is None:
-            return
-        level = st.level if isinstance(st.level, int) else int.from_bytes(st.level, "little")
-        with self.lock:
-            s = self._shared
-            s.diagnostics = {kv.key: kv.value for kv in st.values}
-            s.level = LEVELS[level] if level < len(LEVELS) else str(level)
-            s.message = st.message
-            s.diagnostics_at = time.monotonic()
+        if st is not None:
+            with self.lock:
+                s = self._shared
+                s.level, s.message, s.diagnostics, s.diagnostics_at = st
 
     def _on_log(self, line: str) -> None:
         with self.lock:
