@@ -31,7 +31,6 @@ Definitions (docs/training.md, "`evaluate`: definitions"):
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -42,7 +41,7 @@ import numpy as np
 
 from ..core.errors import GaitEstimatorError
 from ..core.strides import DetectionOptions, stride_bounds
-from ..io.recording import Recording
+from ..io.recording import Recording, read_csv_table
 from .strides import HeelStrikes, nearest_index
 
 
@@ -68,13 +67,7 @@ class PredictionTable:
 def read_predictions_csv(path: str | Path) -> PredictionTable:
     """Read a predictions CSV written by ``gait-estimator process``."""
     p = Path(path)
-    try:
-        with p.open(encoding="utf-8", newline="") as f:
-            reader = csv.reader(f)
-            header = [h.strip() for h in next(reader, [])]
-            rows = [r for r in reader if r]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise GaitEstimatorError(f"{p}: cannot read predictions ({exc})") from None
+    header, rows = read_csv_table(p, " predictions")
     need = ("time_s", "mode", "phase", "ready")
     missing = [c for c in need if c not in header]
     if missing:

@@ -164,13 +164,7 @@ def is_project_csv(p: Path) -> bool:
 def read_project_csv(p: Path, options: ReadOptions | None = None, /, **values: Any) -> Recording:
     """Read the project recording CSV (see module docstring); no option concerns it."""
     ReadOptions.of(options, values)
-    try:
-        with p.open(encoding="utf-8", newline="") as f:
-            reader = csv.reader(f)
-            header = [h.strip() for h in next(reader, [])]
-            body = [row for row in reader if row and any(c.strip() for c in row)]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise RecordingError(f"{p}: cannot read ({exc})") from None
+    header, body = read_csv_table(p)
     cols = {name: i for i, name in enumerate(header)}
     if "time_s" not in cols:
         raise RecordingError(f"{p}: missing column 'time_s'")
@@ -221,6 +215,17 @@ def read_project_csv(p: Path, options: ReadOptions | None = None, /, **values: A
         prev, cur = rec.time_s[bad[0]], rec.time_s[bad[0] + 1]
         raise RecordingError(f"{p}:{row}: time_s is not strictly increasing ({cur:g} after {prev:g})")
     return rec
+
+
+def read_csv_table(p: Path, what: str = "") -> tuple[list[str], list[list[str]]]:
+    """(header, rows that are not blank) of a CSV file; RecordingError ``cannot read{what}`` (one line)."""
+    try:
+        with p.open(encoding="utf-8", newline="") as f:
+            reader = csv.reader(f)
+            header = [h.strip() for h in next(reader, [])]
+            return header, [row for row in reader if row and any(c.strip() for c in row)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise RecordingError(f"{p}: cannot read{what} ({exc})") from None
 
 
 def _flag(cell: str) -> bool:

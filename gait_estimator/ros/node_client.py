@@ -41,6 +41,7 @@ from .node_process import (  # noqa: F401 - re-exported: the node client's users
     spin_executor_until,
     use_local_ros,
 )
+from .outputs import double_array
 
 DIAGNOSTICS_TOPIC = "/diagnostics"
 
@@ -117,12 +118,6 @@ def drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscript
             callback(taken[0], taken[1])
 
     return on_message
-
-
-def _double_array(values: np.ndarray) -> array.array:
-    out = array.array("d")
-    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
-    return out
 
 
 class EstimatorClient:
@@ -322,9 +317,9 @@ class EstimatorClient:
         if self.input_type == "joint_state":
             msg = self._js
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
-            msg.position = _double_array(angles)
+            msg.position = double_array(angles)
             return msg
-        self._fma.data = _double_array(angles)
+        self._fma.data = double_array(angles)
         return self._fma
 
     def publish(self, angles: np.ndarray, stamp_ns: int = 0) -> None:
