@@ -412,17 +412,13 @@ class RecoveredBag:
             )
         return out
 
-    def messages(
-        self, connections: Collection[Any] = (), start: int | None = None, stop: int | None = None
-    ) -> Iterator[tuple[Any, int, bytes]]:
-        """``(connection, log time ns, CDR bytes)`` of the wanted connections (default all),
-        in file order, log time in [start, stop)."""
+    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, bytes]]:
+        """``(connection, log time ns, CDR bytes)`` of the wanted connections (default all), in file order."""
         wanted = {c.id - 1 for c in connections} if connections else set(range(len(self.connections)))
         for st, keys in zip(self._storages, self._keys, strict=True):
             local = {k for k, i in keys.items() if i in wanted}
             for key, log_ns, data in st.iter(local):
-                if (start is None or log_ns >= start) and (stop is None or log_ns < stop):
-                    yield self.connections[keys[key]], log_ns, data
+                yield self.connections[keys[key]], log_ns, data
 
     def close(self) -> None:
         for st in self._storages:

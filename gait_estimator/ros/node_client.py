@@ -330,7 +330,6 @@ class EstimatorClient:
         angles: np.ndarray,
         stamps_ns: Sequence[int] | np.ndarray,
         rate_hz: float | None,
-        on_sample: Callable[[int], None] | None = None,
         due_s: np.ndarray | None = None,
     ) -> np.ndarray:
         """Publish samples paced at ``rate_hz`` (None: as fast as possible), spinning in between.
@@ -340,7 +339,6 @@ class EstimatorClient:
                 serialised Imu messages (analysis/imu_sagittal.py ``imu_samples``, stamped already).
             stamps_ns: (T,) stamps (JointState only; ignored for Float64MultiArray and imu).
             rate_hz: Publication rate, Hz.
-            on_sample: Called with the index after each publication.
             due_s: (T,) publication times, seconds from the start, instead of a fixed rate.
 
         Returns:
@@ -371,8 +369,6 @@ class EstimatorClient:
                 msg = self.message(angles[i], int(stamps_ns[i]))
                 sent[i] = clock()  # before the call: the message may be on its way before publish() returns
                 self.publisher.publish(msg)
-            if on_sample is not None:
-                on_sample(i)
             if not period_ns:
                 spin(timeout_sec=0.0)
         return sent
