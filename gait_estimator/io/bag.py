@@ -1,22 +1,12 @@
 """Reading the driver topic of a rosbag2 recording (mcap or sqlite3) into a Recording.
 
 Pure Python (the ``rosbags`` library, imported lazily): no ROS install needed. Messages become
-samples exactly as the live node turns them into samples (``stream.py``):
+samples as the live node takes them (``stream.py``); which topic, which time and which messages
+are skipped: docs/bags.md, "``process`` on a bag". Sample times are kept as integer stamps
+(``BagRecording.stamp_ns``, for ``--out-bag``) and as ``time_s`` from the first accepted sample;
+gaps longer than ``max_gap_s`` are counted (``process.predict`` restarts the window there).
 
-* ``sensor_msgs/msg/JointState``: the four angles by joint name (``joint_names``, default
-  CHANNELS; other joints ignored), ``input_units`` ``rad`` (default, REP 103) or ``deg``; the
-  sample time is ``header.stamp``, or the bag's receive (log) time when the stamp is zero;
-* ``std_msgs/msg/Float64MultiArray``: ``data`` = the four angles in CHANNELS order; it has no
-  header, so the sample time is the bag's receive (log) time;
-* bad messages (non-finite values, missing joints, wrong length, undecodable data, a stamp not
-  after the previous one) are skipped and counted in ``Recording.skipped``;
-* sample times are kept as integer stamps (``BagRecording.stamp_ns``, for ``--out-bag``) and as
-  ``time_s`` = seconds since the first accepted sample; a gap longer than ``max_gap_s`` restarts
-  the matcher window, which ``process.predict`` does from ``time_s`` (as the node does from its
-  stamps); the reader counts such gaps for the summary.
-
-A bag path is a rosbag2 directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3``
-storage file, which is read on its own (its own schema/topic tables; no metadata.yaml needed).
+A bag path is a rosbag2 directory or a single ``.mcap`` / ``.db3`` storage file (read on its own).
 A cut or damaged bag is read as far as it goes (``bag_recover.py``, through ``open_bag``);
 ``bag_records`` gives any topic's raw CDR records, for readers of other message types.
 """

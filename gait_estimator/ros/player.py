@@ -1,23 +1,10 @@
 """Publishing a recording into the live ROS 2 graph with its recorded timing (``play``).
 
 For machines without ``ros2 bag``. rclpy is imported only inside ``play``; loading a playlist is
-ROS-free. Nothing about DDS is configured here: the domain and discovery range come from the
-environment (``ROS_DOMAIN_ID``, ``ROS_AUTOMATIC_DISCOVERY_RANGE``), as for any ROS 2 process.
-
-Timing and stamps:
-
-* a bag: every selected topic is published with its serialized messages unchanged, at the
-  recorded receive (log) times divided by ``rate``; header stamps stay as recorded (as
-  ``ros2 bag play`` does); ``/clock`` (with ``clock=True``) carries the log time of each message
-  just before it is published;
-* a CSV (or any non-bag recording): one message per sample (JointState in radians with the
-  CHANNELS joint names by default, REP 103), at the CSV's ``time_s`` divided by ``rate``; the
-  header stamp is the CSV time offset so that the first sample is stamped with the wall-clock
-  time at which playback starts; ``/clock`` (with ``clock=True``) follows the same timeline, so
-  stamps and simulated time agree;
-* ``loop``: every repetition shifts header stamps and ``/clock`` by the recording's duration plus
-  one median sample interval, so stamps keep increasing (a node drops samples whose stamp is not
-  after the previous one; ``ros2 bag play --loop`` repeats stamps verbatim).
+ROS-free. The domain and discovery range come from the environment, as for any ROS 2 process.
+Timing, stamps, ``/clock`` and ``loop``: docs/bags.md, "``play``" (a bag's messages go out
+unchanged at their log times; a CSV's are stamped from the wall clock at the start; each loop
+shifts stamps and ``/clock`` by the duration plus one median interval, so they keep increasing).
 """
 
 from __future__ import annotations
