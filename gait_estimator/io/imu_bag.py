@@ -2,17 +2,12 @@
 
 The same code as the node's ``input_type: imu`` (``imu_stream.py``): each message becomes its
 sensor's up direction, the four streams are paired by stamp, and the calibration (given, or
-learnt from the first still second and the strides after it) turns them into angles. Unlike the
-node, the whole file is known: a learnt calibration applies from the first sample, and with raw
-input (no orientation) the fusion is run again with the gyro bias measured while standing (for a
-given or configured calibration: as the node measures it, at a standing pose before the check's
-verdict), and backwards in time from the end of the first still stretch for the samples up to it.
-
-Topics: ``imu_topics`` (four names, CHANNELS order), else ``/imu/right_thigh``, ... if present,
-else the four Imu topics whose names end in the channel names.
-
-Pairing tolerance: ``imu_tolerance_s``, else measured from the stamps (``auto_tolerance_s``): the
-whole file is known, so sensors that are not sampled together pair too.
+learnt) turns them into angles. Unlike the node, the whole file is known (docs/imu.md, "Offline"):
+a learnt calibration applies from the first sample, raw sensors are fused again with the gyro
+biases measured standing (for a given or configured calibration: as the node measures them,
+before the check's verdict) and backwards in time over the first still stretch, and the pairing
+tolerance is measured from the stamps (``auto_tolerance_s``) unless ``imu_tolerance_s`` is given.
+Topics: ``imu_topics``, else ``/imu/<channel>``, else the four Imu topics named after the channels.
 """
 
 from __future__ import annotations
