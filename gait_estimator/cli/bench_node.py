@@ -237,13 +237,9 @@ def _bench_variant(lib: Any, kernels: str, executor: str, outputs: str, args: ar
 
 
 def bench_node(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
-    """Measure estimator_node (with estimator preset ``--preset``) in a child process over DDS on
-    this machine, once per variant (``--executor`` x ``--outputs``, a fresh node process each),
-    with the options of ``bench-node`` (``args``). With ``--modes``, the node runs a library of
-    that many modes cycled from ``--kernels`` (``KernelLibrary.replicated``, as ``gait-estimator
-    bench --modes``), written to a temporary NPZ. With ``--thread-priority`` P > 0 the node runs
-    with ``thread_priority: P`` (``cmd_bench_node`` also puts this process under SCHED_FIFO P, as
-    a controller subscribing to the node would run).
+    """Measure estimator_node in a child process over DDS on this machine, once per variant
+    (``--executor`` x ``--outputs``, a fresh node process each), with the options of ``bench-node``
+    (``args``; its help says what ``--modes``, ``--thread-priority`` and ``--input`` change).
 
     1. Latency: ``--samples`` inputs at ``--rate``; latency = arrival of the ``estimate``
        message carrying an input's stamp in the bench's callback - publication of that input
@@ -258,16 +254,8 @@ def bench_node(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
        the message info of ``estimate``; see PROFILE_LABELS), and the per-call costs of the
        publishing levers in this process.
 
-    With ``--input`` ``imu`` / ``imu-raw`` the node runs ``input_type: imu`` with configured
-    mounting (analysis/imu_sagittal.py) and each sample is four Imu messages with one stamp (with
-    orientations / gyro + accelerometer only) after one second of standing; latency runs from the
-    publication of a sample's last message, rates count samples.
-
-    Input: JointState (rad) of synthetic strides of the library's kernels with noise, stamped on
-    the library's time base, published reliably; this process subscribes to ``estimate`` (like a
-    controller) or to all four outputs, and to ``/diagnostics``. The report's top-level
-    ``latency``/``throughput`` are the first variant's (by default the node's default executor,
-    ``estimate`` only).
+    Input: synthetic strides of the library's kernels with noise (``_Variant.run``), published
+    reliably. The report's top-level ``latency``/``throughput`` are the first variant's.
     """
     from ..analysis.bench import machine_info
     from ..io.library_io import load_library, save_library

@@ -399,7 +399,7 @@ def publishing_costs_us(lib: KernelLibrary, node: Node) -> dict[str, float]:
 
     from ..analysis.bench import synthetic_walk
     from ..core.estimator import Estimator
-    from ..io.outputs import estimate_array, estimate_into, estimate_values
+    from ..io.outputs import estimate_array, estimate_values
     from .serialized import SerializedJointState
 
     est = Estimator(lib)
@@ -423,7 +423,7 @@ def publishing_costs_us(lib: KernelLibrary, node: Node) -> dict[str, float]:
 
     def fill_message() -> None:
         reused.header.stamp = stamp
-        estimate_into(view, e)
+        view[:] = estimate_values(e)
         reused.position = buffer
         probe.publish(reused)
 
