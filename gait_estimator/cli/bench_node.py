@@ -211,8 +211,8 @@ class _Variant:
 def _bench_variant(lib: Any, kernels: str, executor: str, outputs: str, args: argparse.Namespace, log: Any) -> dict[str, Any]:
     """One variant of bench_node: a fresh estimator_node process, its latency and throughput."""
     from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
+    from ..ros.diagnostics import DIAGNOSTICS_TOPIC
     from ..ros.node import NODE_NAME
-    from ..ros.node_client import DIAGNOSTICS_TOPIC
 
     input_kind, rate_hz = args.input, args.rate
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)

@@ -33,6 +33,7 @@ from ..core.states import name_index, reported_names
 from ..io.cdr import read_stamp, stamp_to_ns
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.outputs import ESTIMATE_TAIL, ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
+from .diagnostics import DIAGNOSTICS_TOPIC
 from .node_process import (  # noqa: F401 - re-exported: the node client's users start nodes too
     NODE_MODULE,
     NodeProcess,
@@ -42,8 +43,6 @@ from .node_process import (  # noqa: F401 - re-exported: the node client's users
     use_local_ros,
 )
 from .outputs import double_array
-
-DIAGNOSTICS_TOPIC = "/diagnostics"
 
 
 @dataclass
