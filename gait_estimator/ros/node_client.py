@@ -36,6 +36,7 @@ from ..io.outputs import ESTIMATE_TAIL, ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC,
 from .diagnostics import DIAGNOSTICS_TOPIC
 from .node_process import (  # noqa: F401 - re-exported: the node client's users start nodes too
     NODE_MODULE,
+    Closes,
     NodeProcess,
     local_ros_environment,
     node_command,
@@ -119,7 +120,7 @@ def drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscript
     return on_message
 
 
-class EstimatorClient:
+class EstimatorClient(Closes):
     """A ROS node that feeds ``segment_angles`` and records the estimator's outputs.
 
     Args:
@@ -378,12 +379,6 @@ class EstimatorClient:
         self.node.destroy_node()
         if self._own_context:
             rclpy.try_shutdown(context=self.context)
-
-    def __enter__(self) -> EstimatorClient:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def publishing_costs_us(lib: KernelLibrary, node: Node) -> dict[str, float]:

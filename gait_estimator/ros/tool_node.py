@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import NamedTuple, TypeVar
+from typing import NamedTuple
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
@@ -18,9 +18,8 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from ..core.errors import GaitEstimatorError
-from .node_process import spin_executor_until
+from .node_process import Closes, spin_executor_until
 
-T = TypeVar("T", bound="ToolNode")
 LEVELS = ("OK", "WARN", "ERROR", "STALE")
 """diagnostic_msgs/DiagnosticStatus levels 0..3."""
 
@@ -35,7 +34,7 @@ class TargetStatus(NamedTuple):
     at: float
 
 
-class ToolNode:
+class ToolNode(Closes):
     """A command's ROS node aimed at the estimator node ``target``.
 
     Args:
@@ -79,9 +78,3 @@ class ToolNode:
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-
-    def __enter__(self: T) -> T:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
