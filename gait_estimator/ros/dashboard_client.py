@@ -24,7 +24,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -34,7 +33,7 @@ from ..io.cdr import CdrError, read_joint_state
 from ..io.library_io import load_library
 from ..io.outputs import ESTIMATE_TOPIC
 from .angles_output import ANGLES_TOPIC
-from .node_client import drained
+from .node_client import drained_subscription
 from .teach_client import TeachClient
 
 DISPLAY_QOS = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST, depth=100)
@@ -137,9 +136,8 @@ class DashboardLink:
         namespace = self.target.rsplit("/", 1)[0]  # the node's relative topics (a remapping is not followed)
         for msg_type, topic, callback in ((JointState, f"{namespace}/{ESTIMATE_TOPIC}", self._on_estimate),
                                           (Float64MultiArray, self.target + ANGLES_TOPIC[1:], self._on_angles)):
-            box: list[Subscription] = []  # serialised estimate: parsed only for a frame (io/cdr.py)
-            box.append(n.create_subscription(msg_type, topic, drained(callback, box), DISPLAY_QOS,
-                                             raw=msg_type is JointState))
+            # serialised estimate: parsed only for a frame (io/cdr.py)
+            drained_subscription(n, msg_type, topic, callback, DISPLAY_QOS, raw=msg_type is JointState)
         n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.client.on_log = self._on_log
         self._thread = threading.Thread(target=self._run, name="dashboard-ros", daemon=True)

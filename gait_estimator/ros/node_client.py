@@ -98,15 +98,15 @@ class Received:
         )
 
 
-def drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscription]) -> Callable[[Any, Any], None]:
-    """Wrap a subscription callback ``callback(msg, info)`` to also take the messages queued
+def drained_subscription(node: Node, msg_type: Any, topic: str, callback: Callable[[Any, Any], None], qos: Any,
+                         raw: bool = False) -> Subscription:
+    """A subscription of ``node`` whose ``callback(msg, info)`` also takes the messages queued
     behind the first one (rclpy's executor costs hundreds of microseconds per wake-up; see
-    EstimatorNode._on_input). ``box`` receives the subscription once created. The wrapper takes
-    the message info (a SingleThreadedExecutor passes it; rclpy 7.1's EventsExecutor cannot)."""
+    EstimatorNode._on_input). ``info`` is the message info (a SingleThreadedExecutor passes it;
+    rclpy 7.1's EventsExecutor cannot)."""
 
     def on_message(msg: Any, info: Any) -> None:
         callback(msg, info)
-        sub = box[0]
         for _ in range(200):
             try:
                 with sub.handle:
@@ -117,7 +117,8 @@ def drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscript
                 return
             callback(taken[0], taken[1])
 
-    return on_message
+    sub = node.create_subscription(msg_type, topic, on_message, qos, raw=raw)
+    return sub
 
 
 class EstimatorClient(Closes):
@@ -206,11 +207,8 @@ class EstimatorClient(Closes):
         self._subs = []
         for topic in outputs:
             msg_type, callback, qos = subs[topic]
-            box: list[Subscription] = []
             raw = topic == ESTIMATE_TOPIC and not record
-            sub = self.node.create_subscription(msg_type, topic, drained(callback, box), qos, raw=raw)
-            box.append(sub)
-            self._subs.append(sub)
+            self._subs.append(drained_subscription(self.node, msg_type, topic, callback, qos, raw))
         self._js = JointState()
         self._js.name = self.joint_names
         self._fma = Float64MultiArray()
