@@ -112,9 +112,6 @@ class NodeProcess(Closes):
                 self.proc.wait()
         return int(self.proc.returncode)
 
-    def wait(self, timeout_s: float) -> int:
-        return int(self.proc.wait(timeout=timeout_s))
-
     def close(self) -> None:
         if self.proc.poll() is None:
             self.stop(signal.SIGKILL)
