@@ -5,8 +5,7 @@ installs without the ros2 CLI (``pip install '.[ros]'``).
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.exceptions import NameValidationException
@@ -14,7 +13,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, String
 
 from ..core.errors import GaitEstimatorError
-from .tool_node import ToolNode
+from .tool_node import TargetStatus, ToolNode
 
 
 @dataclass
@@ -25,12 +24,8 @@ class Seen:
     phase: float | None = None
     estimates: int = 0
     """``phase`` messages received (one per estimate once the window is full)."""
-    level: str = ""
-    message: str = ""
-    values: dict[str, str] = field(default_factory=dict)
-    """The node's last diagnostics key/values."""
-    diagnostics_at: float = math.nan
-    """``time.monotonic()`` when the last diagnostics came (they come at 1 Hz)."""
+    status: TargetStatus | None = None
+    """The node's last diagnostics (they come at 1 Hz)."""
 
 
 class WatchClient(ToolNode):
@@ -71,6 +66,4 @@ class WatchClient(ToolNode):
         self.seen.estimates += 1
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
-        st = self.target_status(msg)
-        if st is not None:
-            self.seen.level, self.seen.message, self.seen.values, self.seen.diagnostics_at = st
+        self.seen.status = self.target_status(msg) or self.seen.status
