@@ -1,9 +1,7 @@
 """Driving ``estimator_node`` from Python: start it, stream samples into it, collect its outputs.
 
-Used by ``gait-estimator demo``, ``gait-estimator bench-node`` and the node tests. Everything here
-talks real DDS, restricted to this machine: ``local_ros_environment`` sets
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a ``ROS_DOMAIN_ID`` for child processes, and
-``use_local_ros`` does the same for the current process (call it before creating a client).
+Used by ``gait-estimator demo``, ``gait-estimator bench-node`` and the node tests, over real DDS
+restricted to this machine (``node_process.py``, re-exported here, sets that up).
 """
 
 from __future__ import annotations
