@@ -43,7 +43,7 @@ class EstimateOutputs:
         self._phase_pub = node.create_publisher(Float64, PHASE_TOPIC, OUTPUT_QOS, event_callbacks=QUIET)
         self._sse_pub = node.create_publisher(Float64MultiArray, SSE_TOPIC, OUTPUT_QOS, event_callbacks=QUIET)
         self._estimate_pub = node.create_publisher(JointState, ESTIMATE_TOPIC, OUTPUT_QOS, event_callbacks=QUIET)
-        self.angles = AnglesOutput(node, OUTPUT_QOS)
+        self.angles = AnglesOutput(node, OUTPUT_QOS, QUIET)
         self._mode_msg = String()
         self._phase_msg = Float64()
         self.set_modes([])
