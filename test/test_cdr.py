@@ -9,7 +9,7 @@ import pytest
 
 from gait_estimator.io.bag import typestore
 from gait_estimator.io.bag_write import JOINT_STATE
-from gait_estimator.io.cdr import CdrError, read_imu, read_joint_state, read_stamp
+from gait_estimator.io.cdr import CdrError, read_imu, read_joint_state, read_stamp, stamp_to_ns, with_stamp
 
 
 def _cdr(frame_id: str, names: list[str], positions: list[float], velocity: list[float], little: bool,
@@ -41,6 +41,15 @@ def test_fields_equal_the_serialised_message(little: bool, frame_id: str, names:
         assert got.names == names
         assert list(got.positions) == positions
         assert tuple(got.stamp) == (-7, 999_999_999) and got.stamp.sec == -7
+
+
+@pytest.mark.parametrize("little", [True, False])
+def test_stamp_patching_round_trip(little: bool) -> None:
+    data = _cdr("imu_link", OSL, [0.1, 0.2, 0.3, 0.4], [], little)
+    assert stamp_to_ns(read_stamp(data)) == 1_763_900_000_123_456_789
+    patched = with_stamp(data, 1_700_000_000_000_000_123)
+    assert stamp_to_ns(read_stamp(patched)) == 1_700_000_000_000_000_123
+    assert len(patched) == len(data) and patched[12:] == data[12:] and patched[:4] == data[:4]
 
 
 def test_bad_bytes_raise_cdr_error() -> None:

@@ -1,37 +1,19 @@
 """Evaluating predictions against truth: mode accuracy, confusion, phase error, transition delay.
 
-Definitions (docs/training.md, "`evaluate`: definitions"):
+Matching rows by time, evaluated rows, phase truth and error, ``steady`` and transitions are
+defined in docs/training.md, "``evaluate``: definitions" (``match_times``, ``phase_truth``,
+``time_in_run``, ``transitions`` implement them).
 
-* Predictions (``process`` CSV rows) are matched to truth samples by time (``match_times``):
-  the nearest truth sample, for rows within half the truth's median sample interval of one or
-  between two truth samples at most 0.25 s apart. Unmatched rows are not evaluated.
-* A row is *evaluated* when it is matched, ``ready`` and its truth label (after
-  ``--label-map``) is not empty. ``accuracy`` = correct / evaluated.
-* Phase truth (paper): linear in time from one right heel strike to the next, 0 at the heel
-  strike; only inside complete strides whose duration is within the stride limits of
-  ``strides`` (0.6-2.5 s), elsewhere none.
-* Phase error is circular, ``min(|a - b|, 1 - |a - b|)``, a fraction of a stride (0-0.5);
-  ``phase_error_*`` use correctly classified evaluated rows with phase truth (as the paper),
-  ``phase_error_all_*`` every evaluated row with phase truth and a phase (not stand or unknown).
-* ``steady``: the same over rows at least one matcher window (``settle_s``, the time the
-  predictions took to become ready) after the start of their run of identical truth labels, i.e.
-  once the whole window holds data of the current mode (the paper evaluates steady-state trials).
-* Transitions: consecutive runs of different truth labels (unlabelled rows between them are
-  skipped). The delay is the time from the first row of the new label to the first ready
-  prediction accepted for it, searching from the end of the previous run; negative when the
-  estimator switched inside an unlabelled gap (whose length is reported); "missed" when it never
-  switches within the new run.
-* Switches (``switch_metrics``): a change of the reported mode between consecutive ready rows
-  (``stand`` and ``unknown`` included) is *false* when it falls on a labelled walking row (not
-  ``stand``) and no truth label changed from ``SWITCH_WINDOW_S`` before it to ``SWITCH_LEAD_S``
-  after it (labels mark motion to a few tenths of a second); per minute of labelled walking.
-  Delay: from a change of the truth label to the first ready row reporting a mode accepted for
-  the new label, within ``SWITCH_WINDOW_S`` (else missed).
+Switches (``switch_metrics``): a change of the reported mode between consecutive ready rows
+(``stand`` and ``unknown`` included) is *false* when it falls on a labelled walking row (not
+``stand``) and no truth label changed from ``SWITCH_WINDOW_S`` before it to ``SWITCH_LEAD_S``
+after it (labels mark motion to a few tenths of a second); per minute of labelled walking.
+Delay: from a change of the truth label to the first ready row reporting a mode accepted for
+the new label, within ``SWITCH_WINDOW_S`` (else missed).
 """
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -42,7 +24,7 @@ import numpy as np
 
 from ..core.errors import GaitEstimatorError
 from ..core.strides import DetectionOptions, stride_bounds
-from ..io.recording import Recording
+from ..io.recording import Recording, read_csv_table
 from .strides import HeelStrikes, nearest_index
 
 
@@ -68,13 +50,7 @@ class PredictionTable:
 def read_predictions_csv(path: str | Path) -> PredictionTable:
     """Read a predictions CSV written by ``gait-estimator process``."""
     p = Path(path)
-    try:
-        with p.open(encoding="utf-8", newline="") as f:
-            reader = csv.reader(f)
-            header = [h.strip() for h in next(reader, [])]
-            rows = [r for r in reader if r]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise GaitEstimatorError(f"{p}: cannot read predictions ({exc})") from None
+    header, rows = read_csv_table(p, " predictions")
     need = ("time_s", "mode", "phase", "ready")
     missing = [c for c in need if c not in header]
     if missing:
@@ -399,7 +375,7 @@ def _stats(e: np.ndarray, prefix: str) -> dict[str, Any]:
 
 
 def transitions(al: Aligned, accepted: Mapping[str, tuple[str, ...]]) -> dict[str, Any]:
-    """Truth mode changes and how long the estimator took to follow (see module docstring)."""
+    """Truth mode changes and how long the estimator took to follow (docs/training.md)."""
     rows = np.flatnonzero(al.truth != "")
     events: list[dict[str, Any]] = []
     if rows.size:

@@ -21,7 +21,9 @@ _DPI = 110
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
+    """Lay ``fig`` out and write it as PNG."""
     p = Path(path)
+    fig.tight_layout()
     FigureCanvasAgg(fig)
     fig.savefig(p, dpi=_DPI)
     return p
@@ -59,7 +61,6 @@ def plot_confusion(metrics: Mapping[str, Any], path: str | Path, title: str = ""
     head = "confusion matrix" + (f" (accuracy {100 * acc:.1f} %)" if acc is not None else "")
     ax.set_title((title + "\n" if title else "") + head)
     fig.colorbar(im, ax=ax, label="% of true-mode samples")
-    fig.tight_layout()
     return _save(fig, path)
 
 
@@ -90,7 +91,6 @@ def plot_phase_error(metrics: Mapping[str, Any], path: str | Path, title: str = 
     ax.set_xlabel("true mode")
     ax.set_title((title + "\n" if title else "") + "phase error, correctly classified samples (mean ± std)")
     ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
     return _save(fig, path)
 
 
@@ -159,5 +159,4 @@ def plot_timeseries(al: Aligned, path: str | Path, title: str = "", window: tupl
     if t.size:
         ax_ph.set_xlim(float(t[0]), float(t[-1]))
     fig.suptitle(title or "mode and phase over time")
-    fig.tight_layout()
     return _save(fig, path)

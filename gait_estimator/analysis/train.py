@@ -1,16 +1,8 @@
 """Training kernels: labelled recordings -> strides -> outlier rejection -> average per mode.
 
-Pipeline (paper, "Data Processing"; docs/training.md, "`train`: rules"):
-
-1. Each recording is resampled to one uniform rate (default: the median of the recordings'
-   median sample rates), which the library records.
-2. Right heel strikes come from the ``heel_strike`` column or are detected (``strides``);
-   consecutive heel strikes 0.6-2.5 s apart form strides.
-3. A stride belongs to mode m when every source sample in its inner 94 % (3 % of the duration
-   left out at either end) is labelled m; strides spanning two labels are skipped (reported),
-   unlabelled strides are ignored.
-4. Outliers are rejected per mode and the kept strides averaged: ``core.training`` (shared with
-   live teaching).
+The rules (paper, "Data Processing"): docs/training.md, "`train`: rules". Resampling and heel
+strikes come from ``strides``; outlier rejection and averaging from ``core.training`` (shared
+with live teaching).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ from ..io.resources import DEFAULT_LIBRARY
 from ..ros import EXECUTORS, require_ros
 from .args import checked_number, choice_list, domain_id, positive_float, positive_int, positive_list, prepare_output
 from .bench_profile import PROFILE_LABELS, clock_offset_ns, profile_stages
-from .node_commands import percentiles, start_node, wait_node
+from .node_commands import percentiles, running_node
 
 BENCH_DOMAIN_ID = 78
 DEFAULT_RATES = (500, 1000, 1500, 2000, 3000, 4000, 6000, 8000)
@@ -211,33 +211,21 @@ class _Variant:
 def _bench_variant(lib: Any, kernels: str, executor: str, outputs: str, args: argparse.Namespace, log: Any) -> dict[str, Any]:
     """One variant of bench_node: a fresh estimator_node process, its latency and throughput."""
     from ..io.outputs import ESTIMATE_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC
+    from ..ros.diagnostics import DIAGNOSTICS_TOPIC
     from ..ros.node import NODE_NAME
-    from ..ros.node_client import DIAGNOSTICS_TOPIC, EstimatorClient
 
     input_kind, rate_hz = args.input, args.rate
     topics = (ESTIMATE_TOPIC,) if outputs == "estimate" else (MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, ESTIMATE_TOPIC)
     extra = ["-p", f"thread_priority:={args.thread_priority}"] if args.thread_priority else []
     if input_kind != "joint_state":  # configured mounting; a path without a file: no saved calibration
         extra += node_imu_arguments(os.path.join(tempfile.gettempdir(), f"gait_estimator_bench_{os.getpid()}.imu.yaml"))
-    node = start_node(args.domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={args.preset}", *extra],
-                      args.node_cmd)
-    try:
-        client = EstimatorClient(
-            args.domain_id,
-            input_type="imu" if input_kind != "joint_state" else "joint_state",
-            reliable=True,
-            record=False,
-            outputs=(*topics, DIAGNOSTICS_TOPIC),
-            profile_topic=f"/{NODE_NAME}/profile" if args.profile else None,
-        )
-    except BaseException:
-        node.close()
-        raise
-    out: dict[str, Any] = {"executor": executor, "outputs": outputs, "node_cmd": node.cmd}
-    bench = _Variant(lib, client, log, f"[executor {executor}, outputs {outputs}"
-                     + ("]" if input_kind == "joint_state" else f", input {input_kind}]"), input_kind)
-    try:
-        wait_node(client, node, 30.0)
+    with running_node(args.domain_id, kernels, ["-p", f"executor:={executor}", "-p", f"preset:={args.preset}", *extra],
+                      args.node_cmd, 30.0, input_type="imu" if input_kind != "joint_state" else "joint_state",
+                      reliable=True, record=False, outputs=(*topics, DIAGNOSTICS_TOPIC),
+                      profile_topic=f"/{NODE_NAME}/profile" if args.profile else None) as (node, client):
+        out: dict[str, Any] = {"executor": executor, "outputs": outputs, "node_cmd": node.cmd}
+        bench = _Variant(lib, client, log, f"[executor {executor}, outputs {outputs}"
+                         + ("]" if input_kind == "joint_state" else f", input {input_kind}]"), input_kind)
         if input_kind != "joint_state":  # as a wearer would: stand (the fusion settles), then walk
             bench.run(round(lib.sample_rate_hz), rate_hz, standing=True)
         bench.run(int(lib.lengths.max()) + 50, rate_hz)  # warm-up: fill the window, first-call costs
@@ -245,20 +233,13 @@ def _bench_variant(lib: Any, kernels: str, executor: str, outputs: str, args: ar
         if outputs == "estimate":
             out["throughput"] = bench.throughput(args.rates, args.seconds)
         out["node_exit_code"] = node.stop(signal.SIGINT)
-    finally:
-        client.close()
-        node.close()
     return out
 
 
 def bench_node(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
-    """Measure estimator_node (with estimator preset ``--preset``) in a child process over DDS on
-    this machine, once per variant (``--executor`` x ``--outputs``, a fresh node process each),
-    with the options of ``bench-node`` (``args``). With ``--modes``, the node runs a library of
-    that many modes cycled from ``--kernels`` (``KernelLibrary.replicated``, as ``gait-estimator
-    bench --modes``), written to a temporary NPZ. With ``--thread-priority`` P > 0 the node runs
-    with ``thread_priority: P`` (``cmd_bench_node`` also puts this process under SCHED_FIFO P, as
-    a controller subscribing to the node would run).
+    """Measure estimator_node in a child process over DDS on this machine, once per variant
+    (``--executor`` x ``--outputs``, a fresh node process each), with the options of ``bench-node``
+    (``args``; its help says what ``--modes``, ``--thread-priority`` and ``--input`` change).
 
     1. Latency: ``--samples`` inputs at ``--rate``; latency = arrival of the ``estimate``
        message carrying an input's stamp in the bench's callback - publication of that input
@@ -273,16 +254,8 @@ def bench_node(args: argparse.Namespace, log: Any = print) -> dict[str, Any]:
        the message info of ``estimate``; see PROFILE_LABELS), and the per-call costs of the
        publishing levers in this process.
 
-    With ``--input`` ``imu`` / ``imu-raw`` the node runs ``input_type: imu`` with configured
-    mounting (analysis/imu_sagittal.py) and each sample is four Imu messages with one stamp (with
-    orientations / gyro + accelerometer only) after one second of standing; latency runs from the
-    publication of a sample's last message, rates count samples.
-
-    Input: JointState (rad) of synthetic strides of the library's kernels with noise, stamped on
-    the library's time base, published reliably; this process subscribes to ``estimate`` (like a
-    controller) or to all four outputs, and to ``/diagnostics``. The report's top-level
-    ``latency``/``throughput`` are the first variant's (by default the node's default executor,
-    ``estimate`` only).
+    Input: synthetic strides of the library's kernels with noise (``_Variant.run``), published
+    reliably. The report's top-level ``latency``/``throughput`` are the first variant's.
     """
     from ..analysis.bench import machine_info
     from ..io.library_io import load_library, save_library

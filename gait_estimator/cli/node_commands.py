@@ -12,6 +12,8 @@ import os
 import signal
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -40,21 +42,25 @@ def demo_domain(given: int | None) -> tuple[int, str]:
         raise GaitEstimatorError(f"ROS_DOMAIN_ID: {exc}") from None
 
 
-def start_node(domain_id: int, kernels: str, extra_ros_args: list[str], node_cmd: str | None) -> Any:
-    from ..ros.node_client import NodeProcess, local_ros_environment, node_command
+@contextmanager
+def running_node(domain_id: int, kernels: str, extra_ros_args: list[str], node_cmd: str | None, timeout_s: float,
+                 **client_options: Any) -> Iterator[tuple[Any, Any]]:
+    """(node, client): estimator_node in a child process and an EstimatorClient (``client_options``)
+    connected to it within ``timeout_s``; both closed at the end."""
+    from ..ros.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
 
     ros_args = ["-p", f"kernels:={kernels}", *extra_ros_args]
-    return NodeProcess(node_command(ros_args, node_cmd), local_ros_environment(domain_id))
-
-
-def wait_node(client: Any, node: Any, timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not client.wait_for_node(timeout_s=0.2, settle_s=0.5):
-        if node.poll() is not None:
-            out = node.output().strip().splitlines()
-            raise GaitEstimatorError(f"estimator_node exited with code {node.poll()}: {out[-1] if out else '(no output)'}")
-        if time.monotonic() > deadline:
-            raise GaitEstimatorError(f"estimator_node did not connect within {timeout_s:g} s")
+    with NodeProcess(node_command(ros_args, node_cmd), local_ros_environment(domain_id)) as node:
+        with EstimatorClient(domain_id, **client_options) as client:
+            deadline = time.monotonic() + timeout_s
+            while not client.wait_for_node(timeout_s=0.2, settle_s=0.5):
+                if node.poll() is not None:
+                    out = node.output().strip().splitlines()
+                    raise GaitEstimatorError(f"estimator_node exited with code {node.poll()}: "
+                                             f"{out[-1] if out else '(no output)'}")
+                if time.monotonic() > deadline:
+                    raise GaitEstimatorError(f"estimator_node did not connect within {timeout_s:g} s")
+            yield node, client
 
 
 def percentiles(values_ms: np.ndarray) -> dict[str, float]:
@@ -151,7 +157,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     rate = (rec.median_rate_hz if len(rec) > 1 else lib.sample_rate_hz) * args.speed
     due_s = (rec.time_s - rec.time_s[0]) / args.speed  # the recording's own timing
     require_ros()
-    from ..ros.node_client import EstimatorClient, use_local_ros
+    from ..ros.node_client import use_local_ros
 
     domain, source = demo_domain(args.domain_id)
     use_local_ros(domain)
@@ -160,45 +166,38 @@ def cmd_demo(args: argparse.Namespace) -> int:
         "discovery LOCALHOST)",
         flush=True,
     )
-    node = start_node(domain, lib.path or args.kernels, [], args.node_cmd)
-    try:
-        client = EstimatorClient(domain, reliable=args.reliable)
-    except BaseException:
-        node.close()
-        raise
     code = 0
     page = None
     try:
-        wait_node(client, node, args.timeout)
-        if args.dashboard:
-            page = _start_dashboard(domain, args.dashboard_port)
-        echo_every = max(1, args.echo_every)
-        _echo(client, echo_every)
-        print(
-            f"streaming {len(rec)} samples of {path.name} into segment_angles (sensor_msgs/JointState, rad) "
-            f"at {rate:.0f} Hz (x{args.speed:g}, recorded timing); echoing 1 in {echo_every} mode/phase messages "
-            "and every mode change",
-            flush=True,
-        )
-        base_ns = time.time_ns()
-        stamps = base_ns + np.round((rec.time_s - rec.time_s[0]) * 1e9).astype(np.int64)
-        t0 = time.monotonic()
-        sent = client.stream(np.radians(rec.angles_deg), stamps, rate, due_s=due_s)
-        client.spin_until(lambda: client.estimate_count >= len(rec), 3.0)
-        wall = time.monotonic() - t0
-        diag = client.latest_diagnostics(timeout_s=2.5)
-        stop_code = node.stop(signal.SIGINT)
-        if not _demo_summary(client, path, lib, rec, stamps, sent, wall, diag):
-            code = 1
-        print(f"estimator_node stopped with SIGINT: exit code {stop_code}")
-        if stop_code != 0:
-            code = 1
+        with running_node(domain, lib.path or args.kernels, [], args.node_cmd, args.timeout,
+                          reliable=args.reliable) as (node, client):
+            if args.dashboard:
+                page = _start_dashboard(domain, args.dashboard_port)
+            echo_every = max(1, args.echo_every)
+            _echo(client, echo_every)
+            print(
+                f"streaming {len(rec)} samples of {path.name} into segment_angles (sensor_msgs/JointState, rad) "
+                f"at {rate:.0f} Hz (x{args.speed:g}, recorded timing); echoing 1 in {echo_every} mode/phase messages "
+                "and every mode change",
+                flush=True,
+            )
+            base_ns = time.time_ns()
+            stamps = base_ns + np.round((rec.time_s - rec.time_s[0]) * 1e9).astype(np.int64)
+            t0 = time.monotonic()
+            sent = client.stream(np.radians(rec.angles_deg), stamps, rate, due_s=due_s)
+            client.spin_until(lambda: client.estimate_count >= len(rec), 3.0)
+            wall = time.monotonic() - t0
+            diag = client.latest_diagnostics(timeout_s=2.5)
+            stop_code = node.stop(signal.SIGINT)
+            if not _demo_summary(client, path, lib, rec, stamps, sent, wall, diag):
+                code = 1
+            print(f"estimator_node stopped with SIGINT: exit code {stop_code}")
+            if stop_code != 0:
+                code = 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         code = 130
     finally:
-        client.close()
-        node.close()
         if page is not None:
             page.close()
     return code

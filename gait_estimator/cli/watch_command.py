@@ -6,7 +6,6 @@ rclpy is imported only when the command runs, so the offline CLI works without R
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import time
 from collections.abc import Sequence
@@ -31,7 +30,7 @@ def watch_line(elapsed_s: float, mode: str | None, phase: float | None, level: s
 
 def cmd_watch(args: argparse.Namespace) -> int:
     require_ros()
-    from ..ros.watch_client import WatchClient
+    from ..ros.watch_client import TargetStatus, WatchClient
 
     keys = [k.strip() for k in (args.keys or "").split(",") if k.strip()]
     try:
@@ -40,16 +39,16 @@ def cmd_watch(args: argparse.Namespace) -> int:
                   f"diagnostics every {1 / args.rate:g} s; Ctrl-C stops", flush=True)
             seen, start, counted = client.seen, time.monotonic(), 0
             while args.duration is None or time.monotonic() - start < args.duration:
-                client.spin_for(1.0 / args.rate)
+                client.spin_until(lambda: False, 1.0 / args.rate)
                 now = time.monotonic()
                 fresh = seen.estimates > counted
                 counted = seen.estimates
-                level, message = seen.level, seen.message
-                age = now - (start if math.isnan(seen.diagnostics_at) else seen.diagnostics_at)
+                st = seen.status or TargetStatus("", "", {}, start)
+                level, message, age = st.level, st.message, now - st.at
                 if age > STALE_AFTER_S:
                     level, message = "STALE", f"no diagnostics for {age:.0f} s (has the node stopped?)"
                 print(watch_line(now - start, seen.mode if fresh else None, seen.phase if fresh else None,
-                                 level, message, seen.values, keys), flush=True)
+                                 level, message, st.values, keys), flush=True)
     except KeyboardInterrupt:
         return 130
     return 0

@@ -1,12 +1,7 @@
 """The dashboard's web server (aiohttp): one page, its static assets, and a WebSocket that pushes
-the node's state at ``rate_hz`` and takes the page's teach/cancel/save commands.
-
-Who may steer: with a token, the page and the socket answer 401 without one and 403 with a wrong
-one (query ``?token=`` or ``Authorization: Bearer``); a socket opened from another site's page
-(``Origin`` not this server) is refused; without a token, so on loopback, a request whose ``Host``
-is not a loopback name is refused (DNS rebinding); ``read_only`` refuses every command; at most
-``MAX_SOCKETS`` pages at once. A refused message
-is logged (at most once a second per reason) and answered; it never reaches the node.
+the node's state at ``rate_hz`` and takes the page's teach/cancel/save commands. Who may steer
+(token, ``Origin``, loopback ``Host``, ``read_only``, ``MAX_SOCKETS``, refusals logged and
+answered, never passed to the node): docs/dashboard.md, "Who may steer".
 """
 
 from __future__ import annotations

@@ -1,22 +1,12 @@
 """Reading the driver topic of a rosbag2 recording (mcap or sqlite3) into a Recording.
 
 Pure Python (the ``rosbags`` library, imported lazily): no ROS install needed. Messages become
-samples exactly as the live node turns them into samples (``stream.py``):
+samples as the live node takes them (``stream.py``); which topic, which time and which messages
+are skipped: docs/bags.md, "``process`` on a bag". Sample times are kept as integer stamps
+(``BagRecording.stamp_ns``, for ``--out-bag``) and as ``time_s`` from the first accepted sample;
+gaps longer than ``max_gap_s`` are counted (``process.predict`` restarts the window there).
 
-* ``sensor_msgs/msg/JointState``: the four angles by joint name (``joint_names``, default
-  CHANNELS; other joints ignored), ``input_units`` ``rad`` (default, REP 103) or ``deg``; the
-  sample time is ``header.stamp``, or the bag's receive (log) time when the stamp is zero;
-* ``std_msgs/msg/Float64MultiArray``: ``data`` = the four angles in CHANNELS order; it has no
-  header, so the sample time is the bag's receive (log) time;
-* bad messages (non-finite values, missing joints, wrong length, undecodable data, a stamp not
-  after the previous one) are skipped and counted in ``Recording.skipped``;
-* sample times are kept as integer stamps (``BagRecording.stamp_ns``, for ``--out-bag``) and as
-  ``time_s`` = seconds since the first accepted sample; a gap longer than ``max_gap_s`` restarts
-  the matcher window, which ``process.predict`` does from ``time_s`` (as the node does from its
-  stamps); the reader counts such gaps for the summary.
-
-A bag path is a rosbag2 directory (with ``metadata.yaml``) or a single ``.mcap`` / ``.db3``
-storage file, which is read on its own (its own schema/topic tables; no metadata.yaml needed).
+A bag path is a rosbag2 directory or a single ``.mcap`` / ``.db3`` storage file (read on its own).
 A cut or damaged bag is read as far as it goes (``bag_recover.py``, through ``open_bag``);
 ``bag_records`` gives any topic's raw CDR records, for readers of other message types.
 """
@@ -27,10 +17,10 @@ import math
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -40,6 +30,7 @@ from ..core.rejections import SampleRejected
 from ..core.stamps import StreamGuard
 from . import bag_recover
 from .bag_recover import STORAGE_SUFFIXES, RawRecord
+from .cdr import stamp_to_ns
 from .read_options import DEFAULT_MAX_GAP_S, ReadOptions
 from .recording import Recording
 from .stream import UNITS, angles_from_array, angles_from_named
@@ -67,17 +58,6 @@ def normalize_topic(topic: str) -> str:
     """Absolute topic name as stored in bags: ``segment_angles`` -> ``/segment_angles``."""
     topic = topic.strip()
     return topic if topic.startswith("/") else "/" + topic
-
-
-def stamp_to_ns(sec: int, nanosec: int) -> int:
-    """builtin_interfaces/Time -> integer nanoseconds since the epoch."""
-    return int(sec) * 1_000_000_000 + int(nanosec)
-
-
-def ns_to_stamp(ns: int) -> tuple[int, int]:
-    """Integer nanoseconds -> (sec, nanosec) of builtin_interfaces/Time."""
-    sec, nanosec = divmod(int(ns), 1_000_000_000)
-    return sec, nanosec
 
 
 # ---------------------------------------------------------------------------------------------
@@ -116,6 +96,7 @@ class BagRecording(Recording):
     max_gap_s: float = DEFAULT_MAX_GAP_S
     recovered: str = ""
     """One line on what was recovered from a damaged bag ('' for an intact bag)."""
+    PER_SAMPLE: ClassVar[tuple[str, ...]] = (*Recording.PER_SAMPLE, "stamp_ns", "log_time_ns")
 
     @property
     def notes(self) -> list[str]:
@@ -134,17 +115,6 @@ class BagRecording(Recording):
                 "the matcher window restarted there (as in the live node)"
             )
         return out
-
-    def select(self, keep: np.ndarray, skipped: dict[str, int] | None = None) -> BagRecording:
-        """The samples where ``keep`` is true, with their stamps (``slice`` uses this too); the
-        same type, its other fields kept."""
-        base = super().select(keep, skipped)
-        return replace(
-            self,
-            **{f: getattr(base, f) for f in Recording.__dataclass_fields__},
-            stamp_ns=None if self.stamp_ns is None else self.stamp_ns[keep],
-            log_time_ns=None if self.log_time_ns is None else self.log_time_ns[keep],
-        )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -284,24 +254,12 @@ def read_bag(path: str | Path, options: ReadOptions | None = None, /, **values: 
     """
     p = Path(path)
     o = ReadOptions.of(options, values)
-    topic, input_units, max_gap_s = o.topic, o.input_units, o.max_gap_s
-    names = parse_joint_names(o.joint_names)
-    if input_units not in UNITS:
-        raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {input_units!r}")
-    max_gap = float(max_gap_s)
+    max_gap = float(o.max_gap_s)
     if math.isnan(max_gap):
-        raise RecordingError(f"max_gap_s must be a number of seconds, got {max_gap_s!r}")
-    with open_bag(p, topic and normalize_topic(topic)) as reader:
-        topics = bag_topics(reader)
-        name = choose_topic(p, topics, topic)
-        msgtype = topics[name][0]
-        if msgtype not in INPUT_MSGTYPES.values():
-            raise RecordingError(
-                f"{p}: topic {name} has message type {msgtype}; expected {JOINT_STATE} or {FLOAT64_MULTI_ARRAY}"
-            )
-        conns = [c for c in reader.connections if c.topic == name]
+        raise RecordingError(f"max_gap_s must be a number of seconds, got {o.max_gap_s!r}")
+    with _angle_topic(p, o) as (reader, name, msgtype, samples):
         try:
-            rec = _read_samples(p, name, msgtype, reader.messages(connections=conns), names, input_units, max_gap)
+            rec = _read_samples(p, name, msgtype, samples, max_gap)
             recovery = getattr(reader, "recovery", None)
             rec.recovered = recovery.line() if recovery else ""
             return rec
@@ -327,7 +285,7 @@ def decoded_samples(messages: Iterator[tuple[Any, int, bytes]], msgtype: str, jo
         try:
             if is_joint_state:
                 sample = angles_from_named(msg.name, msg.position, joint_names, units)
-                stamp_ns = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+                stamp_ns = stamp_to_ns(msg.header.stamp)
                 fallback = stamp_ns == 0
                 if fallback:
                     stamp_ns = int(log_ns)
@@ -341,12 +299,10 @@ def decoded_samples(messages: Iterator[tuple[Any, int, bytes]], msgtype: str, jo
 
 
 @contextmanager
-def bag_samples(path: str | Path, options: ReadOptions | None = None, /,
-                **values: Any) -> Iterator[tuple[str, Iterator[tuple[int, int, int, bool, Any]]]]:
-    """The angle topic of a bag as ``read_bag`` chooses it: (its message type, ``decoded_samples``
-    of all its messages), for a caller that takes each message as a live node would."""
-    p = Path(path)
-    o = ReadOptions.of(options, values)
+def _angle_topic(p: Path, o: ReadOptions) -> Iterator[tuple[Any, str, str, Iterator[tuple[int, int, int, bool, Any]]]]:
+    """The open bag, its angle topic (``choose_topic``), that topic's message type and its
+    ``decoded_samples``."""
+    names = parse_joint_names(o.joint_names)
     if o.input_units not in UNITS:
         raise RecordingError(f"input units must be one of {', '.join(UNITS)}, got {o.input_units!r}")
     with open_bag(p, o.topic and normalize_topic(o.topic)) as reader:
@@ -357,19 +313,20 @@ def bag_samples(path: str | Path, options: ReadOptions | None = None, /,
             raise RecordingError(f"{p}: topic {name} has message type {msgtype}; expected {JOINT_STATE} or "
                                  f"{FLOAT64_MULTI_ARRAY}")
         conns = [c for c in reader.connections if c.topic == name]
-        yield msgtype, decoded_samples(reader.messages(connections=conns), msgtype, parse_joint_names(o.joint_names),
-                                       o.input_units)
+        yield reader, name, msgtype, decoded_samples(reader.messages(connections=conns), msgtype, names, o.input_units)
 
 
-def _read_samples(
-    bag: Path,
-    topic: str,
-    msgtype: str,
-    messages: Iterator[tuple[Any, int, bytes]],
-    joint_names: tuple[str, ...],
-    units: str,
-    max_gap_s: float,
-) -> BagRecording:
+@contextmanager
+def bag_samples(path: str | Path, options: ReadOptions | None = None, /,
+                **values: Any) -> Iterator[tuple[str, Iterator[tuple[int, int, int, bool, Any]]]]:
+    """The angle topic of a bag as ``read_bag`` chooses it: (its message type, ``decoded_samples``
+    of all its messages), for a caller that takes each message as a live node would."""
+    with _angle_topic(Path(path), ReadOptions.of(options, values)) as (_, _, msgtype, samples):
+        yield msgtype, samples
+
+
+def _read_samples(bag: Path, topic: str, msgtype: str, samples: Iterator[tuple[int, int, int, bool, Any]],
+                  max_gap_s: float) -> BagRecording:
     guard = StreamGuard(max_gap_s=max_gap_s)
     angles: list[np.ndarray] = []
     stamps: list[int] = []
@@ -378,7 +335,7 @@ def _read_samples(
     undecodable = 0
     fallbacks = 0
     n = 0
-    for i, log_ns, stamp_ns, fallback, sample in decoded_samples(messages, msgtype, joint_names, units):
+    for i, log_ns, stamp_ns, fallback, sample in samples:
         n = i + 1
         if sample is None:
             undecodable += 1

@@ -1,21 +1,11 @@
 """Reading what a damaged rosbag2 bag still holds (a recording cut by a power loss).
 
-What counts as damaged (``damage``):
-
-* an ``.mcap`` file without its end magic: the recorder never closed it, so the summary and
-  footer are missing; every complete message before the cut is read record by record
-  (``mcap_scan.py``), inside chunks too;
-* an ``.db3`` file shorter than its header says, or with a ``-wal`` / ``-journal`` file left
-  beside it (the last transaction never finished): the database is read from a copy in a
-  temporary directory, where SQLite rolls back the unfinished transaction or replays the
-  committed part of the write-ahead log; the original files are never opened for writing.
-  When SQLite stops early (a cut lost interior b-tree pages of the messages table), the
-  table-leaf pages still in the file are read on their own (``sqlite_pages.py``): topics,
-  message definitions, and the messages of consecutive ids from the first up to the first
-  missing id (a lost page cannot be told from a gap);
-* a bag directory whose ``metadata.yaml`` is missing or unreadable, lists files that are
-  missing, misses files that are there, or (``count_disagreement``) gives message counts its
-  files do not hold: the storage files are read on their own.
+``damage`` says why a bag needs it (the kinds, and what is read of each: docs/bags.md, "Cut
+recordings and ``repair``"): a cut ``.mcap`` is read record by record (``mcap_scan.py``); a
+``.db3`` from a copy in a temporary directory, where SQLite finishes or rolls back the last
+transaction (the originals are never opened for writing), or from its leaf pages when SQLite
+stops early (``sqlite_pages.py``); a directory whose ``metadata.yaml`` disagrees with its files
+(or, ``count_disagreement``, their message counts) from its storage files alone.
 
 ``RecoveredBag`` offers the part of rosbags' ``Reader`` interface the project reads bags with
 (``topics``, ``connections``, ``messages(connections)``, ``close``), so topic decoding is the
@@ -359,8 +349,7 @@ def _rows(con: sqlite3.Connection, problem: list[str]) -> Iterator[tuple[int, in
 
 
 class RecoveredBag:
-    """The readable part of a damaged bag, with the reader interface of rosbags' ``Reader``
-    that the project uses: ``topics``, ``connections``, ``messages(connections)``, ``close()``.
+    """The readable part of a damaged bag, with the reader interface in the module docstring.
 
     Connections are merged across storage files by (topic, type, serialization format);
     messages come in file order.
@@ -412,17 +401,13 @@ class RecoveredBag:
             )
         return out
 
-    def messages(
-        self, connections: Collection[Any] = (), start: int | None = None, stop: int | None = None
-    ) -> Iterator[tuple[Any, int, bytes]]:
-        """``(connection, log time ns, CDR bytes)`` of the wanted connections (default all),
-        in file order, log time in [start, stop)."""
+    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, bytes]]:
+        """``(connection, log time ns, CDR bytes)`` of the wanted connections (default all), in file order."""
         wanted = {c.id - 1 for c in connections} if connections else set(range(len(self.connections)))
         for st, keys in zip(self._storages, self._keys, strict=True):
             local = {k for k, i in keys.items() if i in wanted}
             for key, log_ns, data in st.iter(local):
-                if (start is None or log_ns >= start) and (stop is None or log_ns < stop):
-                    yield self.connections[keys[key]], log_ns, data
+                yield self.connections[keys[key]], log_ns, data
 
     def close(self) -> None:
         for st in self._storages:

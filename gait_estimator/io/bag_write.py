@@ -26,6 +26,7 @@ import numpy as np
 
 from ..core.channels import CHANNELS
 from ..core.errors import GaitEstimatorError
+from .atomic import fsync_path
 from .bag import (
     DEFAULT_TOPIC,
     FLOAT64_MULTI_ARRAY,
@@ -33,10 +34,10 @@ from .bag import (
     JOINT_STATE,
     BagRecording,
     normalize_topic,
-    ns_to_stamp,
     parse_joint_names,
     typestore,
 )
+from .cdr import read_stamp, stamp_to_ns
 from .outputs import (
     ESTIMATE_TOPIC,
     MODE_TOPIC,
@@ -109,19 +110,11 @@ def staged_writer(path: str | Path, storage: str) -> Iterator[Any]:
         with Writer(staged, version=BAG_VERSION, storage_plugin=plugin) as writer:
             yield writer
         for f in staged.iterdir():
-            _fsync(f)
+            fsync_path(f)
         os.rename(staged, target)
-        _fsync(target.parent)
+        fsync_path(target.parent)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-
-
-def _fsync(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def recording_stamps(rec: Recording, start_ns: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -157,7 +150,7 @@ def output_stamps(rec: Recording, pred: Predictions, start_ns: int | None = None
 
 def joint_state_msg(ts: Any, stamp_ns: int, names: list[str], values: Any) -> Any:
     t = ts.types
-    sec, nanosec = ns_to_stamp(stamp_ns)
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     empty = np.empty(0, dtype=np.float64)
     return t[JOINT_STATE](
         header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=""),
@@ -329,8 +322,7 @@ class _ArrayTemplate:
             return
         self.prefix, self.suffix = first[:start], first[end:]
         self.fast = True
-        stamp = struct.unpack_from("<iI", first, 4) if stamped else None
-        self.fast = self.message(0, stamp[0] * 1_000_000_000 + stamp[1] if stamp else None) == first
+        self.fast = self.message(0, stamp_to_ns(read_stamp(first)) if stamped else None) == first
 
     def message(self, i: int, stamp_ns: int | None = None) -> bytes:
         """CDR of message i (header stamp ``stamp_ns`` when stamped)."""
@@ -338,6 +330,6 @@ class _ArrayTemplate:
             return bytes(self.slow(i))
         row = self.data[i * self.width : (i + 1) * self.width]
         if self.stamped:
-            sec, nanosec = ns_to_stamp(int(stamp_ns or 0))
-            return self.prefix[:4] + struct.pack("<iI", sec, nanosec) + self.prefix[12:] + row + self.suffix
+            stamp = struct.pack("<iI", *divmod(int(stamp_ns or 0), 1_000_000_000))
+            return self.prefix[:4] + stamp + self.prefix[12:] + row + self.suffix
         return self.prefix + row + self.suffix

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 
 class CdrError(ValueError):
@@ -57,6 +57,18 @@ def read_stamp(data: bytes) -> Stamp:
         CdrError: not plain CDR (XCDR1), or too short.
     """
     return Stamp(*_TIME[_byte_order(data)].unpack_from(data, _BODY))
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """A ``builtin_interfaces/Time`` (anything with ``sec`` and ``nanosec``) as integer ns since the epoch."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def with_stamp(data: bytes, stamp_ns: int) -> bytes:
+    """``data`` (as for ``read_stamp``) with ``header.stamp`` = ``stamp_ns``, in the message's byte order."""
+    buf = bytearray(data)
+    _TIME[_byte_order(data)].pack_into(buf, _BODY, *divmod(int(stamp_ns), 1_000_000_000))
+    return bytes(buf)
 
 
 def read_joint_state(data: bytes) -> JointStateFields:

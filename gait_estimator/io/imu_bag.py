@@ -2,17 +2,12 @@
 
 The same code as the node's ``input_type: imu`` (``imu_stream.py``): each message becomes its
 sensor's up direction, the four streams are paired by stamp, and the calibration (given, or
-learnt from the first still second and the strides after it) turns them into angles. Unlike the
-node, the whole file is known: a learnt calibration applies from the first sample, and with raw
-input (no orientation) the fusion is run again with the gyro bias measured while standing (for a
-given or configured calibration: as the node measures it, at a standing pose before the check's
-verdict), and backwards in time from the end of the first still stretch for the samples up to it.
-
-Topics: ``imu_topics`` (four names, CHANNELS order), else ``/imu/right_thigh``, ... if present,
-else the four Imu topics whose names end in the channel names.
-
-Pairing tolerance: ``imu_tolerance_s``, else measured from the stamps (``auto_tolerance_s``): the
-whole file is known, so sensors that are not sampled together pair too.
+learnt) turns them into angles. Unlike the node, the whole file is known (docs/imu.md, "Offline"):
+a learnt calibration applies from the first sample, raw sensors are fused again with the gyro
+biases measured standing (for a given or configured calibration: as the node measures them,
+before the check's verdict) and backwards in time over the first still stretch, and the pairing
+tolerance is measured from the stamps (``auto_tolerance_s``) unless ``imu_tolerance_s`` is given.
+Topics: ``imu_topics``, else ``/imu/<channel>``, else the four Imu topics named after the channels.
 """
 
 from __future__ import annotations
@@ -39,7 +34,8 @@ from ..core.imu_learn import (
     learn_calibration,
 )
 from ..core.rejections import SampleRejected
-from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, stamp_to_ns, typestore
+from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, typestore
+from .cdr import stamp_to_ns, write_imu
 from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
 from .read_options import ReadOptions
 
@@ -108,7 +104,7 @@ def _front_end(messages: list[tuple[int, int, Any]], rate_hz: float, bias: list 
     rejected: Counter = Counter()
     paired = []
     for sensor, log_ns, m in messages:
-        stamp_ns = stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) or log_ns
+        stamp_ns = stamp_to_ns(m.header.stamp) or log_ns
         o, w, a = m.orientation, m.angular_velocity, m.linear_acceleration
         try:
             up, gyro, acc = inputs[sensor].convert(stamp_ns, (o.x, o.y, o.z, o.w), float(m.orientation_covariance[0]),
@@ -239,7 +235,7 @@ def _measured_tolerance(messages: list[tuple[int, int, Any]]) -> float:
     """``auto_tolerance_s`` from the header stamps (log times when zero) of the first messages."""
     stamps: list[list[int]] = [[] for _ in range(N_CHANNELS)]
     for sensor, log_ns, m in messages[:4000]:
-        stamps[sensor].append(stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) or log_ns)
+        stamps[sensor].append(stamp_to_ns(m.header.stamp) or log_ns)
     try:
         return auto_tolerance_s(stamps)
     except ValueError:
@@ -248,7 +244,7 @@ def _measured_tolerance(messages: list[tuple[int, int, Any]]) -> float:
 
 def _rate_hz(messages: list[tuple[int, int, Any]]) -> float:
     """The first sensor's message rate (Hz) from its first stamps; 200 Hz if too few."""
-    stamps = [stamp_to_ns(m.header.stamp.sec, m.header.stamp.nanosec) for s, _, m in messages[:800] if s == 0]
+    stamps = [stamp_to_ns(m.header.stamp) for s, _, m in messages[:800] if s == 0]
     d = float(np.median(np.diff(np.array(stamps, dtype=np.int64)))) * 1e-9 if len(stamps) > 8 else 0.0
     return 1.0 / d if d > 0 else 200.0
 
@@ -349,27 +345,6 @@ def _check_note(p: Path, paired: list, cal: ImuCalibration, params: ImuLearnPara
     return "; WARNING: the configured axes do not fit the walking (the angles are wrong): " + found.summary(), checked
 
 
-def imu_msg(ts: Any, stamp_ns: int, frame_id: str, quat_xyzw: Any | None, gyro_rps: Any, acc_mps2: Any) -> Any:
-    """A rosbags ``sensor_msgs/msg/Imu``; ``quat_xyzw`` None = no orientation (covariance[0] -1)."""
-    t = ts.types
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    vec, quat = t["geometry_msgs/msg/Vector3"], t["geometry_msgs/msg/Quaternion"]
-    ocov = np.zeros(9)
-    if quat_xyzw is None:
-        ocov[0] = -1.0
-        quat_xyzw = (0.0, 0.0, 0.0, 1.0)
-    x, y, z, w = (float(v) for v in quat_xyzw)
-    return t[IMU](
-        header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame_id),
-        orientation=quat(x=x, y=y, z=z, w=w),
-        orientation_covariance=ocov,
-        angular_velocity=vec(x=float(gyro_rps[0]), y=float(gyro_rps[1]), z=float(gyro_rps[2])),
-        angular_velocity_covariance=np.zeros(9),
-        linear_acceleration=vec(x=float(acc_mps2[0]), y=float(acc_mps2[1]), z=float(acc_mps2[2])),
-        linear_acceleration_covariance=np.zeros(9),
-    )
-
-
 def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray, acc_mps2: np.ndarray,
                   quat_xyzw: np.ndarray | None = None, topics: list[str] | None = None, storage: str = "mcap") -> Path:
     """Write four IMU streams as ``sensor_msgs/msg/Imu`` topics of a new bag.
@@ -380,6 +355,8 @@ def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray,
         quat_xyzw: (4, T, 4) orientations (world <- sensor), or None for raw IMUs (also per
             sensor: a list of four (T, 4) arrays or None).
         topics: Four topic names (default ``/imu/<channel>``).
+
+    Messages are those of io/cdr.py ``write_imu`` (no orientation: ``orientation_covariance[0]`` -1).
     """
     from .bag_write import offered_qos, staged_writer
 
@@ -390,8 +367,9 @@ def write_imu_bag(path: str | Path, stamps_ns: np.ndarray, gyro_rps: np.ndarray,
         conns = [writer.add_connection(n, IMU, typestore=ts, offered_qos_profiles=offered_qos(100)) for n in names]
         for k in range(stamps.shape[1]):
             for c in range(N_CHANNELS):
-                q = None if quat_xyzw is None or quat_xyzw[c] is None else quat_xyzw[c][k]
-                msg = imu_msg(ts, int(stamps[c, k]), CHANNELS[c], q,
-                              gyro_rps[c, k], acc_mps2[c, k])
-                writer.write(conns[c], int(stamps[c, k]), ts.serialize_cdr(msg, IMU))
+                no_orientation = quat_xyzw is None or quat_xyzw[c] is None
+                q = (0.0, 0.0, 0.0, 1.0) if no_orientation else [float(v) for v in quat_xyzw[c][k]]
+                data = write_imu(int(stamps[c, k]), CHANNELS[c], q, -1.0 if no_orientation else 0.0,
+                                 [float(v) for v in gyro_rps[c, k]], [float(v) for v in acc_mps2[c, k]])
+                writer.write(conns[c], int(stamps[c, k]), data)
     return Path(path)

@@ -1,21 +1,11 @@
 """Names and layouts of the estimator's outputs, ROS-free.
 
 The live node (rclpy messages) and the bag writer (rosbags messages) both build their messages
-from these, so a recorded result is identical to what the node publishes.
-
-Topics (relative names, so namespaces and remapping apply):
-
-``mode``, ``phase`` and ``sse`` are published once the matcher is ready, ``estimate`` for every
-estimate (with ``ready`` = 0 while the window fills):
-
-* ``mode``  std_msgs/String: name of the estimated mode, ``stand`` or ``unknown`` (states.py);
-* ``phase`` std_msgs/Float64: gait phase in [0, 1), 0 = right heel strike; NaN unless walking;
-* ``sse``   std_msgs/Float64MultiArray: per-mode match error in library order: minimum SSE
-  (deg^2) in the paper preset, mean squared error per window sample (deg^2) with
-  ``normalize_error`` (the default);
-  ``layout.dim[0]`` = {label: ``SSE_LABEL_PREFIX`` + comma-separated mode names, size: M, stride: M};
-* ``estimate`` sensor_msgs/JointState used as stamped named values: ``header.stamp`` = the input
-  sample's stamp, ``name[k]``/``position[k]`` = key/value (see ``estimate_names``).
+from these, so a recorded result is identical to what the node publishes. Topics, types and when
+each is published: docs/node.md, "Topics"; here the layouts of ``sse`` (``sse_label``: its
+``layout.dim[0]``, size and stride M) and of ``estimate`` (a JointState as stamped named values:
+``header.stamp`` = the input sample's stamp, ``name``/``position`` = ``estimate_names`` and
+``estimate_array``).
 """
 
 from __future__ import annotations
@@ -78,14 +68,6 @@ def estimate_names(mode_names: Sequence[str]) -> list[str]:
     ``state`` (``EstimateState``: 0 not ready, 1 walking, 2 stand, 3 unknown; docs/controller.md).
     """
     return [*ESTIMATE_HEAD, *(f"sse/{m}" for m in mode_names), *(f"phase/{m}" for m in mode_names), *ESTIMATE_TAIL]
-
-
-def estimate_into(out: np.ndarray, est: Estimate) -> np.ndarray:
-    """``estimate_array(est)`` for one Estimate, written into ``out`` (float64, (K,)) without
-    allocating a new array (the bench fills a preallocated JointState this way, for comparison
-    with the node's ``estimate_values``)."""
-    out[:] = estimate_values(est)
-    return out
 
 
 def estimate_values(est: Estimate) -> list[float]:

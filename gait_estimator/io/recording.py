@@ -15,9 +15,9 @@ from __future__ import annotations
 import csv
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -26,6 +26,8 @@ from ..core.errors import RecordingError
 from .atomic import atomic_open
 from .library_io import DEFAULT_REFERENCE_RATE_HZ
 from .read_options import ReadOptions
+
+R = TypeVar("R", bound="Recording")
 
 
 @dataclass
@@ -53,6 +55,8 @@ class Recording:
     index: np.ndarray | None = None
     skipped: dict[str, int] = field(default_factory=dict)
     time_from_rate: bool = False
+    PER_SAMPLE: ClassVar[tuple[str, ...]] = ("time_s", "angles_deg", "labels", "heel_strike", "index")
+    """The fields with one row per sample (None or an array)."""
 
     def __post_init__(self) -> None:
         if self.index is None:
@@ -78,19 +82,12 @@ class Recording:
             keep &= idx < stop
         return self.select(keep)
 
-    def select(self, keep: np.ndarray, skipped: dict[str, int] | None = None) -> Recording:
-        """The samples where ``keep`` (bool, (T,)) is true; ``skipped`` replaces the counts."""
-        return Recording(
-            time_s=self.time_s[keep],
-            angles_deg=self.angles_deg[keep],
-            labels=None if self.labels is None else self.labels[keep],
-            heel_strike=None if self.heel_strike is None else self.heel_strike[keep],
-            extra={k: v[keep] for k, v in self.extra.items()},
-            source=self.source,
-            index=self.index[keep],
-            skipped=dict(self.skipped if skipped is None else skipped),
-            time_from_rate=self.time_from_rate,
-        )
+    def select(self: R, keep: np.ndarray, skipped: dict[str, int] | None = None) -> R:
+        """The samples where ``keep`` (bool, (T,)) is true: every PER_SAMPLE field and ``extra``;
+        the same type, its other fields kept; ``skipped`` replaces the counts."""
+        rows = {f: None if getattr(self, f) is None else getattr(self, f)[keep] for f in self.PER_SAMPLE}
+        return replace(self, **rows, extra={k: v[keep] for k, v in self.extra.items()},
+                       skipped=dict(self.skipped if skipped is None else skipped))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -167,13 +164,7 @@ def is_project_csv(p: Path) -> bool:
 def read_project_csv(p: Path, options: ReadOptions | None = None, /, **values: Any) -> Recording:
     """Read the project recording CSV (see module docstring); no option concerns it."""
     ReadOptions.of(options, values)
-    try:
-        with p.open(encoding="utf-8", newline="") as f:
-            reader = csv.reader(f)
-            header = [h.strip() for h in next(reader, [])]
-            body = [row for row in reader if row and any(c.strip() for c in row)]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise RecordingError(f"{p}: cannot read ({exc})") from None
+    header, body = read_csv_table(p)
     cols = {name: i for i, name in enumerate(header)}
     if "time_s" not in cols:
         raise RecordingError(f"{p}: missing column 'time_s'")
@@ -224,6 +215,17 @@ def read_project_csv(p: Path, options: ReadOptions | None = None, /, **values: A
         prev, cur = rec.time_s[bad[0]], rec.time_s[bad[0] + 1]
         raise RecordingError(f"{p}:{row}: time_s is not strictly increasing ({cur:g} after {prev:g})")
     return rec
+
+
+def read_csv_table(p: Path, what: str = "") -> tuple[list[str], list[list[str]]]:
+    """(header, rows that are not blank) of a CSV file; RecordingError ``cannot read{what}`` (one line)."""
+    try:
+        with p.open(encoding="utf-8", newline="") as f:
+            reader = csv.reader(f)
+            header = [h.strip() for h in next(reader, [])]
+            return header, [row for row in reader if row and any(c.strip() for c in row)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise RecordingError(f"{p}: cannot read{what} ({exc})") from None
 
 
 def _flag(cell: str) -> bool:

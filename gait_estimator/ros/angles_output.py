@@ -22,11 +22,11 @@ MAX_ROWS = 1000
 
 
 class AnglesOutput:
-    """``~/angles`` of ``node`` (std_msgs/Float64MultiArray, rows x 5, row-major)."""
+    """``~/angles`` of ``node`` (std_msgs/Float64MultiArray, rows x 5, row-major), published with
+    ``qos`` and QoS ``events`` those of the node's other outputs."""
 
-    def __init__(self, node: Node, qos: QoSProfile) -> None:
-        self._pub = node.create_publisher(Float64MultiArray, ANGLES_TOPIC, qos,
-                                          event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+    def __init__(self, node: Node, qos: QoSProfile, events: PublisherEventCallbacks) -> None:
+        self._pub = node.create_publisher(Float64MultiArray, ANGLES_TOPIC, qos, event_callbacks=events)
         self._msg = Float64MultiArray()
         self._rows: list[float] = []
         self._due = 0.0

@@ -18,13 +18,12 @@ import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from itertools import islice
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -34,9 +33,8 @@ from ..io.cdr import CdrError, read_joint_state
 from ..io.library_io import load_library
 from ..io.outputs import ESTIMATE_TOPIC
 from .angles_output import ANGLES_TOPIC
-from .node_client import drained
+from .node_client import drained_subscription
 from .teach_client import TeachClient
-from .watch_client import LEVELS
 
 DISPLAY_QOS = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST, depth=100)
 WAKE_PERIOD_S = 0.01
@@ -50,54 +48,46 @@ LOOK_PERIOD_S = 1.0
 
 
 @dataclass
-class Snapshot:
-    """What the dashboard knows of the node, copied out for one page frame.
-
-    ``angles``/``log`` hold only the rows after the cursors given to ``DashboardLink.snapshot``;
-    ``angles_cursor``/``log_cursor`` are the cursors for the next call.
-    """
-
-    present: bool
-    ever_seen: bool
-    estimates: int
-    names: list[str]
-    values: list[float]
-    estimate_source_ns: int
-    estimate_at: float
-    diagnostics: dict[str, str]
-    level: str
-    message: str
-    diagnostics_at: float
-    angles: list[list[float]]
-    angles_cursor: int
-    log: list[str]
-    log_cursor: int
-    library: KernelLibrary | None
-    library_version: int
-    library_note: str
-
-
-@dataclass
-class _Shared:
-    """State written by the ROS thread, read under ``DashboardLink.lock``."""
+class NodeState:
+    """What the dashboard knows of the node besides its estimate, angles and log lines."""
 
     present: bool = False
     ever_seen: bool = False
     estimates: int = 0
-    estimate: bytes = b""
     estimate_source_ns: int = 0
     estimate_at: float = math.nan
     diagnostics: dict[str, str] = field(default_factory=dict)
     level: str = ""
     message: str = ""
     diagnostics_at: float = math.nan
+    library: KernelLibrary | None = None
+    library_version: int = 0
+    library_note: str = ""
+
+
+@dataclass
+class Snapshot(NodeState):
+    """NodeState copied out for one page frame, with the last estimate's keys and values;
+    ``angles``/``log`` hold only the rows after the cursors given to ``DashboardLink.snapshot``,
+    ``angles_cursor``/``log_cursor`` are the cursors for the next call."""
+
+    names: list[str] = field(default_factory=list)
+    values: list[float] = field(default_factory=list)
+    angles: list[list[float]] = field(default_factory=list)
+    angles_cursor: int = 0
+    log: list[str] = field(default_factory=list)
+    log_cursor: int = 0
+
+
+@dataclass
+class _Shared(NodeState):
+    """State written by the ROS thread, read under ``DashboardLink.lock``."""
+
+    estimate: bytes = b""
     angles: deque = field(default_factory=lambda: deque(maxlen=KEPT_ANGLES))
     angles_total: int = 0
     log: deque = field(default_factory=lambda: deque(maxlen=KEPT_LOG))
     log_total: int = 0
-    library: KernelLibrary | None = None
-    library_version: int = 0
-    library_note: str = ""
 
 
 def parse_estimate(data: bytes) -> tuple[list[str], list[float]]:
@@ -138,9 +128,8 @@ class DashboardLink:
         namespace = self.target.rsplit("/", 1)[0]  # the node's relative topics (a remapping is not followed)
         for msg_type, topic, callback in ((JointState, f"{namespace}/{ESTIMATE_TOPIC}", self._on_estimate),
                                           (Float64MultiArray, self.target + ANGLES_TOPIC[1:], self._on_angles)):
-            box: list[Subscription] = []  # serialised estimate: parsed only for a frame (io/cdr.py)
-            box.append(n.create_subscription(msg_type, topic, drained(callback, box), DISPLAY_QOS,
-                                             raw=msg_type is JointState))
+            # serialised estimate: parsed only for a frame (io/cdr.py)
+            drained_subscription(n, msg_type, topic, callback, DISPLAY_QOS, raw=msg_type is JointState)
         n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.client.on_log = self._on_log
         self._thread = threading.Thread(target=self._run, name="dashboard-ros", daemon=True)
@@ -226,15 +215,10 @@ class DashboardLink:
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         st = self.client.target_status(msg)
-        if st is None:
-            return
-        level = st.level if isinstance(st.level, int) else int.from_bytes(st.level, "little")
-        with self.lock:
-            s = self._shared
-            s.diagnostics = {kv.key: kv.value for kv in st.values}
-            s.level = LEVELS[level] if level < len(LEVELS) else str(level)
-            s.message = st.message
-            s.diagnostics_at = time.monotonic()
+        if st is not None:
+            with self.lock:
+                s = self._shared
+                s.level, s.message, s.diagnostics, s.diagnostics_at = st
 
     def _on_log(self, line: str) -> None:
         with self.lock:
@@ -247,17 +231,12 @@ class DashboardLink:
         """The node's latest state, with the angle rows and log lines after the cursors."""
         with self.lock:
             s = self._shared
-            data, estimates, source_ns, at = s.estimate, s.estimates, s.estimate_source_ns, s.estimate_at
-        names, values = parse_estimate(data)  # outside the lock: the ROS thread goes on meanwhile
-        with self.lock:
-            return Snapshot(
-                present=s.present, ever_seen=s.ever_seen, estimates=estimates, names=names, values=values,
-                estimate_source_ns=source_ns, estimate_at=at, diagnostics=s.diagnostics,
-                level=s.level, message=s.message, diagnostics_at=s.diagnostics_at,
-                angles=_tail(s.angles, s.angles_total, angles_cursor), angles_cursor=s.angles_total,
-                log=_tail(s.log, s.log_total, log_cursor), log_cursor=s.log_total,
-                library=s.library, library_version=s.library_version, library_note=s.library_note,
-            )
+            snap = Snapshot(**{f.name: getattr(s, f.name) for f in fields(NodeState)},
+                            angles=_tail(s.angles, s.angles_total, angles_cursor), angles_cursor=s.angles_total,
+                            log=_tail(s.log, s.log_total, log_cursor), log_cursor=s.log_total)
+            data = s.estimate
+        snap.names, snap.values = parse_estimate(data)  # outside the lock: the ROS thread goes on meanwhile
+        return snap
 
     def submit(self, work: Callable[[TeachClient], str]) -> Future:
         """Run ``work(client)`` in the ROS thread (where the client is spun); its result or

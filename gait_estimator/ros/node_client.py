@@ -1,9 +1,7 @@
 """Driving ``estimator_node`` from Python: start it, stream samples into it, collect its outputs.
 
-Used by ``gait-estimator demo``, ``gait-estimator bench-node`` and the node tests. Everything here
-talks real DDS, restricted to this machine: ``local_ros_environment`` sets
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a ``ROS_DOMAIN_ID`` for child processes, and
-``use_local_ros`` does the same for the current process (call it before creating a client).
+Used by ``gait-estimator demo``, ``gait-estimator bench-node`` and the node tests, over real DDS
+restricted to this machine (``node_process.py``, re-exported here, sets that up).
 """
 
 from __future__ import annotations
@@ -30,19 +28,20 @@ from ..core.channels import CHANNELS
 from ..core.estimator import EstimateTrace
 from ..core.kernels import KernelLibrary
 from ..core.states import name_index, reported_names
-from ..io.cdr import read_stamp
+from ..io.cdr import read_stamp, stamp_to_ns
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.outputs import ESTIMATE_TAIL, ESTIMATE_TOPIC, INPUT_TOPIC, MODE_TOPIC, PHASE_TOPIC, SSE_TOPIC, estimate_names
+from .diagnostics import DIAGNOSTICS_TOPIC
 from .node_process import (  # noqa: F401 - re-exported: the node client's users start nodes too
     NODE_MODULE,
+    Closes,
     NodeProcess,
     local_ros_environment,
     node_command,
     spin_executor_until,
     use_local_ros,
 )
-
-DIAGNOSTICS_TOPIC = "/diagnostics"
+from .outputs import double_array
 
 
 @dataclass
@@ -97,15 +96,15 @@ class Received:
         )
 
 
-def drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscription]) -> Callable[[Any, Any], None]:
-    """Wrap a subscription callback ``callback(msg, info)`` to also take the messages queued
+def drained_subscription(node: Node, msg_type: Any, topic: str, callback: Callable[[Any, Any], None], qos: Any,
+                         raw: bool = False) -> Subscription:
+    """A subscription of ``node`` whose ``callback(msg, info)`` also takes the messages queued
     behind the first one (rclpy's executor costs hundreds of microseconds per wake-up; see
-    EstimatorNode._on_input). ``box`` receives the subscription once created. The wrapper takes
-    the message info (a SingleThreadedExecutor passes it; rclpy 7.1's EventsExecutor cannot)."""
+    EstimatorNode._on_input). ``info`` is the message info (a SingleThreadedExecutor passes it;
+    rclpy 7.1's EventsExecutor cannot)."""
 
     def on_message(msg: Any, info: Any) -> None:
         callback(msg, info)
-        sub = box[0]
         for _ in range(200):
             try:
                 with sub.handle:
@@ -116,20 +115,11 @@ def drained(callback: Callable[[Any, dict[str, Any]], None], box: list[Subscript
                 return
             callback(taken[0], taken[1])
 
-    return on_message
+    sub = node.create_subscription(msg_type, topic, on_message, qos, raw=raw)
+    return sub
 
 
-def stamp_to_ns(stamp: Any) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-def _double_array(values: np.ndarray) -> array.array:
-    out = array.array("d")
-    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
-    return out
-
-
-class EstimatorClient:
+class EstimatorClient(Closes):
     """A ROS node that feeds ``segment_angles`` and records the estimator's outputs.
 
     Args:
@@ -215,11 +205,8 @@ class EstimatorClient:
         self._subs = []
         for topic in outputs:
             msg_type, callback, qos = subs[topic]
-            box: list[Subscription] = []
             raw = topic == ESTIMATE_TOPIC and not record
-            sub = self.node.create_subscription(msg_type, topic, drained(callback, box), qos, raw=raw)
-            box.append(sub)
-            self._subs.append(sub)
+            self._subs.append(drained_subscription(self.node, msg_type, topic, callback, qos, raw))
         self._js = JointState()
         self._js.name = self.joint_names
         self._fma = Float64MultiArray()
@@ -326,9 +313,9 @@ class EstimatorClient:
         if self.input_type == "joint_state":
             msg = self._js
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
-            msg.position = _double_array(angles)
+            msg.position = double_array(angles)
             return msg
-        self._fma.data = _double_array(angles)
+        self._fma.data = double_array(angles)
         return self._fma
 
     def publish(self, angles: np.ndarray, stamp_ns: int = 0) -> None:
@@ -339,7 +326,6 @@ class EstimatorClient:
         angles: np.ndarray,
         stamps_ns: Sequence[int] | np.ndarray,
         rate_hz: float | None,
-        on_sample: Callable[[int], None] | None = None,
         due_s: np.ndarray | None = None,
     ) -> np.ndarray:
         """Publish samples paced at ``rate_hz`` (None: as fast as possible), spinning in between.
@@ -349,7 +335,6 @@ class EstimatorClient:
                 serialised Imu messages (analysis/imu_sagittal.py ``imu_samples``, stamped already).
             stamps_ns: (T,) stamps (JointState only; ignored for Float64MultiArray and imu).
             rate_hz: Publication rate, Hz.
-            on_sample: Called with the index after each publication.
             due_s: (T,) publication times, seconds from the start, instead of a fixed rate.
 
         Returns:
@@ -380,8 +365,6 @@ class EstimatorClient:
                 msg = self.message(angles[i], int(stamps_ns[i]))
                 sent[i] = clock()  # before the call: the message may be on its way before publish() returns
                 self.publisher.publish(msg)
-            if on_sample is not None:
-                on_sample(i)
             if not period_ns:
                 spin(timeout_sec=0.0)
         return sent
@@ -392,12 +375,6 @@ class EstimatorClient:
         self.node.destroy_node()
         if self._own_context:
             rclpy.try_shutdown(context=self.context)
-
-    def __enter__(self) -> EstimatorClient:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def publishing_costs_us(lib: KernelLibrary, node: Node) -> dict[str, float]:
@@ -412,7 +389,7 @@ def publishing_costs_us(lib: KernelLibrary, node: Node) -> dict[str, float]:
 
     from ..analysis.bench import synthetic_walk
     from ..core.estimator import Estimator
-    from ..io.outputs import estimate_array, estimate_into, estimate_values
+    from ..io.outputs import estimate_array, estimate_values
     from .serialized import SerializedJointState
 
     est = Estimator(lib)
@@ -436,7 +413,7 @@ def publishing_costs_us(lib: KernelLibrary, node: Node) -> dict[str, float]:
 
     def fill_message() -> None:
         reused.header.stamp = stamp
-        estimate_into(view, e)
+        view[:] = estimate_values(e)
         reused.position = buffer
         probe.publish(reused)
 

@@ -14,6 +14,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
+from contextlib import AbstractContextManager
 from typing import Any
 
 NODE_MODULE = "gait_estimator.ros.node"
@@ -59,7 +60,17 @@ def spin_executor_until(executor: Any, predicate: Callable[[], bool], timeout_s:
         executor.spin_once(timeout_sec=min(left, step_s))
     return True
 
-class NodeProcess:
+class Closes(AbstractContextManager):
+    """A ``with`` block that ends with ``close()``."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class NodeProcess(Closes):
     """estimator_node as a child process; its stdout+stderr go to a temporary file.
 
     Args:
@@ -101,16 +112,7 @@ class NodeProcess:
                 self.proc.wait()
         return int(self.proc.returncode)
 
-    def wait(self, timeout_s: float) -> int:
-        return int(self.proc.wait(timeout=timeout_s))
-
     def close(self) -> None:
         if self.proc.poll() is None:
             self.stop(signal.SIGKILL)
         self._log.close()
-
-    def __enter__(self) -> NodeProcess:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -1,18 +1,7 @@
-"""What ``estimator_node`` publishes (reliable, keep last 10). Topics nobody listens to are
-skipped (a count query is far cheaper than a publish).
-
-* ``mode`` (std_msgs/String: a library mode, ``stand`` or ``unknown``) and ``phase``
-  (std_msgs/Float64, [0, 1), NaN unless walking) once the window is full (docs/controller.md);
-* ``sse`` (std_msgs/Float64MultiArray, per-mode minimum SSE in deg^2, the layout names the
-  modes) once the window is full;
-* ``estimate`` (sensor_msgs/JointState as stamped key/values, see ``io/outputs.py``) for every
-  estimate, ``header.stamp`` = the input stamp, ``ready`` = 0 while the window fills;
-* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) at 1 Hz;
-* ``~/angles`` (std_msgs/Float64MultiArray), only while something subscribes: each sample as the
-  matcher saw it, in blocks ~30 a second, for the dashboard (``angles_output.py``);
-* ``~/profile`` (std_msgs/Float64MultiArray) at 1 Hz, only while something subscribes to it: the
-  per-sample timing of the last second (see ``PROFILE_COLUMNS``; ``gait-estimator bench-node
-  --profile``).
+"""What ``estimator_node`` publishes (reliable, keep last 10): the topics of ``io/outputs.py``
+(docs/node.md, "Topics"); ``~/angles`` (``angles_output.py``) and ``~/profile`` (diagnostics.py
+``PROFILE_COLUMNS``) only while something subscribes. Topics nobody listens to are skipped (a
+count query is far cheaper than a publish).
 """
 
 from __future__ import annotations
@@ -54,7 +43,7 @@ class EstimateOutputs:
         self._phase_pub = node.create_publisher(Float64, PHASE_TOPIC, OUTPUT_QOS, event_callbacks=QUIET)
         self._sse_pub = node.create_publisher(Float64MultiArray, SSE_TOPIC, OUTPUT_QOS, event_callbacks=QUIET)
         self._estimate_pub = node.create_publisher(JointState, ESTIMATE_TOPIC, OUTPUT_QOS, event_callbacks=QUIET)
-        self.angles = AnglesOutput(node, OUTPUT_QOS)
+        self.angles = AnglesOutput(node, OUTPUT_QOS, QUIET)
         self._mode_msg = String()
         self._phase_msg = Float64()
         self.set_modes([])

@@ -1,29 +1,15 @@
 """Publishing a recording into the live ROS 2 graph with its recorded timing (``play``).
 
 For machines without ``ros2 bag``. rclpy is imported only inside ``play``; loading a playlist is
-ROS-free. Nothing about DDS is configured here: the domain and discovery range come from the
-environment (``ROS_DOMAIN_ID``, ``ROS_AUTOMATIC_DISCOVERY_RANGE``), as for any ROS 2 process.
-
-Timing and stamps:
-
-* a bag: every selected topic is published with its serialized messages unchanged, at the
-  recorded receive (log) times divided by ``rate``; header stamps stay as recorded (as
-  ``ros2 bag play`` does); ``/clock`` (with ``clock=True``) carries the log time of each message
-  just before it is published;
-* a CSV (or any non-bag recording): one message per sample (JointState in radians with the
-  CHANNELS joint names by default, REP 103), at the CSV's ``time_s`` divided by ``rate``; the
-  header stamp is the CSV time offset so that the first sample is stamped with the wall-clock
-  time at which playback starts; ``/clock`` (with ``clock=True``) follows the same timeline, so
-  stamps and simulated time agree;
-* ``loop``: every repetition shifts header stamps and ``/clock`` by the recording's duration plus
-  one median sample interval, so stamps keep increasing (a node drops samples whose stamp is not
-  after the previous one; ``ros2 bag play --loop`` repeats stamps verbatim).
+ROS-free. The domain and discovery range come from the environment, as for any ROS 2 process.
+Timing, stamps, ``/clock`` and ``loop``: docs/bags.md, "``play``" (a bag's messages go out
+unchanged at their log times; a CSV's are stamped from the wall clock at the start; each loop
+shifts stamps and ``/clock`` by the duration plus one median interval, so they keep increasing).
 """
 
 from __future__ import annotations
 
 import importlib
-import struct
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -36,6 +22,7 @@ from ..core.channels import CHANNELS
 from ..core.errors import GaitEstimatorError, RecordingError
 from ..io.bag import format_topics, is_bag_path, normalize_topic, open_bag, typestore
 from ..io.bag_write import serialize_inputs
+from ..io.cdr import read_stamp, stamp_to_ns, with_stamp
 from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, OUTPUT_TOPICS
 from ..io.recording import Recording
 
@@ -184,24 +171,6 @@ def load_playlist(
     return playlist_from_recording(rec, topics[0] if topics else INPUT_TOPIC, msg_type, units, joint_names)
 
 
-def with_stamp(raw: bytes, stamp_ns: int) -> bytes:
-    """``raw`` (CDR of a message starting with std_msgs/Header) with header.stamp = stamp_ns.
-
-    The stamp is the first field after the 4-byte encapsulation header: int32 sec, uint32
-    nanosec, in the byte order named by the encapsulation (0x0001 little endian).
-    """
-    buf = bytearray(raw)
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    struct.pack_into("<iI" if buf[1] == 1 else ">iI", buf, 4, sec, nanosec)
-    return bytes(buf)
-
-
-def stamp_of(raw: bytes) -> int:
-    """header.stamp (ns) of a CDR message starting with std_msgs/Header."""
-    sec, nanosec = struct.unpack_from("<iI" if raw[1] == 1 else ">iI", raw, 4)
-    return sec * 1_000_000_000 + nanosec
-
-
 def _ros_message_class(msgtype: str) -> Any:
     pkg, _, name = msgtype.split("/")
     try:
@@ -330,7 +299,7 @@ def _publish_loop(playlist: Playlist, pubs: list[Any], clock_pub: Any, clock_cls
                 clock_msg.clock.sec, clock_msg.clock.nanosec = sec, nanosec
                 clock_pub.publish(clock_msg)
             if shift and has_header[tr]:
-                raw = with_stamp(raw, stamp_of(raw) + shift)
+                raw = with_stamp(raw, stamp_to_ns(read_stamp(raw)) + shift)
             published[0] += 1  # counted first: a Ctrl-C inside publish() still counts this message
             pubs[tr].publish(raw)
         if not loop:

@@ -20,7 +20,6 @@ from std_srvs.srv import Trigger
 
 from ..core.errors import GaitEstimatorError
 from ..core.teach import TeachOptions
-from .node_client import spin_executor_until
 from .teach import LOG_PREFIX
 from .tool_node import ToolNode
 
@@ -104,12 +103,9 @@ class TeachClient(ToolNode):
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         st = self.target_status(msg)
         if st is not None:
-            self.diagnostics = {kv.key: kv.value for kv in st.values}
+            self.diagnostics = st.values
 
     # -- calls
-
-    def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
-        return spin_executor_until(self.executor, predicate, timeout_s, step_s=0.1)
 
     def _wait(self, future: Any, what: str, timeout_s: float = 5.0) -> Any:
         if not self.spin_until(future.done, timeout_s):

@@ -6,7 +6,9 @@ as the ros2 CLI would, unless given a domain ID.
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+import time
+from collections.abc import Callable
+from typing import NamedTuple
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
@@ -16,11 +18,23 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from ..core.errors import GaitEstimatorError
+from .node_process import Closes, spin_executor_until
 
-T = TypeVar("T", bound="ToolNode")
+LEVELS = ("OK", "WARN", "ERROR", "STALE")
+"""diagnostic_msgs/DiagnosticStatus levels 0..3."""
 
 
-class ToolNode:
+class TargetStatus(NamedTuple):
+    """The target's ``DiagnosticStatus``: level name (LEVELS), message, key/values; and when it came
+    (``time.monotonic()``)."""
+
+    level: str
+    message: str
+    values: dict[str, str]
+    at: float
+
+
+class ToolNode(Closes):
     """A command's ROS node aimed at the estimator node ``target``.
 
     Args:
@@ -37,9 +51,18 @@ class ToolNode:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
-    def target_status(self, msg: DiagnosticArray) -> Any | None:
-        """The target's ``DiagnosticStatus`` in a ``/diagnostics`` message, or None."""
-        return next((st for st in msg.status if st.name.startswith(self.target + ": ")), None)
+    def target_status(self, msg: DiagnosticArray) -> TargetStatus | None:
+        """The target's status in a ``/diagnostics`` message, or None."""
+        st = next((st for st in msg.status if st.name.startswith(self.target + ": ")), None)
+        if st is None:
+            return None
+        level = st.level if isinstance(st.level, int) else int.from_bytes(st.level, "little")
+        return TargetStatus(LEVELS[level] if level < len(LEVELS) else str(level), st.message,
+                            {kv.key: kv.value for kv in st.values}, time.monotonic())
+
+    def spin_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        """Take messages until ``predicate()`` is true (True) or ``timeout_s`` passes (False)."""
+        return spin_executor_until(self.executor, predicate, timeout_s, step_s=0.1)
 
     def not_found(self, timeout_s: float, verb: str = "") -> GaitEstimatorError:
         """Close, and the one-line error for a target that did not show (``verb``, e.g.
@@ -55,9 +78,3 @@ class ToolNode:
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-
-    def __enter__(self: T) -> T:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

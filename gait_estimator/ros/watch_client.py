@@ -5,9 +5,7 @@ installs without the ros2 CLI (``pip install '.[ros]'``).
 
 from __future__ import annotations
 
-import math
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.exceptions import NameValidationException
@@ -15,11 +13,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, String
 
 from ..core.errors import GaitEstimatorError
-from .node_client import spin_executor_until
-from .tool_node import ToolNode
-
-LEVELS = ("OK", "WARN", "ERROR", "STALE")
-"""diagnostic_msgs/DiagnosticStatus levels 0..3."""
+from .tool_node import TargetStatus, ToolNode
 
 
 @dataclass
@@ -30,12 +24,8 @@ class Seen:
     phase: float | None = None
     estimates: int = 0
     """``phase`` messages received (one per estimate once the window is full)."""
-    level: str = ""
-    message: str = ""
-    values: dict[str, str] = field(default_factory=dict)
-    """The node's last diagnostics key/values."""
-    diagnostics_at: float = math.nan
-    """``time.monotonic()`` when the last diagnostics came (they come at 1 Hz)."""
+    status: TargetStatus | None = None
+    """The node's last diagnostics (they come at 1 Hz)."""
 
 
 class WatchClient(ToolNode):
@@ -65,11 +55,8 @@ class WatchClient(ToolNode):
             self.close()
             raise GaitEstimatorError(f"--node {node}: not a valid node name ({str(exc).splitlines()[0]})") from None
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
-        if not spin_executor_until(self.executor, self._node_found, timeout_s, step_s=0.1):
+        if not self.spin_until(lambda: self.target in self.node.get_fully_qualified_node_names(), timeout_s):
             raise self.not_found(timeout_s)
-
-    def _node_found(self) -> bool:
-        return self.target in self.node.get_fully_qualified_node_names()
 
     def _on_mode(self, msg: String) -> None:
         self.seen.mode = msg.data
@@ -79,17 +66,4 @@ class WatchClient(ToolNode):
         self.seen.estimates += 1
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
-        st = self.target_status(msg)
-        if st is None:
-            return
-        level = st.level if isinstance(st.level, int) else int.from_bytes(st.level, "little")
-        self.seen.level = LEVELS[level] if level < len(LEVELS) else str(level)
-        self.seen.message = st.message
-        self.seen.values = {kv.key: kv.value for kv in st.values}
-        self.seen.diagnostics_at = time.monotonic()
-
-    def spin_for(self, seconds: float) -> None:
-        """Take the node's messages for ``seconds``."""
-        end = time.monotonic() + seconds
-        while (left := end - time.monotonic()) > 0:
-            self.executor.spin_once(timeout_sec=min(left, 0.05))
+        self.seen.status = self.target_status(msg) or self.seen.status
