@@ -20,7 +20,8 @@ from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import STANDARD_GRAVITY
 from gait_estimator.io.bag import typestore
 from gait_estimator.io.bag_write import staged_writer, write_input_bag
-from gait_estimator.io.imu_bag import IMU, imu_msg
+from gait_estimator.io.cdr import write_imu
+from gait_estimator.io.imu_bag import IMU
 from gait_estimator.io.readers import read_recording
 from gait_estimator.ros.player import playlist_from_bag
 
@@ -109,9 +110,9 @@ def _restarted_imu_bag(path: Path) -> Path:
         for k in range(2 * n):
             stamp = BASE_NS + round(float(s.time_s[k % n]) * 1e9)
             for c in range(4):
-                msg = imu_msg(ts, stamp + 100_000 * c, CHANNELS[c], None, np.radians(s.gyro_dps[c, k % n]),
-                              s.acc_g[c, k % n] * STANDARD_GRAVITY)
-                writer.write(conns[c], BASE_NS + round(k / RATE * 1e9) + 100_000 * c, ts.serialize_cdr(msg, IMU))
+                raw = write_imu(stamp + 100_000 * c, CHANNELS[c], (0.0, 0.0, 0.0, 1.0), -1.0,
+                                np.radians(s.gyro_dps[c, k % n]), s.acc_g[c, k % n] * STANDARD_GRAVITY)
+                writer.write(conns[c], BASE_NS + round(k / RATE * 1e9) + 100_000 * c, raw)
     return path
 
 
