@@ -171,8 +171,7 @@ class IncrementalMatcher(_MatcherBase):
         if self._offset:
             sums = self._wsums[p] if self._decay else self.window_sums()[rows]
         score = self._scores(self._e[p].astype(np.float64), sums, rows)
-        valid = np.arange(self.max_length)[None, :] < self.lengths[rows][:, None]
-        return np.where(valid, score, np.inf).min(axis=1)
+        return np.where(self._valid[rows], score, np.inf).min(axis=1)
 
     def _table_arrays(self) -> tuple[str, ...]:
         return (*super()._table_arrays(), "_ksq", "_e", "_wsums")
@@ -217,12 +216,8 @@ class IncrementalMatcher(_MatcherBase):
 
     def _reweighted(self) -> None:
         # The compiled step rebuilds the rows of the scale band; the others when they are needed.
-        rows = self._active if self.backend == "numba" else self._rows
-        p = self._slots.at(rows)
-        self._e[p] = self._rows_sse_fft(rows, self._lam)
-        self._wsums[p] = self.age_weighted_sums(rows)
         self._synced[:] = -1
-        self._synced[rows] = self._count
+        self._rebuild(self._active if self.backend == "numba" else self._rows)
 
     def _band_changed(self) -> None:
         if self.backend != "numba":
