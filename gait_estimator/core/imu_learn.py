@@ -257,15 +257,19 @@ def _sagittal_swing(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3, standin
     return both, ""
 
 
+def _knee_extension(thigh_deg: np.ndarray, shank_deg: np.ndarray) -> float:
+    """The knee angle's (shank - thigh) 98th percentile over its finite samples (deg, + = past
+    straight); nan without any."""
+    knee = shank_deg - thigh_deg
+    knee = knee[np.isfinite(knee)]
+    return float(np.percentile(knee, 98)) if len(knee) else math.nan
+
+
 def _leg_signs(cands: dict[int, list[SegmentMount]], ups: np.ndarray, thigh: int,
                shank: int, margin_deg: float) -> tuple[dict[int, SegmentMount], str]:
     """Pick the mounts of one leg's thigh and shank by the knee rule (module docstring)."""
-    options = [cands[thigh], cands[shank]]
-    scores = []
-    for mt, ms in itertools.product(*options):
-        knee = ms.angles_deg(ups[shank]) - mt.angles_deg(ups[thigh])
-        knee = knee[np.isfinite(knee)]
-        scores.append((float(np.percentile(knee, 98)), mt, ms))
+    scores = [(_knee_extension(mt.angles_deg(ups[thigh]), ms.angles_deg(ups[shank])), mt, ms)
+              for mt, ms in itertools.product(cands[thigh], cands[shank])]
     scores.sort(key=lambda s: s[0])
     if len(scores) > 1 and scores[1][0] - scores[0][0] < margin_deg:
         return {}, (f"{CHANNELS[thigh]}/{CHANNELS[shank]}: cannot tell forward from backward "
@@ -382,11 +386,7 @@ def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, 
     ups = np.asarray(ups, dtype=np.float64)
     mounts = cal.mounts
     angles = [m.angles_deg(ups[i]) for i, m in enumerate(mounts)]
-    knee = []
-    for thigh, shank in LEGS:
-        k = angles[shank] - angles[thigh]
-        k = k[np.isfinite(k)]
-        knee.append(float(np.percentile(k, 98)) if len(k) else math.nan)
+    knee = [_knee_extension(angles[thigh], angles[shank]) for thigh, shank in LEGS]
     bent = [f"{leg} knee {k:.0f} deg past straight" for leg, k in zip(("right", "left"), knee, strict=True)
             if math.isfinite(k) and round(k) > params.max_knee_extension_deg]  # rounded as printed
     fresh, _, missing = learn_calibration(
