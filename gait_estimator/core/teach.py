@@ -42,8 +42,8 @@ from .. import __version__
 from .channels import CHANNELS
 from .errors import GaitEstimatorError
 from .kernels import KernelLibrary, KernelMode, near_duplicates
-from .strides import DetectionOptions, detect_peaks, normalise_strides
-from .training import OutlierRule, StrideInfo, TrainOptions, reject_outliers, train_mode
+from .strides import DetectionOptions, detect_peaks
+from .training import OutlierRule, StrideInfo, TrainOptions, judge_strides, train_mode
 
 TEACH_STRIDES = 10
 """Default good strides per taught mode (the paper: about ten steady strides)."""
@@ -309,11 +309,8 @@ class StrideCollector:
             del self.candidates[:drop], self._reasons[:drop], self._pieces[:drop]
         rate = float(self.rate_hz)  # type: ignore[arg-type]
         bounds = np.array(self.candidates, dtype=np.float64)
-        durations = bounds[:, 1] - bounds[:, 0]
-        base_len = max(2, round(float(np.median(durations)) * rate))
-        strides = np.concatenate([normalise_strides(p.time_s, p.angles_deg, bounds[i:i + 1], base_len)
-                                  for i, p in enumerate(self._pieces)])
-        reasons, _ = reject_outliers(durations, strides, self.options.outliers)
+        parts = [(LIVE_SOURCE, p, bounds[i:i + 1]) for i, p in enumerate(self._pieces)]
+        _, reasons, _ = judge_strides(parts, rate, self.options.outliers)
         events = []
         before = self._reasons + [""] * (len(reasons) - len(self._reasons))
         newest = len(reasons) - 1
@@ -329,15 +326,14 @@ class StrideCollector:
         self._reasons = reasons
         events.append(self.progress())
         if self.good >= max(self.target, self.options.min_strides):
-            self._build(rate, bounds)
+            self._build(rate, bounds, parts)
             assert self.result is not None
             events.append(f"{self.mode}: kernel built from " + self.result.summary().split(": ", 1)[1])
         return events
 
-    def _build(self, rate: float, bounds: np.ndarray) -> None:
+    def _build(self, rate: float, bounds: np.ndarray, parts: list[tuple[str, Grid, np.ndarray]]) -> None:
         opts = self.options
         train = TrainOptions(min_strides=opts.min_strides, detection=opts.detection, outliers=opts.outliers)
-        parts = [(LIVE_SOURCE, p, bounds[i:i + 1]) for i, p in enumerate(self._pieces)]
         kernel, infos = train_mode(self.mode, parts, rate, train)
         info = dict(kernel.info)
         info["heel_strikes"] = f"{opts.channel} maxima, taught live"

@@ -121,6 +121,16 @@ def reject_outliers(durations_s: np.ndarray, strides: np.ndarray, rule: OutlierR
     return reasons, dist
 
 
+def judge_strides(parts: list[tuple[str, Samples, np.ndarray]], rate: float,
+                  rule: OutlierRule) -> tuple[np.ndarray, list[str], np.ndarray]:
+    """The candidate strides of ``parts`` (as ``train_mode``'s) time-normalised to round(median
+    duration x ``rate``) samples and judged by ``reject_outliers``: (durations s, reasons, distances)."""
+    durations = np.concatenate([b[:, 1] - b[:, 0] for _, _, b in parts])
+    base_len = max(2, round(float(np.median(durations)) * rate))
+    normalised = np.concatenate([normalise_strides(u.time_s, u.angles_deg, b, base_len) for _, u, b in parts])
+    return (durations, *reject_outliers(durations, normalised, rule))
+
+
 def train_mode(
     mode: str, parts: list[tuple[str, Samples, np.ndarray]], rate: float, opts: TrainOptions
 ) -> tuple[KernelMode, list[StrideInfo]]:
@@ -135,10 +145,7 @@ def train_mode(
     Raises:
         GaitEstimatorError: fewer than ``opts.min_strides`` strides left after outlier rejection.
     """
-    durations = np.concatenate([b[:, 1] - b[:, 0] for _, _, b in parts])
-    base_len = max(2, round(float(np.median(durations)) * rate))
-    normalised = np.concatenate([normalise_strides(u.time_s, u.angles_deg, b, base_len) for _, u, b in parts])
-    reasons, dist = reject_outliers(durations, normalised, opts.outliers)
+    durations, reasons, dist = judge_strides(parts, rate, opts.outliers)
     keep = np.array([not r for r in reasons])
     starts = np.concatenate([b[:, 0] for _, _, b in parts])
     srcs = [s for s, _, b in parts for _ in range(len(b))]
