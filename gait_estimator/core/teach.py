@@ -39,6 +39,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .. import __version__
+from .calibration import CalibrationParams
 from .channels import CHANNELS
 from .errors import GaitEstimatorError
 from .kernels import KernelLibrary, KernelMode, near_duplicates
@@ -57,10 +58,10 @@ KEEP_MARGIN_S = 1.0
 """Stream kept beyond the longest stride plus the heel-strike confirmation delay (s)."""
 PIECE_MARGIN = 2
 """Grid samples a candidate keeps beyond each of its heel strikes (interpolation needs one)."""
-NEAR_COPY_RMS_DEG = 1.0
-NEAR_COPY_LENGTH_RATIO = 0.02
+NEAR_COPY_RMS_DEG = CalibrationParams.near_copy_rms_deg
+NEAR_COPY_LENGTH_RATIO = CalibrationParams.near_copy_length_ratio
 """A taught kernel this close to another mode (shape RMS, degrees; |ln| of the length ratio) is
-reported as a near copy: the estimator's rule for near copies (core/estimator.py)."""
+reported as a near copy: the walking calibration's rule for near copies (``CalibrationParams``)."""
 LIVE_SOURCE = "taught live"
 TAUGHT_LIBRARY = "taught"
 """Name of the library a node without one (``kernels: ''``) builds from its first taught mode."""
