@@ -140,9 +140,7 @@ class SegmentMount:
                 tuple(d["lateral"]), tuple(d["proximal"]), float(d.get("standing_deg", 0.0)),
                 tuple(d.get("gyro_bias_dps", (0.0, 0.0, 0.0))), str(d.get("source", "configured")),
             )
-        except (TypeError, ValueError) as exc:
-            raise CalibrationError(f"{what}: {exc}") from None
-        except CalibrationError as exc:
+        except (TypeError, ValueError, CalibrationError) as exc:
             raise CalibrationError(f"{what}: {exc}") from None
 
 
