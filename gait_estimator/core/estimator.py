@@ -67,8 +67,7 @@ class Estimator:
         self.params = p = params or PipelineParams.from_config(self.config)
         self.stamped = bool(stamped)
         self.gaps = GapCheck(p.gaps)
-        resamples = p.resample == "on" or (p.resample == "auto" and self.stamped)
-        self.resampler = UniformResampler(library.sample_rate_hz) if resamples else None
+        self.resampler = UniformResampler(library.sample_rate_hz) if self.config.resamples(self.stamped) else None
         self.matcher = p.match.build(library, backend)
         self.supervisor = Supervisor(library.mode_names, p.supervisor, active_channels=self.matcher.active_channels,
                                      normalized=p.match.normalize, time_scales=self.matcher.time_scales)
