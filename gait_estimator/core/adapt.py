@@ -47,6 +47,13 @@ MAD_TO_SIGMA = 1.4826  # median absolute deviation -> standard deviation of a no
 SKIP_REASONS = ("held", "confidence", "duration", "warmup", "shape", "unchecked")  # keys of KernelAdapter.skipped
 
 
+def robust_sigma(x: np.ndarray) -> float:
+    """1.4826 x median absolute deviation of ``x`` (a robust standard deviation; ``train``'s
+    outlier rules and the personalisation's shape guard)."""
+    x = np.asarray(x, dtype=np.float64)
+    return float(MAD_TO_SIGMA * np.median(np.abs(x - np.median(x)))) if x.size else math.nan
+
+
 @dataclass(frozen=True)
 class AdaptParams:
     """Personalisation settings.
@@ -153,7 +160,7 @@ class KernelAdapter:
             return self.skip_stride("warmup")
         h = np.asarray(history)
         med = float(np.median(h))
-        sigma = MAD_TO_SIGMA * float(np.median(np.abs(h - med)))
+        sigma = robust_sigma(h)
         if dist > med + max(self.options.shape_sigmas * sigma, med):
             return self.skip_stride("shape")
         step = np.clip(obs - k, -self.options.max_step_deg, self.options.max_step_deg)

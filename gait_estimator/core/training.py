@@ -20,7 +20,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .adapt import MAD_TO_SIGMA
+from .adapt import robust_sigma
 from .errors import GaitEstimatorError
 from .kernels import REFERENCE_MODE_IDS, KernelMode, make_mode
 from .states import FIT_LIMIT_KEY
@@ -79,12 +79,6 @@ class StrideInfo:
         if self.rejected:
             d["reason"] = self.rejected
         return d
-
-
-def robust_sigma(x: np.ndarray) -> float:
-    """1.4826 x median absolute deviation of ``x`` (a robust standard deviation)."""
-    x = np.asarray(x, dtype=np.float64)
-    return float(MAD_TO_SIGMA * np.median(np.abs(x - np.median(x)))) if x.size else math.nan
 
 
 def reject_outliers(durations_s: np.ndarray, strides: np.ndarray, rule: OutlierRule) -> tuple[list[str], np.ndarray]:
