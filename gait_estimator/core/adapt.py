@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .channels import N_CHANNELS, Sample
-from .kernels import KernelLibrary, KernelMode, resample_stride
+from .kernels import KernelLibrary, make_mode, resample_stride
 from .matcher import IncrementalMatcher, StepResult
 from .options import EstimatorConfig
 from .supervisor import Estimate
@@ -193,11 +193,7 @@ class KernelAdapter:
         """The library with the adapted kernels; provenance says how many strides each took."""
         modes = []
         for m, k, n in zip(self.library.modes, self.kernels, self.accepted, strict=True):
-            info = dict(m.info)
-            info["adapted_strides"] = int(n)
-            arr = k.copy()
-            arr.setflags(write=False)
-            modes.append(KernelMode(m.name, arr, m.sample_rate_hz, m.mode_id, info))
+            modes.append(make_mode(m.name, k, m.sample_rate_hz, m.mode_id, {**m.info, "adapted_strides": int(n)}))
         prov = dict(self.library.provenance)
         prov["adapted_from"] = self.library.path or self.library.name
         prov["adaptation"] = {
