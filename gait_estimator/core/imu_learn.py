@@ -150,9 +150,9 @@ def quiet_runs(time_s: np.ndarray, gyro_dps: np.ndarray, still_s: float = STILL_
 
 
 def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | None = None,
-                  acc_g: np.ndarray | None = None, start_s: float | None = None,
+                  acc_g: np.ndarray | None = None,
                   still_s: float = STILL_S, params: ImuLearnParams = DEFAULT_LEARN) -> Standing | None:
-    """The first still stretch of ``still_s`` seconds (after ``start_s``), or None.
+    """The first still stretch of ``still_s`` seconds, or None.
 
     Args:
         time_s: (T,) sample times, s.
@@ -161,7 +161,6 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
         acc_g: (4, T, 3) accelerometer, g, or None (nan for a sensor with an orientation): a raw
             sensor's stillness and up direction come from its accelerometer (the fused direction
             may still be settling), with twice the tilt tolerance (accelerometer noise).
-        start_s: Only stretches that start at or after this time.
         still_s: Length of the stretch (s).
         params: The stillness thresholds.
     """
@@ -188,8 +187,6 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
     if acc_a is not None and raw.any():
         moved |= (np.abs(np.linalg.norm(acc_a[raw], axis=2) - 1.0) > params.still_acc_tolerance).any(axis=0)
     still = ok & ~moved
-    if start_s is not None:
-        still &= t >= start_s
     length = still_s - dt / 2
     edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
     step = max(1, round(0.1 / dt))  # a stretch that drifts: try again 0.1 s later
@@ -288,7 +285,6 @@ def learn_calibration(
     standing: Standing | None = None,
     gyro_dps: np.ndarray | None = None,
     acc_g: np.ndarray | None = None,
-    walk_s: float = WALK_S,
     still_s: float = STILL_S,
     params: ImuLearnParams = DEFAULT_LEARN,
     search: bool = True,
@@ -303,7 +299,6 @@ def learn_calibration(
         standing: A standing pose already found, or None: then (``search``) the first in the
             stream, needed for a learnt proximal axis, else used for the gyro bias alone.
         gyro_dps, acc_g: (4, T, 3) raw rates and accelerations for the still test and the bias.
-        walk_s: Seconds of stream after the standing pose needed before learning axes.
         still_s: Length of the still stretch taken as the standing pose (s).
         params: Learning thresholds.
         search: Look for a standing pose when ``standing`` is None (False: the caller looked).
@@ -326,8 +321,8 @@ def learn_calibration(
                                     for i in range(N_CHANNELS))), standing, ""
     begin = standing.stop if need_stand and standing is not None else 0  # else the pose gave only the bias
     walk = slice(begin, None)
-    if len(t) <= begin or t[-1] - t[begin] < walk_s:
-        return None, standing, f"walk {walk_s:g} s"
+    if len(t) <= begin or t[-1] - t[begin] < WALK_S:  # stream after the standing pose before learning axes
+        return None, standing, f"walk {WALK_S:g} s"
     cands: dict[int, list[SegmentMount]] = {}
     for i in range(N_CHANNELS):
         if lateral[i] is not None:
