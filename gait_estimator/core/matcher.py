@@ -46,8 +46,6 @@ class NaiveMatcher(_MatcherBase):
     """
 
     def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:
-        """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
-        return the estimate."""
         d0, d1, d2, d3, _ = self._weighted_values(sample)
         self._ring[self._count % self.max_window] = d0, d1, d2, d3
         self._count += 1
@@ -287,8 +285,6 @@ class IncrementalMatcher(_MatcherBase):
         self._synced[:] = 0
 
     def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:
-        """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
-        return the estimate."""
         d0, d1, d2, d3, dsq = self._weighted_values(sample)
         if self.backend == "numba":
             result = self._step_numba(d0, d1, d2, d3, dsq)

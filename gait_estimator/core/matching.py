@@ -543,5 +543,7 @@ class _MatcherBase:
             mode_index[i], phase[i], sse[i], phases[i], ready[i] = r.mode_index, r.phase, r.sse, r.phases, r.ready
         return MatchTrace(list(self.mode_names), mode_index, phase, sse, phases, ready)
 
-    def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
+    def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:  # pragma: no cover - abstract
+        """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
+        return the estimate."""
         raise NotImplementedError
