@@ -38,13 +38,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from .channels import N_CHANNELS, Sample
-from .kernels import KernelLibrary, KernelMode, resample_stride
+from .kernels import KernelLibrary, make_mode, resample_stride
 from .matcher import IncrementalMatcher, StepResult
 from .options import EstimatorConfig
 from .supervisor import Estimate
 
 MAD_TO_SIGMA = 1.4826  # median absolute deviation -> standard deviation of a normal distribution
 SKIP_REASONS = ("held", "confidence", "duration", "warmup", "shape", "unchecked")  # keys of KernelAdapter.skipped
+
+
+def robust_sigma(x: np.ndarray) -> float:
+    """1.4826 x median absolute deviation of ``x`` (a robust standard deviation; ``train``'s
+    outlier rules and the personalisation's shape guard)."""
+    x = np.asarray(x, dtype=np.float64)
+    return float(MAD_TO_SIGMA * np.median(np.abs(x - np.median(x)))) if x.size else math.nan
 
 
 @dataclass(frozen=True)
@@ -153,7 +160,7 @@ class KernelAdapter:
             return self.skip_stride("warmup")
         h = np.asarray(history)
         med = float(np.median(h))
-        sigma = MAD_TO_SIGMA * float(np.median(np.abs(h - med)))
+        sigma = robust_sigma(h)
         if dist > med + max(self.options.shape_sigmas * sigma, med):
             return self.skip_stride("shape")
         step = np.clip(obs - k, -self.options.max_step_deg, self.options.max_step_deg)
@@ -186,11 +193,7 @@ class KernelAdapter:
         """The library with the adapted kernels; provenance says how many strides each took."""
         modes = []
         for m, k, n in zip(self.library.modes, self.kernels, self.accepted, strict=True):
-            info = dict(m.info)
-            info["adapted_strides"] = int(n)
-            arr = k.copy()
-            arr.setflags(write=False)
-            modes.append(KernelMode(m.name, arr, m.sample_rate_hz, m.mode_id, info))
+            modes.append(make_mode(m.name, k, m.sample_rate_hz, m.mode_id, {**m.info, "adapted_strides": int(n)}))
         prov = dict(self.library.provenance)
         prov["adapted_from"] = self.library.path or self.library.name
         prov["adaptation"] = {

@@ -16,7 +16,7 @@ parameters derived from them.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -67,8 +67,7 @@ class Estimator:
         self.params = p = params or PipelineParams.from_config(self.config)
         self.stamped = bool(stamped)
         self.gaps = GapCheck(p.gaps)
-        resamples = p.resample == "on" or (p.resample == "auto" and self.stamped)
-        self.resampler = UniformResampler(library.sample_rate_hz) if resamples else None
+        self.resampler = UniformResampler(library.sample_rate_hz) if self.config.resamples(self.stamped) else None
         self.matcher = p.match.build(library, backend)
         self.supervisor = Supervisor(library.mode_names, p.supervisor, active_channels=self.matcher.active_channels,
                                      normalized=p.match.normalize, time_scales=self.matcher.time_scales)
@@ -235,6 +234,11 @@ class EstimateTrace:
         return [str(m) for m in self.mode]
 
 
+_TRACE_DTYPES: dict[str, Any] = {"mode_index": np.int64, "raw_mode_index": np.int64, "state": np.int64, "ready": bool,
+                                 "held": bool, "mode": object}
+"""Column dtypes of an ``EstimateTrace`` besides float64."""
+
+
 def run_estimator(
     estimator: Estimator, time_s: np.ndarray, angles_deg: np.ndarray, index: np.ndarray | None = None
 ) -> EstimateTrace:
@@ -252,28 +256,9 @@ def run_estimator(
 
 
 def trace_from_estimates(mode_names: Sequence[str], rows: Sequence[tuple[int, Estimate]]) -> EstimateTrace:
-    """Pack (source sample index, Estimate) pairs into arrays."""
+    """Pack (source sample index, Estimate) pairs into arrays: every ``Estimate`` field a column."""
     m = len(mode_names)
-    ests = [e for _, e in rows]
-
-    def col(name: str, dtype: Any = np.float64) -> np.ndarray:
-        return np.array([getattr(e, name) for e in ests], dtype=dtype)
-
-    return EstimateTrace(
-        mode_names=list(mode_names),
-        time_s=col("time_s"),
-        sample=np.array([i for i, _ in rows], dtype=np.int64),
-        mode_index=col("mode_index", np.int64),
-        phase=col("phase"),
-        ready=col("ready", bool),
-        sse=np.array([e.sse for e in ests]).reshape(-1, m),
-        phases=np.array([e.phases for e in ests]).reshape(-1, m),
-        raw_mode_index=col("raw_mode_index", np.int64),
-        confidence=col("confidence"),
-        fit_rms_deg=col("fit_rms_deg"),
-        held=col("held", bool),
-        phase_rate=col("phase_rate"),
-        cadence_ratio=col("cadence_ratio"),
-        state=col("state", np.int64),
-        mode=col("mode", object),
-    )
+    columns = {f.name: np.array([getattr(e, f.name) for _, e in rows], dtype=_TRACE_DTYPES.get(f.name, np.float64))
+               for f in fields(Estimate)}
+    columns["sse"], columns["phases"] = columns["sse"].reshape(-1, m), columns["phases"].reshape(-1, m)
+    return EstimateTrace(mode_names=list(mode_names), sample=np.array([i for i, _ in rows], dtype=np.int64), **columns)

@@ -112,14 +112,8 @@ class SegmentMount:
         """A configured mount from sensor axis names, e.g. ``from_axes('+z', '-x')``."""
         return cls(parse_axis(lateral, "lateral axis"), parse_axis(proximal, "proximal axis"), standing_deg)
 
-    def angle_deg(self, up: Vec3) -> float:
-        """Segment angle (deg) for the world up direction ``up`` in the sensor frame (any norm)."""
-        f, p = self.forward, self.proximal
-        return self.standing_deg + math.degrees(math.atan2(
-            f[0] * up[0] + f[1] * up[1] + f[2] * up[2], p[0] * up[0] + p[1] * up[1] + p[2] * up[2]))
-
     def angles_deg(self, up: np.ndarray) -> np.ndarray:
-        """Vectorised ``angle_deg``: ``up`` (T, 3) -> (T,) degrees."""
+        """Segment angles (deg) for world up directions ``up`` (T, 3) in the sensor frame (any norm), (T,)."""
         return self.standing_deg + np.degrees(np.arctan2(up @ np.asarray(self.forward), up @ np.asarray(self.proximal)))
 
     def as_dict(self) -> dict[str, Any]:
@@ -140,9 +134,7 @@ class SegmentMount:
                 tuple(d["lateral"]), tuple(d["proximal"]), float(d.get("standing_deg", 0.0)),
                 tuple(d.get("gyro_bias_dps", (0.0, 0.0, 0.0))), str(d.get("source", "configured")),
             )
-        except (TypeError, ValueError) as exc:
-            raise CalibrationError(f"{what}: {exc}") from None
-        except CalibrationError as exc:
+        except (TypeError, ValueError, CalibrationError) as exc:
             raise CalibrationError(f"{what}: {exc}") from None
 
 
@@ -159,7 +151,7 @@ class ImuCalibration:
 
     def angles_deg(self, ups: Any) -> tuple[float, float, float, float]:
         """Four segment angles (deg) from four up vectors (sensor frames), CHANNELS order; the
-        same values as each mount's ``angle_deg``."""
+        formula of each mount's ``angles_deg``."""
         # Unrolled over the four sensors: this runs for every sample of a live stream.
         (a0, a1, a2, a3, a4, a5, a6), (b0, b1, b2, b3, b4, b5, b6), (c0, c1, c2, c3, c4, c5, c6), \
             (d0, d1, d2, d3, d4, d5, d6) = self._rows  # type: ignore[attr-defined]

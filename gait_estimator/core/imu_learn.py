@@ -150,9 +150,9 @@ def quiet_runs(time_s: np.ndarray, gyro_dps: np.ndarray, still_s: float = STILL_
 
 
 def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | None = None,
-                  acc_g: np.ndarray | None = None, start_s: float | None = None,
+                  acc_g: np.ndarray | None = None,
                   still_s: float = STILL_S, params: ImuLearnParams = DEFAULT_LEARN) -> Standing | None:
-    """The first still stretch of ``still_s`` seconds (after ``start_s``), or None.
+    """The first still stretch of ``still_s`` seconds, or None.
 
     Args:
         time_s: (T,) sample times, s.
@@ -161,7 +161,6 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
         acc_g: (4, T, 3) accelerometer, g, or None (nan for a sensor with an orientation): a raw
             sensor's stillness and up direction come from its accelerometer (the fused direction
             may still be settling), with twice the tilt tolerance (accelerometer noise).
-        start_s: Only stretches that start at or after this time.
         still_s: Length of the stretch (s).
         params: The stillness thresholds.
     """
@@ -188,8 +187,6 @@ def find_standing(time_s: np.ndarray, ups: np.ndarray, gyro_dps: np.ndarray | No
     if acc_a is not None and raw.any():
         moved |= (np.abs(np.linalg.norm(acc_a[raw], axis=2) - 1.0) > params.still_acc_tolerance).any(axis=0)
     still = ok & ~moved
-    if start_s is not None:
-        still &= t >= start_s
     length = still_s - dt / 2
     edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
     step = max(1, round(0.1 / dt))  # a stretch that drifts: try again 0.1 s later
@@ -257,15 +254,19 @@ def _sagittal_swing(time_s: np.ndarray, ups: np.ndarray, proximal: Vec3, standin
     return both, ""
 
 
+def _knee_extension(thigh_deg: np.ndarray, shank_deg: np.ndarray) -> float:
+    """The knee angle's (shank - thigh) 98th percentile over its finite samples (deg, + = past
+    straight); nan without any."""
+    knee = shank_deg - thigh_deg
+    knee = knee[np.isfinite(knee)]
+    return float(np.percentile(knee, 98)) if len(knee) else math.nan
+
+
 def _leg_signs(cands: dict[int, list[SegmentMount]], ups: np.ndarray, thigh: int,
                shank: int, margin_deg: float) -> tuple[dict[int, SegmentMount], str]:
     """Pick the mounts of one leg's thigh and shank by the knee rule (module docstring)."""
-    options = [cands[thigh], cands[shank]]
-    scores = []
-    for mt, ms in itertools.product(*options):
-        knee = ms.angles_deg(ups[shank]) - mt.angles_deg(ups[thigh])
-        knee = knee[np.isfinite(knee)]
-        scores.append((float(np.percentile(knee, 98)), mt, ms))
+    scores = [(_knee_extension(mt.angles_deg(ups[thigh]), ms.angles_deg(ups[shank])), mt, ms)
+              for mt, ms in itertools.product(cands[thigh], cands[shank])]
     scores.sort(key=lambda s: s[0])
     if len(scores) > 1 and scores[1][0] - scores[0][0] < margin_deg:
         return {}, (f"{CHANNELS[thigh]}/{CHANNELS[shank]}: cannot tell forward from backward "
@@ -284,7 +285,6 @@ def learn_calibration(
     standing: Standing | None = None,
     gyro_dps: np.ndarray | None = None,
     acc_g: np.ndarray | None = None,
-    walk_s: float = WALK_S,
     still_s: float = STILL_S,
     params: ImuLearnParams = DEFAULT_LEARN,
     search: bool = True,
@@ -299,7 +299,6 @@ def learn_calibration(
         standing: A standing pose already found, or None: then (``search``) the first in the
             stream, needed for a learnt proximal axis, else used for the gyro bias alone.
         gyro_dps, acc_g: (4, T, 3) raw rates and accelerations for the still test and the bias.
-        walk_s: Seconds of stream after the standing pose needed before learning axes.
         still_s: Length of the still stretch taken as the standing pose (s).
         params: Learning thresholds.
         search: Look for a standing pose when ``standing`` is None (False: the caller looked).
@@ -322,8 +321,8 @@ def learn_calibration(
                                     for i in range(N_CHANNELS))), standing, ""
     begin = standing.stop if need_stand and standing is not None else 0  # else the pose gave only the bias
     walk = slice(begin, None)
-    if len(t) <= begin or t[-1] - t[begin] < walk_s:
-        return None, standing, f"walk {walk_s:g} s"
+    if len(t) <= begin or t[-1] - t[begin] < WALK_S:  # stream after the standing pose before learning axes
+        return None, standing, f"walk {WALK_S:g} s"
     cands: dict[int, list[SegmentMount]] = {}
     for i in range(N_CHANNELS):
         if lateral[i] is not None:
@@ -382,11 +381,7 @@ def check_calibration(time_s: np.ndarray, ups: np.ndarray, cal: ImuCalibration, 
     ups = np.asarray(ups, dtype=np.float64)
     mounts = cal.mounts
     angles = [m.angles_deg(ups[i]) for i, m in enumerate(mounts)]
-    knee = []
-    for thigh, shank in LEGS:
-        k = angles[shank] - angles[thigh]
-        k = k[np.isfinite(k)]
-        knee.append(float(np.percentile(k, 98)) if len(k) else math.nan)
+    knee = [_knee_extension(angles[thigh], angles[shank]) for thigh, shank in LEGS]
     bent = [f"{leg} knee {k:.0f} deg past straight" for leg, k in zip(("right", "left"), knee, strict=True)
             if math.isfinite(k) and round(k) > params.max_knee_extension_deg]  # rounded as printed
     fresh, _, missing = learn_calibration(

@@ -127,13 +127,9 @@ class KernelLibrary:
         return KernelLibrary(f"{self.name}_x{count}", tuple(modes), dict(self.provenance))
 
 
-def _where(lib: KernelLibrary) -> str:
-    return lib.path or f"library {lib.name!r}"
-
-
 def validate_library(lib: KernelLibrary) -> None:
     """Raise LibraryError (naming the file and the problem) unless ``lib`` is well formed."""
-    where = _where(lib)
+    where = lib.path or f"library {lib.name!r}"
     if not lib.name:
         raise LibraryError(f"{where}: missing library name")
     if not lib.modes:

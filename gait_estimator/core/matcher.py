@@ -46,8 +46,6 @@ class NaiveMatcher(_MatcherBase):
     """
 
     def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:
-        """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
-        return the estimate."""
         d0, d1, d2, d3, _ = self._weighted_values(sample)
         self._ring[self._count % self.max_window] = d0, d1, d2, d3
         self._count += 1
@@ -171,8 +169,7 @@ class IncrementalMatcher(_MatcherBase):
         if self._offset:
             sums = self._wsums[p] if self._decay else self.window_sums()[rows]
         score = self._scores(self._e[p].astype(np.float64), sums, rows)
-        valid = np.arange(self.max_length)[None, :] < self.lengths[rows][:, None]
-        return np.where(valid, score, np.inf).min(axis=1)
+        return np.where(self._valid[rows], score, np.inf).min(axis=1)
 
     def _table_arrays(self) -> tuple[str, ...]:
         return (*super()._table_arrays(), "_ksq", "_e", "_wsums")
@@ -217,12 +214,8 @@ class IncrementalMatcher(_MatcherBase):
 
     def _reweighted(self) -> None:
         # The compiled step rebuilds the rows of the scale band; the others when they are needed.
-        rows = self._active if self.backend == "numba" else self._rows
-        p = self._slots.at(rows)
-        self._e[p] = self._rows_sse_fft(rows, self._lam)
-        self._wsums[p] = self.age_weighted_sums(rows)
         self._synced[:] = -1
-        self._synced[rows] = self._count
+        self._rebuild(self._active if self.backend == "numba" else self._rows)
 
     def _band_changed(self) -> None:
         if self.backend != "numba":
@@ -292,8 +285,6 @@ class IncrementalMatcher(_MatcherBase):
         self._synced[:] = 0
 
     def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:
-        """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
-        return the estimate."""
         d0, d1, d2, d3, dsq = self._weighted_values(sample)
         if self.backend == "numba":
             result = self._step_numba(d0, d1, d2, d3, dsq)

@@ -43,11 +43,8 @@ Options (the defaults are the paper, which reproduces the reference exactly):
   weighted mean of the kernel part at each shift (precomputed, (R, 4, N)); the penalty is then
   the exact minimum of the weighted SSE over offsets within tau, as above. 0 = uniform weights
   (the paper); ``set_recency_half_life`` changes it at any sample;
-* ``set_scale_band``: the time scales a mode may be read at (all by default), and how many of
-  the best-fitting modes are read at every scale besides (``scale_band.py``). The estimator's
-  cadence calibration narrows them to the wearer's learnt cadence; every row keeps its running
-  sums exactly (the compiled step updates only the band's rows and rebuilds the others' from the
-  window when they are needed again), so the band may change at any sample.
+* ``set_scale_band``: the time scales a mode may be read at (all by default; ``scale_band.py``,
+  and how rows outside the band stay exact: ``IncrementalMatcher``).
 """
 
 from __future__ import annotations
@@ -546,5 +543,7 @@ class _MatcherBase:
             mode_index[i], phase[i], sse[i], phases[i], ready[i] = r.mode_index, r.phase, r.sse, r.phases, r.ready
         return MatchTrace(list(self.mode_names), mode_index, phase, sse, phases, ready)
 
-    def step(self, sample: np.ndarray) -> StepResult:  # pragma: no cover - abstract
+    def step(self, sample: Sequence[float] | np.ndarray) -> StepResult:  # pragma: no cover - abstract
+        """Consume one sample (4 angles, degrees, CHANNELS order; four floats are the cheapest);
+        return the estimate."""
         raise NotImplementedError

@@ -55,7 +55,6 @@ class PipelineParams:
     """The parameters of every stage of one estimator."""
 
     gaps: GapParams
-    resample: str  # auto, on or off
     match: MatchParams
     supervisor: SupervisorParams
     calibration: CalibrationParams
@@ -69,7 +68,6 @@ class PipelineParams:
         c = config
         params = cls(
             gaps=GapParams(c.max_gap_s, c.calibration_reset_gap_s),
-            resample=c.resample,
             match=MatchParams(tuple(c.effective_weights().tolist()), c.time_scales, c.offset_tolerance_deg,
                               c.normalize_error, c.recency_half_life),
             supervisor=SupervisorParams(c.min_confidence, c.min_dwell_s, c.switch_back_margin, c.transitions,

@@ -12,8 +12,8 @@ sample, from the angles it matched and the supervisor's estimate:
   ``max_cadence_ratio`` times its kernel's with the knees flexing faster than ``knee_speed_ratio``
   times its kernel's (``knee_speed_dps``), or every segment slower than ``slow_speed_dps``, for
   ``unknown_after_s`` (and stays until it has been within it as long): a library taught or
-  trained here stores each mode's limit (``fit_limit_deg`` in its ``info``, ``fit_limit_deg``
-  here) times ``fit_limit_scale``; others get ``default_fit_limit_deg``;
+  trained here stores each mode's limit (``fit_limit_deg`` in its ``info``: its worst stride's
+  RMS from the kernel, ``training.train_mode``) times ``fit_limit_scale``; others get ``default_fit_limit_deg``;
 * ``walking``: otherwise: a library mode, with its phase.
 
 ``mode`` reads ``stand`` or ``unknown`` in those states, and the phase is NaN in every state but
@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 
 NOT_READY_MODE = ""
 FIT_LIMIT_KEY = "fit_limit_deg"
-"""Key of a mode's fit limit (degrees) in its ``info``, written by ``fit_limit_deg``'s callers."""
+"""Key of a mode's fit limit (degrees) in its ``info``, written by ``training.train_mode``."""
 
 
 class EstimateState(IntEnum):
@@ -129,14 +129,6 @@ def knee_speed_dps(samples: np.ndarray, rate_hz: float, fast_tau: float, slow_ta
     band = af / (1.0 - (1.0 - af) * z) - a_s / (1.0 - (1.0 - a_s) * z)
     speed = np.fft.irfft(np.fft.rfft(knee, axis=0) * band[:, None], n=n, axis=0)
     return float(np.mean(np.abs(speed)) / (slow_tau - fast_tau))
-
-
-def fit_limit_deg(strides: np.ndarray, kernel: np.ndarray) -> float:
-    """The fit limit of a mode trained or taught from ``strides`` (S, N, 4), degrees, each resampled
-    to the ``kernel``'s (N, 4) length: the largest RMS (over samples and channels) of a stride
-    from the kernel, degrees."""
-    rms = np.sqrt(np.mean((np.asarray(strides) - np.asarray(kernel)[None]) ** 2, axis=(1, 2)))
-    return float(rms.max())
 
 
 NAN = math.nan

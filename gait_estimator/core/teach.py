@@ -39,11 +39,12 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .. import __version__
+from .calibration import CalibrationParams
 from .channels import CHANNELS
 from .errors import GaitEstimatorError
 from .kernels import KernelLibrary, KernelMode, near_duplicates
-from .strides import DetectionOptions, detect_peaks, normalise_strides
-from .training import OutlierRule, StrideInfo, TrainOptions, reject_outliers, train_mode
+from .strides import DetectionOptions, detect_peaks
+from .training import OutlierRule, StrideInfo, TrainOptions, judge_strides, train_mode
 
 TEACH_STRIDES = 10
 """Default good strides per taught mode (the paper: about ten steady strides)."""
@@ -57,10 +58,10 @@ KEEP_MARGIN_S = 1.0
 """Stream kept beyond the longest stride plus the heel-strike confirmation delay (s)."""
 PIECE_MARGIN = 2
 """Grid samples a candidate keeps beyond each of its heel strikes (interpolation needs one)."""
-NEAR_COPY_RMS_DEG = 1.0
-NEAR_COPY_LENGTH_RATIO = 0.02
+NEAR_COPY_RMS_DEG = CalibrationParams.near_copy_rms_deg
+NEAR_COPY_LENGTH_RATIO = CalibrationParams.near_copy_length_ratio
 """A taught kernel this close to another mode (shape RMS, degrees; |ln| of the length ratio) is
-reported as a near copy: the estimator's rule for near copies (core/estimator.py)."""
+reported as a near copy: the walking calibration's rule for near copies (``CalibrationParams``)."""
 LIVE_SOURCE = "taught live"
 TAUGHT_LIBRARY = "taught"
 """Name of the library a node without one (``kernels: ''``) builds from its first taught mode."""
@@ -309,11 +310,8 @@ class StrideCollector:
             del self.candidates[:drop], self._reasons[:drop], self._pieces[:drop]
         rate = float(self.rate_hz)  # type: ignore[arg-type]
         bounds = np.array(self.candidates, dtype=np.float64)
-        durations = bounds[:, 1] - bounds[:, 0]
-        base_len = max(2, round(float(np.median(durations)) * rate))
-        strides = np.concatenate([normalise_strides(p.time_s, p.angles_deg, bounds[i:i + 1], base_len)
-                                  for i, p in enumerate(self._pieces)])
-        reasons, _ = reject_outliers(durations, strides, self.options.outliers)
+        parts = [(LIVE_SOURCE, p, bounds[i:i + 1]) for i, p in enumerate(self._pieces)]
+        _, reasons, _ = judge_strides(parts, rate, self.options.outliers)
         events = []
         before = self._reasons + [""] * (len(reasons) - len(self._reasons))
         newest = len(reasons) - 1
@@ -329,15 +327,14 @@ class StrideCollector:
         self._reasons = reasons
         events.append(self.progress())
         if self.good >= max(self.target, self.options.min_strides):
-            self._build(rate, bounds)
+            self._build(rate, bounds, parts)
             assert self.result is not None
             events.append(f"{self.mode}: kernel built from " + self.result.summary().split(": ", 1)[1])
         return events
 
-    def _build(self, rate: float, bounds: np.ndarray) -> None:
+    def _build(self, rate: float, bounds: np.ndarray, parts: list[tuple[str, Grid, np.ndarray]]) -> None:
         opts = self.options
         train = TrainOptions(min_strides=opts.min_strides, detection=opts.detection, outliers=opts.outliers)
-        parts = [(LIVE_SOURCE, p, bounds[i:i + 1]) for i, p in enumerate(self._pieces)]
         kernel, infos = train_mode(self.mode, parts, rate, train)
         info = dict(kernel.info)
         info["heel_strikes"] = f"{opts.channel} maxima, taught live"

@@ -20,10 +20,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .adapt import MAD_TO_SIGMA
+from .adapt import robust_sigma
 from .errors import GaitEstimatorError
 from .kernels import REFERENCE_MODE_IDS, KernelMode, make_mode
-from .states import FIT_LIMIT_KEY, fit_limit_deg
+from .states import FIT_LIMIT_KEY
 from .strides import DetectionOptions, normalise_strides
 
 
@@ -81,12 +81,6 @@ class StrideInfo:
         return d
 
 
-def robust_sigma(x: np.ndarray) -> float:
-    """1.4826 x median absolute deviation of ``x`` (a robust standard deviation)."""
-    x = np.asarray(x, dtype=np.float64)
-    return float(MAD_TO_SIGMA * np.median(np.abs(x - np.median(x)))) if x.size else math.nan
-
-
 def reject_outliers(durations_s: np.ndarray, strides: np.ndarray, rule: OutlierRule) -> tuple[list[str], np.ndarray]:
     """Apply the duration then the shape rule.
 
@@ -121,6 +115,16 @@ def reject_outliers(durations_s: np.ndarray, strides: np.ndarray, rule: OutlierR
     return reasons, dist
 
 
+def judge_strides(parts: list[tuple[str, Samples, np.ndarray]], rate: float,
+                  rule: OutlierRule) -> tuple[np.ndarray, list[str], np.ndarray]:
+    """The candidate strides of ``parts`` (as ``train_mode``'s) time-normalised to round(median
+    duration x ``rate``) samples and judged by ``reject_outliers``: (durations s, reasons, distances)."""
+    durations = np.concatenate([b[:, 1] - b[:, 0] for _, _, b in parts])
+    base_len = max(2, round(float(np.median(durations)) * rate))
+    normalised = np.concatenate([normalise_strides(u.time_s, u.angles_deg, b, base_len) for _, u, b in parts])
+    return (durations, *reject_outliers(durations, normalised, rule))
+
+
 def train_mode(
     mode: str, parts: list[tuple[str, Samples, np.ndarray]], rate: float, opts: TrainOptions
 ) -> tuple[KernelMode, list[StrideInfo]]:
@@ -135,10 +139,7 @@ def train_mode(
     Raises:
         GaitEstimatorError: fewer than ``opts.min_strides`` strides left after outlier rejection.
     """
-    durations = np.concatenate([b[:, 1] - b[:, 0] for _, _, b in parts])
-    base_len = max(2, round(float(np.median(durations)) * rate))
-    normalised = np.concatenate([normalise_strides(u.time_s, u.angles_deg, b, base_len) for _, u, b in parts])
-    reasons, dist = reject_outliers(durations, normalised, opts.outliers)
+    durations, reasons, dist = judge_strides(parts, rate, opts.outliers)
     keep = np.array([not r for r in reasons])
     starts = np.concatenate([b[:, 0] for _, _, b in parts])
     srcs = [s for s, _, b in parts for _ in range(len(b))]
@@ -171,7 +172,7 @@ def train_mode(
         "duration_min_s": round(float(kd.min()), 5),
         "duration_max_s": round(float(kd.max()), 5),
         "stride_rms_from_kernel_deg": round(float(spread.mean()), 4),
-        FIT_LIMIT_KEY: round(fit_limit_deg(strides, kernel), 4),
+        FIT_LIMIT_KEY: round(float(spread.max()), 4),  # the worst stride's RMS from the kernel
         "sample_rate_hz": rate,
         "rejected": [s.as_dict() for s in infos if s.rejected],
         "sources": sorted({s for s, _, _ in parts}),
