@@ -262,7 +262,7 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
     imu, adapter = node.imu, node.stream.estimator.adapter
     assert imu.flow.from_file and imu.flow.calibrator.checking
     for stamp, k in samples:
-        imu.paired(stamp, items(stamp, k), time.perf_counter())
+        node.publish_outputs(node.stream.push_paired(stamp, items(stamp, k)), time.perf_counter())
         if k == round(9.0 * RATE):
             assert not path.exists() and not imu.flow.from_file, "the file gave way after the first check"
             assert imu.flow.calibrator.calibration == right and imu.flow.calibrator.checking
@@ -272,11 +272,12 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
     # ~/calibrate_standing before the file's verdict: the configured axes take over, and their
     # verdict is theirs (the file, never checked, is kept for the next start)
     path = save_calibration(turned(right, 0, 90.0), path)
-    imu = h.estimator(input_type="imu", imu_calibration_path=str(path), **configured).imu
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path), **configured)
+    imu = node.imu
     inputs = [SensorInput() for _ in range(4)]
     assert "then walk 4 s" in imu.calibrate_standing(Trigger.Request(), Trigger.Response()).message
     for stamp, k in samples:
-        imu.paired(stamp, items(stamp, k), time.perf_counter())
+        node.publish_outputs(node.stream.push_paired(stamp, items(stamp, k)), time.perf_counter())
     assert not imu.flow.from_file and imu.flow.calibrator.calibration == right and path.exists()  # orientations: no bias
     assert imu.flow.calibrator.status.startswith("calibrated, checked: lateral axes within")
 
@@ -305,7 +306,7 @@ def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path)
             stamp = BASE_NS + round(t * 1e9)
             items = [imu.flow.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
                                            s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
-            imu.paired(stamp, items, time.perf_counter())
+            node.publish_outputs(node.stream.push_paired(stamp, items), time.perf_counter())
             cal = imu.flow.calibrator.calibration  # None for a sample after the file's misfit verdict
             angles.append(cal.angles_deg([i[0] for i in items]) if cal else (math.nan,) * 4)
             if t < 1.5:
@@ -334,7 +335,7 @@ def test_learning_fuses_with_the_standing_biases_from_the_end_of_the_standing(ro
         stamp = BASE_NS + round(t * 1e9)
         items = [imu.flow.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
                                        s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
-        imu.paired(stamp, items, time.perf_counter())
+        node.publish_outputs(node.stream.push_paired(stamp, items), time.perf_counter())
         if biased_at is None and any(any(i.gyro_bias_dps) for i in imu.flow.inputs):
             biased_at = t
             assert imu.flow.calibrator.calibration is None
@@ -386,7 +387,7 @@ def test_benchmarks_replay_of_the_live_calibration_is_the_nodes(ros, tmp_path, m
                 (stamp, (0.0, 0.0, 0.0, 1.0), -1.0, tuple(np.radians(gyro[c, k]).tolist()),
                  tuple((acc[c, k] * STANDARD_GRAVITY).tolist()))
             for sample_ns, items in imu.flow.pairer.push(c, stamp, imu.flow.inputs[c].convert(*msg)):
-                imu.paired(sample_ns, items, time.perf_counter())
+                node.publish_outputs(node.stream.push_paired(sample_ns, items), time.perf_counter())
     assert [s for s, _ in seen] == [live.BASE_NS + round(float(t[k]) * 1e9) for k in rows]
     assert np.array_equal(np.array([a for _, a in seen]), want[rows])
     assert imu.flow.calibrator.standing_s == calibrator.standing_s

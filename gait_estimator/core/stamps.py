@@ -63,11 +63,6 @@ class StreamGuard:
     def restart_back_s(self, seconds: float) -> None:
         self.check.params = replace(self.check.params, restart_back_s=seconds)
 
-    @property
-    def last_stamp(self) -> float | None:
-        """Stamp (s) of the last accepted sample."""
-        return self.check.last_time
-
     def accept(self, stamp_s: float) -> bool:
         """Accept a sample stamped ``stamp_s``; True if the window must restart before it
         (a gap, counted in ``resets``, or a jump back, counted in ``restarts``). Raises

@@ -141,10 +141,6 @@ class ImuInput:
             stamp_ns = node.get_clock().now().nanoseconds
         node.publish_outputs(node.stream.push_imu(sensor, stamp_ns, orientation, cov0, gyro, acc, frame_id), t0)
 
-    def paired(self, stamp_ns: int, items: list, t0: float) -> None:
-        """One paired sample (``ImuPairer``): its angles, once calibrated, to the node's stream."""
-        self.node.publish_outputs(self.node.stream.push_paired(stamp_ns, items), t0)
-
     def handle(self, events: list[StreamEvent]) -> list[StreamEvent]:
         """Log the IMU flow's events (saving a learnt calibration, deleting one that does not
         fit); the others are returned."""
