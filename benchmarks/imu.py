@@ -82,8 +82,8 @@ from gait_estimator.core.imu import (  # noqa: E402
 )
 from gait_estimator.core.imu_angles import ImuAngles  # noqa: E402
 from gait_estimator.core.imu_calibrator import ImuCalibrator, check_stream  # noqa: E402
+from gait_estimator.core.imu_pairing import ImuPairer, SensorInput  # noqa: E402
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag  # noqa: E402
-from gait_estimator.io.imu_stream import ImuPairer, SensorInput  # noqa: E402
 from gait_estimator.io.process import predict  # noqa: E402
 from gait_estimator.io.recording import Recording, read_project_csv  # noqa: E402
 

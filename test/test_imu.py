@@ -1,4 +1,4 @@
-"""IMU -> segment angles (core/imu.py, core/imu_learn.py, io/imu_stream.py, io/imu_bag.py) on
+"""IMU -> segment angles (core/imu.py, core/imu_learn.py, core/imu_pairing.py, io/imu_bag.py) on
 synthetic IMU streams made from known segment angles (test/imu_synth.py)."""
 
 from __future__ import annotations
@@ -46,20 +46,10 @@ from gait_estimator.core.imu_learn import (
     learn_calibration,
     quiet_runs,
 )
-from gait_estimator.core.rejections import SampleRejected
+from gait_estimator.core.imu_pairing import WRONG_FRAME, ZERO_NORM, ImuPairer, SensorInput, auto_tolerance_s
+from gait_estimator.core.rejections import NON_FINITE, NON_INCREASING_STAMP, OUT_OF_RANGE, SampleRejected
 from gait_estimator.io.imu_bag import ImuBagRecording, read_imu_bag, write_imu_bag
-from gait_estimator.io.imu_stream import (
-    NON_FINITE,
-    NON_INCREASING_STAMP,
-    OUT_OF_RANGE,
-    WRONG_FRAME,
-    ZERO_NORM,
-    ImuPairer,
-    SensorInput,
-    auto_tolerance_s,
-    load_calibration,
-    save_calibration,
-)
+from gait_estimator.io.imu_stream import load_calibration, save_calibration
 from gait_estimator.io.read_options import ReadOptions
 from gait_estimator.io.readers import read_recording
 from gait_estimator.io.recording import read_project_csv
@@ -711,8 +701,8 @@ def test_a_restarted_sensor_stream_is_taken_up_again():
     sensor starts afresh instead of rejecting every later message; the pairer drops what was queued
     under the old stamps and pairs the new ones once every sensor has restarted."""
     period = 5_000_000
-    inputs = [SensorInput(restart_back_s=1.0) for _ in range(4)]
     p = ImuPairer(tolerance_s=0.002)
+    inputs = [SensorInput(restart_back_s=1.0, on_restart=p.restarted) for _ in range(4)]
     out = []
     for start in (50_000_000_000, 10_000_000_000):  # 50 s, then restarted at 10 s
         for k in range(40):
@@ -730,7 +720,7 @@ def test_a_restarted_sensor_stream_is_taken_up_again():
     for t in (50_000_000_000, 10_000_000_000, 50_005_000_000):
         with contextlib.suppress(SampleRejected):
             stray.convert(t, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
-    assert stray.restarts == 0 and stray.last_ns == 50_005_000_000
+    assert stray.restarts == 0 and stray.stamps.last_time == 50_005_000_000
     with pytest.raises(SampleRejected) as err:  # a step back within restart_back_s stays a bad stamp
         inputs[0].convert(10_000_000_000 + 30 * period, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, G))
     assert err.value.reason == NON_INCREASING_STAMP

@@ -1,6 +1,6 @@
 """bench-node's IMU messages (analysis/imu_sagittal.py): segment angles ->
 serialised sensor_msgs/Imu -> the node's own reading and conversion (io/cdr.py read_imu,
-io/imu_stream.py SensorInput, the configured mounting) give the angles back."""
+core/imu_pairing.py SensorInput, the configured mounting) give the angles back."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from gait_estimator.analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXI
 from gait_estimator.cli.bench_node import node_imu_arguments
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, ImuCalibration, SegmentMount
+from gait_estimator.core.imu_pairing import SensorInput
 from gait_estimator.io.cdr import read_imu, write_imu
-from gait_estimator.io.imu_stream import SensorInput
 
 
 def _angles(rate_hz: float) -> np.ndarray:

@@ -31,10 +31,11 @@ from gait_estimator.analysis.train import TrainOptions, train_library
 from gait_estimator.core.channels import CHANNELS
 from gait_estimator.core.imu import FUSION_BY_CHANNEL, STANDARD_GRAVITY, ImuCalibration, SegmentMount
 from gait_estimator.core.imu_learn import learn_calibration
+from gait_estimator.core.imu_pairing import ImuPairer, SensorInput
 from gait_estimator.io.as_node import predict_as_node
 from gait_estimator.io.cdr import read_imu
 from gait_estimator.io.imu_bag import read_imu_bag, write_imu_bag
-from gait_estimator.io.imu_stream import ImuPairer, SensorInput, load_calibration, save_calibration
+from gait_estimator.io.imu_stream import load_calibration, save_calibration
 from gait_estimator.io.outputs import estimate_array
 from gait_estimator.io.read_options import ReadOptions
 from gait_estimator.io.recording import Recording
@@ -166,7 +167,7 @@ def test_a_saved_calibration_that_does_not_fit_the_sensors_is_learnt_again(ros, 
     node = h.estimator(input_type="imu", imu_calibration_path=str(path))
     client = h.client(node)
     pubs = publishers(client)
-    assert node.imu.calibrator.checking
+    assert node.imu.flow.calibrator.checking
     est, forgotten = node.stream.estimator, []
     for name in ("reset_calibration", "reset"):  # count the estimator's resets (still done by the estimator)
         done = getattr(est, name)
@@ -204,7 +205,7 @@ def test_after_a_long_gap_the_calibration_is_checked_again(ros, tmp_path, capfd)
     pubs = publishers(client)
     stream(client, pubs, make_messages(s, len(s.time_s), raw=True), rate_hz=RATE / 2)
     client.spin_for(0.5)
-    assert path.is_file() and node.imu.calibrator.status == "calibrated", "learnt live and saved"
+    assert path.is_file() and node.imu.flow.calibrator.status == "calibrated", "learnt live and saved"
     stream(client, pubs, make_messages(dataclasses.replace(moved, time_s=moved.time_s + gap_s), len(s.time_s), raw=True),
            rate_hz=RATE / 2)
     client.spin_for(0.5)
@@ -212,7 +213,7 @@ def test_after_a_long_gap_the_calibration_is_checked_again(ros, tmp_path, capfd)
     assert "(the sensors may have been re-donned): the IMU calibration is checked again on the next walking" in logs
     assert logs.count("IMU gyro bias measured at the standing pose") == 2, "at each standing pose: before and after the gap"
     assert f"IMU calibration from {path} does not fit the sensors now (right" in logs, logs
-    assert node.imu.calibrator.calibration is None, "learnt again from the next standing pose and strides"
+    assert node.imu.flow.calibrator.calibration is None, "learnt again from the next standing pose and strides"
     got = (np.array(client.received.estimate_stamp_ns) - BASE_NS) * 1e-9
     assert (got > gap_s).any() and not (got > gap_s + 8.6).any(), "estimates after the gap until the verdict"
     stream(client, pubs, make_messages(s, 400, raw=True), rate_hz=RATE / 2)  # a restarted stream: stamps from 0 again
@@ -259,25 +260,26 @@ def test_a_saved_file_that_does_not_fit_gives_way_to_the_configured_axes(ros, tm
                                   s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
 
     imu, adapter = node.imu, node.stream.estimator.adapter
-    assert imu.flow.from_file and imu.calibrator.checking
+    assert imu.flow.from_file and imu.flow.calibrator.checking
     for stamp, k in samples:
-        imu.paired(stamp, items(stamp, k), time.perf_counter())
+        node.publish_outputs(node.stream.push_paired(stamp, items(stamp, k)), time.perf_counter())
         if k == round(9.0 * RATE):
             assert not path.exists() and not imu.flow.from_file, "the file gave way after the first check"
-            assert imu.calibrator.calibration == right and imu.calibrator.checking
+            assert imu.flow.calibrator.calibration == right and imu.flow.calibrator.checking
             assert set(adapter.skipped) == {"unchecked"}, "no stride of unchecked angles reached the kernels"
     assert adapter.skipped["warmup"] >= 2, "checked, the strides are personalised again"
-    assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within") and not imu.flow.check_problem
+    assert imu.flow.calibrator.status.startswith("calibrated, checked: lateral axes within") and not imu.flow.check_problem
     # ~/calibrate_standing before the file's verdict: the configured axes take over, and their
     # verdict is theirs (the file, never checked, is kept for the next start)
     path = save_calibration(turned(right, 0, 90.0), path)
-    imu = h.estimator(input_type="imu", imu_calibration_path=str(path), **configured).imu
+    node = h.estimator(input_type="imu", imu_calibration_path=str(path), **configured)
+    imu = node.imu
     inputs = [SensorInput() for _ in range(4)]
     assert "then walk 4 s" in imu.calibrate_standing(Trigger.Request(), Trigger.Response()).message
     for stamp, k in samples:
-        imu.paired(stamp, items(stamp, k), time.perf_counter())
-    assert not imu.flow.from_file and imu.calibrator.calibration == right and path.exists()  # orientations: no bias
-    assert imu.calibrator.status.startswith("calibrated, checked: lateral axes within")
+        node.publish_outputs(node.stream.push_paired(stamp, items(stamp, k)), time.perf_counter())
+    assert not imu.flow.from_file and imu.flow.calibrator.calibration == right and path.exists()  # orientations: no bias
+    assert imu.flow.calibrator.status.startswith("calibrated, checked: lateral axes within")
 
 
 def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path):
@@ -302,18 +304,18 @@ def test_configured_axes_get_the_gyro_biases_of_the_standing_pose(ros, tmp_path)
         angles = []
         for k, t in enumerate(s.time_s):
             stamp = BASE_NS + round(t * 1e9)
-            items = [imu.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
+            items = [imu.flow.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
                                            s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
-            imu.paired(stamp, items, time.perf_counter())
-            cal = imu.calibrator.calibration  # None for a sample after the file's misfit verdict
+            node.publish_outputs(node.stream.push_paired(stamp, items), time.perf_counter())
+            cal = imu.flow.calibrator.calibration  # None for a sample after the file's misfit verdict
             angles.append(cal.angles_deg([i[0] for i in items]) if cal else (math.nan,) * 4)
             if t < 1.5:
-                assert not any(any(i.gyro_bias_dps) for i in imu.inputs), "no bias before the standing"
+                assert not any(any(i.gyro_bias_dps) for i in imu.flow.inputs), "no bias before the standing"
         assert not imu.flow.from_file and not path.exists(), "the misfit file gave way" if saved else "no file"
-        assert imu.calibrator.calibration.mounts[0].lateral == right.mounts[0].lateral
-        got = np.array([i.gyro_bias_dps for i in imu.inputs])
+        assert imu.flow.calibrator.calibration.mounts[0].lateral == right.mounts[0].lateral
+        got = np.array([i.gyro_bias_dps for i in imu.flow.inputs])
         assert np.abs(got - true_bias).max() < 0.1, (saved, got, true_bias)
-        assert got.tolist() == [list(m.gyro_bias_dps) for m in imu.calibrator.calibration.mounts]
+        assert got.tolist() == [list(m.gyro_bias_dps) for m in imu.flow.calibrator.calibration.mounts]
         late = s.time_s > (10.0 if saved else 6.0)  # after the misfit file gave way
         assert (np.sqrt(np.mean((np.array(angles) - s.angles_deg)[late] ** 2, axis=0)) < 1.0).all()
 
@@ -331,18 +333,19 @@ def test_learning_fuses_with_the_standing_biases_from_the_end_of_the_standing(ro
     biased_at = learnt_at = None
     for k, t in enumerate(s.time_s):
         stamp = BASE_NS + round(t * 1e9)
-        items = [imu.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
+        items = [imu.flow.inputs[c].convert(stamp, (0.0, 0.0, 0.0, 1.0), -1.0, np.radians(s.gyro_dps[c, k]),
                                        s.acc_g[c, k] * STANDARD_GRAVITY) for c in range(4)]
-        imu.paired(stamp, items, time.perf_counter())
-        if biased_at is None and any(any(i.gyro_bias_dps) for i in imu.inputs):
+        node.publish_outputs(node.stream.push_paired(stamp, items), time.perf_counter())
+        if biased_at is None and any(any(i.gyro_bias_dps) for i in imu.flow.inputs):
             biased_at = t
-            assert imu.calibrator.calibration is None
-            assert np.abs(np.array([i.gyro_bias_dps for i in imu.inputs]) - true_bias).max() < 0.1
-        if imu.calibrator.calibration is not None:
+            assert imu.flow.calibrator.calibration is None
+            assert np.abs(np.array([i.gyro_bias_dps for i in imu.flow.inputs]) - true_bias).max() < 0.1
+        if imu.flow.calibrator.calibration is not None:
             learnt_at = t
             break
     assert biased_at is not None and learnt_at is not None and 2.0 <= biased_at < 2.6 and learnt_at - biased_at >= 2.5
-    assert [list(i.gyro_bias_dps) for i in imu.inputs] == [list(m.gyro_bias_dps) for m in imu.calibrator.calibration.mounts]
+    mounts = imu.flow.calibrator.calibration.mounts
+    assert [list(i.gyro_bias_dps) for i in imu.flow.inputs] == [list(m.gyro_bias_dps) for m in mounts]
 
 
 def test_benchmarks_replay_of_the_live_calibration_is_the_nodes(ros, tmp_path, monkeypatch):
@@ -383,11 +386,11 @@ def test_benchmarks_replay_of_the_live_calibration_is_the_nodes(ros, tmp_path, m
             msg = (stamp, tuple(left[c][k].tolist()), 0.0, zero, zero) if c in left else \
                 (stamp, (0.0, 0.0, 0.0, 1.0), -1.0, tuple(np.radians(gyro[c, k]).tolist()),
                  tuple((acc[c, k] * STANDARD_GRAVITY).tolist()))
-            for sample_ns, items in imu.pairer.push(c, stamp, imu.inputs[c].convert(*msg)):
-                imu.paired(sample_ns, items, time.perf_counter())
+            for sample_ns, items in imu.flow.pairer.push(c, stamp, imu.flow.inputs[c].convert(*msg)):
+                node.publish_outputs(node.stream.push_paired(sample_ns, items), time.perf_counter())
     assert [s for s, _ in seen] == [live.BASE_NS + round(float(t[k]) * 1e9) for k in rows]
     assert np.array_equal(np.array([a for _, a in seen]), want[rows])
-    assert imu.calibrator.standing_s == calibrator.standing_s
+    assert imu.flow.calibrator.standing_s == calibrator.standing_s
 
 
 def test_raw_imu_input_with_a_saved_calibration_equals_reading_the_bag(ros, tmp_path):
@@ -489,12 +492,12 @@ def test_configured_axes_need_no_calibration_file(ros, tmp_path):
     path = tmp_path / "never.imu.yaml"
     node = h.estimator(input_type="imu", imu_calibration_path=str(path), imu_lateral_axes=["+z"] * 4,
                        imu_proximal_axes=["-x"] * 4, imu_standing_angles_deg=[5.0, 5.0, -6.0, -6.0])
-    cal = node.imu.calibrator.calibration
+    cal = node.imu.flow.calibrator.calibration
     assert cal is not None and all(m.source == "configured" for m in cal.mounts)
-    assert [s.params for s in node.imu.inputs] == list(FUSION_BY_CHANNEL)  # thighs, then shanks: their fusion
+    assert [s.params for s in node.imu.flow.inputs] == list(FUSION_BY_CHANNEL)  # thighs, then shanks: their fusion
     assert cal.angles_deg([(-1.0, 0.0, 0.0)] * 4) == (5.0, 5.0, -6.0, -6.0)  # segment vertical: standing angle
     node.imu.reset_calibration()
-    assert node.imu.calibrator.add(0.0, [(-1.0, 0.0, 0.0)] * 4, [(0.0,) * 3] * 4, [(0.0, 0.0, 1.0)] * 4) is not None
+    assert node.imu.flow.calibrator.add(0.0, [(-1.0, 0.0, 0.0)] * 4, [(0.0,) * 3] * 4, [(0.0, 0.0, 1.0)] * 4) is not None
     assert not path.exists()
 
 
@@ -539,7 +542,7 @@ def test_save_library_writes_the_imu_calibration_where_the_next_start_reads_it(r
         assert np.allclose(a.lateral, b.lateral, atol=1e-6) and np.allclose(a.proximal, b.proximal, atol=1e-6)
     h.node_name = "restarted"
     again = h.estimator(input_type="imu", kernels=str(out))
-    assert again.imu.path == beside and again.imu.calibrator.calibration == load_calibration(beside)
+    assert again.imu.path == beside and again.imu.flow.calibrator.calibration == load_calibration(beside)
 
 
 def test_raw_input_needs_no_imufusion_and_bad_imu_durations_stop_the_node(ros, tmp_path, monkeypatch):

@@ -82,3 +82,32 @@ def restarted_bag(path: Path, rec) -> Path:
             writer.write(conn, BASE_NS + round(float(rec.time_s[i] - rec.time_s[0]) * 1e9),
                          ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
     return path
+
+
+def test_every_imu_input_is_counted_once_with_its_reason() -> None:
+    """Four IMUs through the node's stream object: each input is received once and either accepted
+    (a paired sample, with or without angles yet) or rejected with a reason (a bad message, one
+    without partners, undecodable bytes): received = accepted + rejected."""
+    from imu_synth import gait_angles, random_mounts, synthesize
+
+    from gait_estimator.core.estimator import EstimatorConfig
+    from gait_estimator.core.gait_stream import GaitStream
+    from gait_estimator.core.imu_flow import ImuFlow
+    from gait_estimator.core.rejections import MALFORMED, SampleRejected
+
+    rng = np.random.default_rng(5)
+    s = synthesize(gait_angles(200.0, walk_s=1.0, stand_s=0.5), 200.0, random_mounts(rng), rng)
+    stream = GaitStream(None, EstimatorConfig(), units=None)
+    stream.attach_imu(ImuFlow.from_settings([""] * 4, [""] * 4, [0.0] * 4, None, frames=[""] * 4, tolerance_s=0.004,
+                                            restart_back_s=1.0, path="x"))
+    for k in range(len(s.time_s)):
+        for c in range(4):
+            if c == 2 and 50 <= k < 60:  # the right shank silent: the others' messages go unpaired
+                continue
+            q = (0.0, 0.0, 0.0, 0.0) if (c, k) == (1, 70) else tuple(s.quat_xyzw[c, k])
+            stream.push_imu(c, BASE_NS + k * 5_000_000, q, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 9.8), "")
+    stream.push_imu(0, BASE_NS, (0.0, 0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 9.8), "")  # stamp back
+    stream.reject(SampleRejected(MALFORMED, "undecodable"))
+    rejected = stream.rejected()
+    assert rejected == {"malformed": 1, "non_increasing_stamp": 1, "unpaired": 30 + 3, "zero_norm": 1}
+    assert stream.accepted == len(s.time_s) - 10 - 1 and stream.received == stream.accepted + sum(rejected.values())

@@ -13,6 +13,7 @@ What is worth a log line comes back as ``StreamEvent`` in ``events``, for the ca
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, NamedTuple, Protocol
 
@@ -103,6 +104,11 @@ class GaitStream:
         self.events: list[StreamEvent] = []
         """Events since the caller last cleared the list (``take_events``)."""
         self.received = 0
+        """Inputs: each angle message; with four IMUs each message dropped on its own (bad or
+        unpaired) and each paired sample. Always ``accepted`` + the rejected (``rejected``)."""
+        self.accepted = 0
+        """Inputs taken: samples past the stamp check and the estimator; with four IMUs also the
+        paired samples the IMU calibration takes while it is learnt (no angles yet)."""
         self._resets_before = 0  # window restarts of estimators swapped out
         self._epoch_sec: int | None = None
         self._period_received = self._period_rejected = self._period_accepted = 0
@@ -175,6 +181,7 @@ class GaitStream:
                 self._first = t
             self._last = t
             self._period_accepted += 1
+        self.accepted += 1
         # the samples a new library's estimator is filled from (``swap``), with or without a library
         recent = self._recent
         recent.append((t, angles_deg))
@@ -201,8 +208,7 @@ class GaitStream:
                 "(the sensors may have been re-donned)"))
 
     def count_received(self) -> None:
-        """An input that will reach ``push`` with ``counted=True`` or nowhere (an IMU sample
-        while the calibration is learnt)."""
+        """An input that will reach ``push`` with ``counted=True``, or is a paired IMU sample."""
         self.received += 1
         self._period_received += 1
 
@@ -248,7 +254,7 @@ class GaitStream:
             return [exc]
         out = [o for ns, items in paired for o in self.push_paired(ns, items)]
         for exc in flow.unpaired(before):
-            self.reject(exc, received=False)
+            self.reject(exc)
             out.append(exc)
         return out
 
@@ -259,6 +265,8 @@ class GaitStream:
         self.count_received()
         out = self._imu_out = []
         flow.sample(stamp_ns, items, self._emit)
+        if not out:  # taken by the IMU calibration
+            self.accepted += 1
         if flow.not_fit:  # the window and learnt offsets came from wrong angles, the strides too
             flow.not_fit = False
             self.reset_calibration("the IMU calibration did not fit")
@@ -293,10 +301,6 @@ class GaitStream:
         return self._epoch_sec
 
     @property
-    def accepted(self) -> int:
-        return self.guard.accepted
-
-    @property
     def stream_restarts(self) -> int:
         """Jumps back that restarted the stream."""
         return self.guard.restarts
@@ -307,9 +311,12 @@ class GaitStream:
         resets = self.estimator.resets if self.estimator is not None else 0
         return self._resets_before + resets + self.guard.restarts
 
-    def rejected(self, reasons: tuple[str, ...] | list[str]) -> dict[str, int]:
-        """Dropped inputs so far, by reason (every reason in ``reasons`` listed)."""
-        return {r: int(self.guard.rejected.get(r, 0)) for r in reasons}
+    def rejected(self, reasons: Sequence[str] | None = None) -> dict[str, int]:
+        """Dropped inputs so far, by reason: every reason in ``reasons`` listed (None: the
+        reasons counted so far, sorted). Every rejection is counted here (``reject``, ``push``,
+        ``push_imu``), as reasons the guard keeps."""
+        counts = self.guard.rejected
+        return {r: int(counts.get(r, 0)) for r in (sorted(counts) if reasons is None else reasons)}
 
     # -- options and libraries
 

@@ -15,7 +15,6 @@ delete) comes back as ``StreamEvent`` through ``on_event``.
 from __future__ import annotations
 
 import math
-from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -62,9 +61,9 @@ class ImuFlow:
                  saved: ImuCalibration | None, *, from_file: bool, configured: bool, frames: Sequence[str],
                  tolerance_s: float, restart_back_s: float, path: str,
                  on_event: Callable[[str, str], None] | None = None) -> None:
-        self.inputs = [SensorInput(None, f.strip(), fusion, restart_back_s)  # raw: rate from stamps
-                       for f, fusion in zip(frames, FUSION_BY_CHANNEL, strict=True)]
         self.pairer = ImuPairer(tolerance_s)
+        self.inputs = [SensorInput(None, f.strip(), fusion, restart_back_s, on_restart=self.pairer.restarted)
+                       for f, fusion in zip(frames, FUSION_BY_CHANNEL, strict=True)]  # raw: rate from stamps
         self.from_file = from_file
         self.configured = configured
         self.path = path
@@ -77,7 +76,6 @@ class ImuFlow:
         self.angles = ImuAngles(self.inputs, self.calibrator, self._biases_measured, self._learnt, self._checked)
         if saved is not None:
             self.angles.set_gyro_biases([m.gyro_bias_dps for m in saved.mounts])
-        self.rejected: Counter = Counter()
         self.gaps = GapCheck(GapParams(0.0, 0.0, restart_back_s))  # GaitStream.attach_imu sets its thresholds
 
     @classmethod
@@ -102,15 +100,14 @@ class ImuFlow:
                    frames=frames, tolerance_s=tolerance_s, restart_back_s=restart_back_s, path=path)
 
     def convert(self, sensor: int, stamp_ns: int, orientation: Any, cov0: float, gyro: Any, acc: Any,
-                frame_id: str) -> list[tuple[int, list[Any]]]:
+                frame_id: str) -> Sequence[tuple[int, list[Any]]]:
         """One decoded message of ``sensor``: the paired samples it completes (stamp ns, items).
-        Raises SampleRejected (counted here) for a bad message."""
+        Raises SampleRejected for a bad message (``GaitStream`` counts it)."""
         try:
             item = self.inputs[sensor].convert(stamp_ns, orientation, cov0, gyro, acc, frame_id)
         except SampleRejected as exc:
-            self.rejected[exc.reason] += 1
             raise SampleRejected(exc.reason, f"{CHANNELS[sensor]}: {exc}") from None
-        return list(self.pairer.push(sensor, stamp_ns, item))
+        return self.pairer.push(sensor, stamp_ns, item)
 
     def unpaired(self, before: int) -> list[SampleRejected]:
         """The messages dropped without partners since the pairer counted ``before``."""
@@ -120,7 +117,6 @@ class ImuFlow:
         waiting = [c for c, q in zip(CHANNELS, pairer.queues, strict=True) if not q]
         why = (f"no message from {', '.join(waiting)} within the pairing tolerance of the others" if waiting
                else "a message without partners within the pairing tolerance")
-        self.rejected[UNPAIRED] += pairer.unpaired - before
         return [SampleRejected(UNPAIRED, f"{why} (dropped so far: {dict(pairer.dropped)})")
                 for _ in range(pairer.unpaired - before)]
 
@@ -129,7 +125,7 @@ class ImuFlow:
         ``restart_back_s`` (a restarted sensor or stream), has the calibration checked again."""
         self.gaps.params = GapParams(0.0, calibration_reset_gap_s, restart_back_s)
         for sensor in self.inputs:
-            sensor.restart_back_ns = round(restart_back_s * 1e9)
+            sensor.stamps.params = GapParams(0.0, 0.0, restart_back_s)
 
     def sample(self, stamp_ns: int, items: list, emit: Callable[[tuple[float, ...], int], None]) -> None:
         """One paired sample: ``emit(angles, stamp_ns)`` once calibrated; a gap or restart first

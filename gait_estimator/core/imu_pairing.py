@@ -15,15 +15,16 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 import numpy as np
 
 from .ahrs import CompiledFusion, make_fusion
 from .channels import CHANNELS, N_CHANNELS
+from .gaps import JUMPED_BACK, GapCheck, GapParams
 from .imu import DEFAULT_FUSION, STANDARD_GRAVITY, FusionParams, Vec3
-from .rejections import NON_FINITE, NON_INCREASING_STAMP, OUT_OF_RANGE, SampleRejected
+from .rejections import NON_FINITE, OUT_OF_RANGE, SampleRejected
 from .stamps import STREAM_RESTART_S
 
 ZERO_NORM = "zero_norm"
@@ -62,48 +63,36 @@ class SensorInput:
         params: Settings of the raw-input fusion.
         restart_back_s: Two messages in a row stamped more than this (s) before the previous
             accepted one, the second after the first, are a restarted sensor (a driver restart, a
-            bag played again): from the second on they are accepted, the fusion started afresh and
-            ``restarts`` counted; a single such message, or a smaller step back, is rejected (0 =
-            always rejected).
+            bag played again; ``GapCheck`` with ``confirm_restart``): from the second on they are
+            accepted, the fusion started afresh and ``restarts`` counted; a single such message,
+            or a smaller step back, is rejected (0 = always rejected).
+        on_restart: Called with the stamp (ns) of a message that restarted the sensor, before it
+            is converted (``ImuPairer.restarted``).
     """
 
     def __init__(self, rate_hz: float | None = 200.0, frame_id: str = "", params: FusionParams = DEFAULT_FUSION,
-                 restart_back_s: float = STREAM_RESTART_S, rate_steps: int = RATE_STEPS) -> None:
+                 restart_back_s: float = STREAM_RESTART_S, rate_steps: int = RATE_STEPS,
+                 on_restart: Callable[[int], None] | None = None) -> None:
         self._rate_hz = 200.0 if rate_hz is None else rate_hz
         self._measured = rate_hz is None
         self._steps: list[int] | None = [] if rate_hz is None else None  # stamp steps (ns) while measuring
         self.rate_steps = rate_steps
         self.params = params
         self.frame_id = frame_id
-        self.restart_back_ns = round(restart_back_s * 1e9)
+        self.stamps = GapCheck(GapParams(0.0, 0.0, restart_back_s), per_second=1e9, confirm_restart=True)
+        """The stamp rule, on the stamps (ns) of the messages with usable values."""
         self.fusion: CompiledFusion | None = None
         self.gyro_bias_dps: Vec3 = (0.0, 0.0, 0.0)
-        self.last_ns: int | None = None
         self.restarts = 0
-        self._restart_from: int | None = None  # stamp of a message far before the previous one
+        self.on_restart = on_restart
 
     def convert(self, stamp_ns: int, orientation: Any, orientation_cov0: float, gyro_rps: Any,
                 acc_mps2: Any, frame_id: str = "") -> tuple[Sequence[float], Vec3, Vec3]:
         """Fields of one Imu message (quaternion x, y, z, w; rad/s; m/s^2) -> (up, gyro, acc)."""
         if self.frame_id and frame_id != self.frame_id:
             raise SampleRejected(WRONG_FRAME, f"frame_id {frame_id!r}, expected {self.frame_id!r}")
-        last = self.last_ns
-        restarting = False  # committed (_restart) only once the message passes every check
-        if last is not None and stamp_ns <= last:
-            candidate = self._restart_from
-            if 0 < self.restart_back_ns < last - stamp_ns:
-                if candidate is None or stamp_ns <= candidate:  # a stray old message, until the next confirms
-                    self._restart_from = stamp_ns
-                    raise SampleRejected(NON_INCREASING_STAMP, f"stamp {stamp_ns * 1e-9:.6f} s is "
-                                         f"{(last - stamp_ns) * 1e-9:.3f} s before the previous (a restart?)")
-                restarting, last = True, None  # a second message after the first on the earlier stamps
-            else:
-                self._restart_from = None
-                raise SampleRejected(NON_INCREASING_STAMP,
-                                     f"stamp {stamp_ns * 1e-9:.6f} s is not after the previous {last * 1e-9:.6f} s")
-        elif self._restart_from is not None:
-            self._restart_from = None
         gx, gy, gz = gyro_rps
+        stamps = self.stamps
         if orientation_cov0 != -1.0:
             x, y, z, w = orientation
             n = x * x + y * y + z * z + w * w
@@ -114,32 +103,33 @@ class SensorInput:
             up = (s * (x * z - w * y), s * (y * z + w * x), 1.0 - s * (x * x + y * y))
             gyro = (gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG) if gx * gx + gy * gy + gz * gz < _MAX_RATE2 \
                 else NO_RATES
-            if restarting:
-                self._restart()
-            self.last_ns = stamp_ns
+            if stamps.admit_stamp(stamp_ns) is JUMPED_BACK:
+                self._restart(stamp_ns)
             return up, gyro, NO_RATES  # the accelerometer is the orientation filter's business
         ax, ay, az = acc_mps2
         if not (gx * gx + gy * gy + gz * gz < _MAX_RATE2 and 1e-6 <= ax * ax + ay * ay + az * az < _MAX_ACC2):
             self._reject_raw(gx, gy, gz, ax, ay, az)  # false for NaN too
-        if restarting:
-            self._restart()
+        last = stamps.last_time
+        if stamps.admit_stamp(stamp_ns) is JUMPED_BACK:
+            self._restart(stamp_ns)
+            last = None
         fusion = self.fusion
         if fusion is None:
             fusion = self.fusion = make_fusion(self._rate_hz, self.gyro_bias_dps, self.params)
         gx, gy, gz, ax, ay, az = gx * _RAD2DEG, gy * _RAD2DEG, gz * _RAD2DEG, ax / _G, ay / _G, az / _G
         up = fusion.update_xyz(gx, gy, gz, ax, ay, az, None if last is None else (stamp_ns - last) * 1e-9)
-        self.last_ns = stamp_ns
         if self._steps is not None and last is not None:
             self._measure_rate(stamp_ns - last)
         return up, (gx, gy, gz), (ax, ay, az)
 
-    def _restart(self) -> None:
+    def _restart(self, stamp_ns: int) -> None:
         """The sensor restarted (a driver restart, a bag played again): its fusion starts afresh."""
         self.restarts += 1
-        self._restart_from = None
         self.fusion = None
         if self._measured:  # the driver may come back at another rate
             self._steps = []
+        if self.on_restart is not None:
+            self.on_restart(stamp_ns)
 
     @staticmethod
     def _reject_raw(gx: float, gy: float, gz: float, ax: float, ay: float, az: float) -> NoReturn:
@@ -207,15 +197,10 @@ class ImuPairer:
         self.dropped: Counter = Counter()  # unpaired messages per sensor name
         self.unpaired = 0
         """Unpaired messages, all sensors (the sum of ``dropped``)."""
-        self._newest = [-1] * N_CHANNELS
 
     def push(self, sensor: int, stamp_ns: int, item: Any) -> Sequence[tuple[int, list[Any]]]:
         """Add one accepted message; returns the samples it completes: (stamp_ns = the latest
         of the four, [item per sensor])."""
-        newest = self._newest
-        if stamp_ns < newest[sensor]:
-            self._restarted(stamp_ns)
-        newest[sensor] = stamp_ns
         queues = self.queues
         q = queues[sensor]
         q.append((stamp_ns, item))
@@ -244,8 +229,9 @@ class ImuPairer:
         self.dropped[CHANNELS[sensor]] += n
         self.unpaired += n
 
-    def _restarted(self, stamp_ns: int) -> None:
-        """A sensor restarted (a stamp before its newest): drop what was queued under the old stamps."""
+    def restarted(self, stamp_ns: int) -> None:
+        """A sensor restarted with a message stamped ``stamp_ns`` (``SensorInput.on_restart``):
+        drop what was queued under the old stamps."""
         limit = stamp_ns + self.tolerance_ns
         for i, old in enumerate(self.queues):
             kept = [m for m in old if m[0] <= limit]

@@ -48,7 +48,6 @@ class StreamGuard:
         self.last_detail: dict[str, str] = {}
         """The latest rejection's text, by reason."""
         self._reported: Counter = Counter()
-        self.accepted = 0
         self.resets = 0
         self.restarts = 0
 
@@ -64,13 +63,8 @@ class StreamGuard:
     def restart_back_s(self, seconds: float) -> None:
         self.check.params = replace(self.check.params, restart_back_s=seconds)
 
-    @property
-    def last_stamp(self) -> float | None:
-        """Stamp (s) of the last accepted sample."""
-        return self.check.last_time
-
     def accept(self, stamp_s: float) -> bool:
-        """Record an accepted sample at ``stamp_s``; True if the window must restart before it
+        """Accept a sample stamped ``stamp_s``; True if the window must restart before it
         (a gap, counted in ``resets``, or a jump back, counted in ``restarts``). Raises
         SampleRejected (non_increasing_stamp, non_finite) without changing state."""
         verdict = self.check.admit_stamp(stamp_s)
@@ -78,7 +72,6 @@ class StreamGuard:
             self.restarts += 1
         elif verdict.restart_window:
             self.resets += 1
-        self.accepted += 1
         return verdict.restart_window
 
     def reject(self, exc: SampleRejected) -> None:

@@ -21,13 +21,14 @@ from ..core.channels import Sample, sample_values
 from ..core.errors import RecordingError
 from ..core.estimator import EstimatorConfig, trace_from_estimates
 from ..core.imu import ImuCalibration
+from ..core.imu_pairing import DEFAULT_TOLERANCE_S
 from ..core.kernels import KernelLibrary
 from ..core.rejections import MALFORMED, SampleRejected
 from ..core.supervisor import Estimate
 from .bag import JOINT_STATE, BagRecording, bag_samples, bag_topics, is_bag_path, open_bag
 from .cdr import CdrError, read_imu
 from .imu_bag import ImuBagRecording, imu_topics_of, is_imu_bag
-from .imu_stream import DEFAULT_TOLERANCE_S, load_calibration
+from .imu_stream import load_calibration
 from .outputs import Predictions
 from .read_options import ReadOptions
 

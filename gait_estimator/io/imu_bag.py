@@ -1,6 +1,6 @@
 """Reading four ``sensor_msgs/Imu`` topics of a rosbag2 bag into a Recording of segment angles.
 
-The same code as the node's ``input_type: imu`` (``imu_stream.py``): each message becomes its
+The same code as the node's ``input_type: imu`` (``core/imu_pairing.py``): each message becomes its
 sensor's up direction, the four streams are paired by stamp, and the calibration (given, or
 learnt) turns them into angles. Unlike the node, the whole file is known (docs/imu.md, "Offline"):
 a learnt calibration applies from the first sample, raw sensors are fused again with the gyro
@@ -33,10 +33,11 @@ from ..core.imu_learn import (
     find_standing,
     learn_calibration,
 )
+from ..core.imu_pairing import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s
 from ..core.rejections import SampleRejected
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, typestore
 from .cdr import stamp_to_ns, write_imu
-from .imu_stream import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, load_calibration
+from .imu_stream import load_calibration
 from .read_options import ReadOptions
 
 IMU = "sensor_msgs/msg/Imu"

@@ -1,5 +1,4 @@
-"""The IMU calibration's file (YAML, atomic write) and where it is kept; the ROS-free IMU stream
-itself (``SensorInput``, ``ImuPairer``) is ``core/imu_pairing.py``'s, re-exported here."""
+"""The IMU calibration's file (YAML, atomic write) and where it is kept."""
 
 from __future__ import annotations
 
@@ -8,18 +7,6 @@ from pathlib import Path
 import yaml
 
 from ..core.imu import CalibrationError, ImuCalibration
-from ..core.imu_pairing import (  # noqa: F401  (re-exported)
-    DEFAULT_TOLERANCE_S,
-    NON_FINITE,
-    NON_INCREASING_STAMP,
-    OUT_OF_RANGE,
-    UNPAIRED,
-    WRONG_FRAME,
-    ZERO_NORM,
-    ImuPairer,
-    SensorInput,
-    auto_tolerance_s,
-)
 from .atomic import atomic_write_text
 
 

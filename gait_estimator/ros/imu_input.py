@@ -92,11 +92,9 @@ class ImuInput:
             values["imu_lateral_axes"], values["imu_proximal_axes"], values["imu_standing_angles_deg"], from_file,
             frames=list(values["imu_frame_ids"]), tolerance_s=float(values["imu_pairing_tolerance_s"]),
             restart_back_s=node.stream.guard.restart_back_s, path=str(self.path))
-        self.configured = self.flow.configured
         saved = self.flow.calibrator.calibration
         warm_up()  # the raw fusion's compiled step, before the first message waits for it
         node.stream.attach_imu(self.flow)
-        self.calibrator, self.inputs, self.pairer = self.flow.calibrator, self.flow.inputs, self.flow.pairer
         self.last_arrival = [math.nan] * N_CHANNELS
         self.received = [0] * N_CHANNELS
         self.started = time.monotonic()
@@ -109,11 +107,11 @@ class ImuInput:
         if saved is not None:
             log.info(f"IMU calibration from {self.path if from_file is not None else 'the configured axes'}: "
                      f"{saved.summary()}")
-            if from_file is not None and self.configured:
+            if from_file is not None and self.flow.configured:
                 log.warn(f"imu_lateral_axes/imu_proximal_axes are configured, but {self.path} is used; "
                          "~/reset_calibration deletes it")
         else:
-            log.info(f"no IMU calibration at {self.path}: {self.calibrator.status or 'learning'} "
+            log.info(f"no IMU calibration at {self.path}: {self.flow.calibrator.status or 'learning'} "
                      f"(stand still {STILL_S:g} s, then walk {WALK_S:g} s); the estimate waits until then")
 
     # -----------------------------------------------------------------------------------------
@@ -131,7 +129,6 @@ class ImuInput:
                 try:
                     msg = deserialize_message(msg, Imu)
                 except Exception:  # whatever rclpy raises for undecodable bytes
-                    self.flow.rejected[MALFORMED] += 1
                     node.reject(SampleRejected(MALFORMED, f"{CHANNELS[sensor]}: cannot decode the Imu ({exc})"))
                     return
         if not isinstance(msg, bytes):
@@ -143,10 +140,6 @@ class ImuInput:
         if stamp_ns == 0:
             stamp_ns = node.get_clock().now().nanoseconds
         node.publish_outputs(node.stream.push_imu(sensor, stamp_ns, orientation, cov0, gyro, acc, frame_id), t0)
-
-    def paired(self, stamp_ns: int, items: list, t0: float) -> None:
-        """One paired sample (``ImuPairer``): its angles, once calibrated, to the node's stream."""
-        self.node.publish_outputs(self.node.stream.push_paired(stamp_ns, items), t0)
 
     def handle(self, events: list[StreamEvent]) -> list[StreamEvent]:
         """Log the IMU flow's events (saving a learnt calibration, deleting one that does not
@@ -161,7 +154,7 @@ class ImuInput:
             elif kind == IMU_LEARNT:
                 self._learnt(line)
             elif kind == IMU_NOT_FIT:
-                if self.configured:  # the configured axes take over; the file would be read again at the next start
+                if self.flow.configured:  # the configured axes take over; the file would be read again at the next start
                     try:
                         self.path.unlink(missing_ok=True)
                         then = "the file deleted, the configured axes used (and checked)"
@@ -176,8 +169,8 @@ class ImuInput:
 
     def _learnt(self, summary: str) -> None:
         log = self.node.get_logger()
-        cal = self.calibrator.calibration
-        if self.configured or cal is None:
+        cal = self.flow.calibrator.calibration
+        if self.flow.configured or cal is None:
             log.info(f"IMU calibration from the configured axes: {summary}")
             return
         try:
@@ -191,7 +184,7 @@ class ImuInput:
         """``~/save_library``: write the learnt calibration where a node started with ``kernels:
         library_path`` looks for it; what happened, for the service reply ('' when nothing was
         learnt: configured axes need no file)."""
-        cal = self.calibrator.calibration
+        cal = self.flow.calibrator.calibration
         if cal is None or all(m.source == "configured" for m in cal.mounts):
             return ""
         path = calibration_path_for(library_path, library_name)
@@ -203,8 +196,8 @@ class ImuInput:
     # -----------------------------------------------------------------------------------------
 
     def calibrate_standing(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        relearn = self.calibrator.checking
-        self.calibrator.request_standing()
+        relearn = self.flow.calibrator.checking
+        self.flow.calibrator.request_standing()
         response.success = True
         response.message = (f"stand still for {STILL_S:g} s: the next still stretch becomes the standing pose"
                             + (f", then walk {WALK_S:g} s (the calibration was not checked yet)" if relearn else "")
@@ -223,7 +216,7 @@ class ImuInput:
             pass
         except OSError as exc:
             removed = f", {self.path} NOT deleted ({exc})"
-        return f"; IMU calibration forgotten{removed}: {self.calibrator.status} to learn it again"
+        return f"; IMU calibration forgotten{removed}: {self.flow.calibrator.status} to learn it again"
 
     def diagnostics(self) -> tuple[dict[str, str], list[str]]:
         """Key/values and problems for the node's diagnostics status."""
@@ -233,20 +226,21 @@ class ImuInput:
             since = (now - self.started) if math.isnan(last) else now - last
             if since > self.timeout_s:
                 silent.append(f"{c} ({since:.1f} s)")
-        cal = self.calibrator.calibration
+        calibrator = self.flow.calibrator
+        cal = calibrator.calibration
         values = {
             "imu_calibration": cal.summary() if cal is not None else "",
-            "imu_calibration_status": self.calibrator.status,
+            "imu_calibration_status": calibrator.status,
             "imu_calibration_path": str(self.path),
             "imu_messages": ",".join(str(n) for n in self.received),
             "imu_silent": ", ".join(silent),
-            **{f"imu_rejected_{r}": str(n) for r, n in sorted(self.flow.rejected.items())},
+            **{f"imu_rejected_{r}": str(n) for r, n in self.node.stream.rejected().items()},
         }
         problems = []
         if silent:
             problems.append("IMU silent: " + ", ".join(silent) + " (estimate waits)")
         if cal is None:
-            problems.append(f"IMU calibration: {self.calibrator.status}")
+            problems.append(f"IMU calibration: {calibrator.status}")
         if self.flow.check_problem:
             problems.append("IMU calibration: " + self.flow.check_problem)
         return values, problems
