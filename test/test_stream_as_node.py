@@ -56,13 +56,13 @@ def test_process_as_node_on_the_command_line(tmp_path: Path, multispeed_csv: Pat
     bag = write_input_bag(rec, tmp_path / "bag", start_ns=BASE_NS)
     assert main(["process", str(bag), "--out", str(tmp_path / "plain.csv"), "-q"]) == 0
     assert main(["process", str(bag), "--as-node", "--out", str(tmp_path / "node.csv")]) == 0
-    assert "as the node: 800 messages, 800 accepted, window restarts 0" in capsys.readouterr().out
+    assert "as the node: 800 received, 800 accepted, window restarts 0" in capsys.readouterr().out
     assert (tmp_path / "node.csv").read_bytes() == (tmp_path / "plain.csv").read_bytes()
     assert main(["process", str(bag), "--as-node", "--start", "3"]) == 2
 
     path = restarted_bag(tmp_path / "restarted", rec)  # second half: stamps from BASE_NS again
     assert main(["process", str(path), "--as-node"]) == 0
-    assert "as the node: 800 messages, 800 accepted, window restarts 1 (1 jumps back)" in capsys.readouterr().out
+    assert "as the node: 800 received, 800 accepted, window restarts 1 (1 jumps back)" in capsys.readouterr().out
     assert main(["process", str(path)]) == 0
     assert "skipped 400 sample(s): non_increasing_stamp" in capsys.readouterr().out
 

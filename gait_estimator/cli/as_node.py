@@ -30,7 +30,7 @@ def finish(args: argparse.Namespace, stream: Any, source: str, quiet: bool = Fal
     if quiet:
         return
     rejected = {r: n for r, n in stream.guard.rejected.items() if n}
-    print(f"as the node: {stream.received} messages, {stream.accepted} accepted, window restarts "
+    print(f"as the node: {stream.received} received, {stream.accepted} accepted, window restarts "
           f"{stream.window_resets} ({stream.stream_restarts} jumps back)"
           + ("; dropped: " + ", ".join(f"{n} {r}" for r, n in rejected.items()) if rejected else ""))
     for event in stream.take_events():
