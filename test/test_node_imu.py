@@ -456,9 +456,9 @@ def test_imu_input_learns_saves_and_forgets_the_calibration_and_survives_bad_inp
     assert path.is_file(), "the learnt calibration is saved"
     diag = client.latest_diagnostics(3.0)
     assert diag["imu_calibration_status"] == "calibrated" and "[learnt]" in diag["imu_calibration"]
-    assert int(diag["rejected_non_finite"]) >= 1 and int(diag["imu_rejected_zero_norm"]) >= 1
-    assert int(diag["rejected_non_increasing_stamp"]) >= 1 and int(diag["imu_rejected_unpaired"]) >= 1
-    assert int(diag["imu_rejected_wrong_frame"]) >= 1 and "rejected_missing_joint" not in diag  # JointState's only
+    assert int(diag["rejected_non_finite"]) >= 1 and int(diag["rejected_zero_norm"]) >= 1
+    assert int(diag["rejected_non_increasing_stamp"]) >= 1 and int(diag["rejected_unpaired"]) >= 1
+    assert int(diag["rejected_wrong_frame"]) >= 1 and "rejected_missing_joint" not in diag  # JointState's only
     assert any(d.get("imu_silent", "").startswith("right_shank (") and "thigh" not in d["imu_silent"]
                for d in client.received.diagnostics), "the silent sensor is named in the diagnostics"
     assert "dropped IMU input: unpaired: no message from right_shank within the pairing tolerance" in capfd.readouterr().err
@@ -599,7 +599,7 @@ def test_undecodable_imu_bytes_are_dropped_and_counted(ros_cdr, tmp_path):
         pubs[c].publish(good)  # still taken after them
     assert client.spin_until(lambda: node.samples_received == 3, 5.0)
     diag = client.latest_diagnostics(3.0)
-    assert diag["rejected_malformed"] == "2" and diag["imu_rejected_malformed"] == "2"
+    assert diag["rejected_malformed"] == "2" and "imu_rejected_malformed" not in diag
     # A sensor that sends only undecodable bytes is silent: nothing usable arrives from it.
     start = time.monotonic()
     while time.monotonic() - start < 1.5:  # > imu_timeout_s (0.5 s)

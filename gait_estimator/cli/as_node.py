@@ -29,7 +29,7 @@ def finish(args: argparse.Namespace, stream: Any, source: str, quiet: bool = Fal
     save_imu_calibration(args, stream.imu.calibrator.calibration if stream.imu is not None else None, source)
     if quiet:
         return
-    rejected = {r: n for r, n in stream.guard.rejected.items() if n}
+    rejected = {r: n for r, n in stream.rejected().items() if n}
     print(f"as the node: {stream.received} received, {stream.accepted} accepted, window restarts "
           f"{stream.window_resets} ({stream.stream_restarts} jumps back)"
           + ("; dropped: " + ", ".join(f"{n} {r}" for r, n in rejected.items()) if rejected else ""))

@@ -212,11 +212,10 @@ class GaitStream:
         self.received += 1
         self._period_received += 1
 
-    def reject(self, exc: SampleRejected, received: bool = True) -> None:
-        """Count an input dropped before ``push`` (undecodable, a missing joint, ...);
-        ``received``: count it as a received input too."""
-        if received:
-            self.count_received()
+    def reject(self, exc: SampleRejected) -> None:
+        """Count an input dropped before ``push`` (undecodable, a missing joint, ...), as received
+        and rejected."""
+        self.count_received()
         self._count_rejection(exc)
 
     def _count_rejection(self, exc: SampleRejected) -> None:

@@ -85,7 +85,7 @@ class GapCheck:
         """Accept sample ``x`` (degrees) stamped ``time_s`` (seconds).
 
         Raises SampleRejected (a ValueError) for a non-finite sample or stamp, or a stamp not
-        after the previous one; the state is then unchanged.
+        after the previous one; the state is then unchanged but ``admit_stamp``'s restart candidate.
         """
         if not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]) and math.isfinite(x[3])):
             raise SampleRejected(NON_FINITE, f"non-finite sample {list(x)} at {time_s}")

@@ -24,12 +24,14 @@ from .ahrs import CompiledFusion, make_fusion
 from .channels import CHANNELS, N_CHANNELS
 from .gaps import JUMPED_BACK, GapCheck, GapParams
 from .imu import DEFAULT_FUSION, STANDARD_GRAVITY, FusionParams, Vec3
-from .rejections import NON_FINITE, OUT_OF_RANGE, SampleRejected
+from .rejections import ANGLE_MESSAGE_ONLY, NON_FINITE, OUT_OF_RANGE, REASONS, SampleRejected
 from .stamps import STREAM_RESTART_S
 
 ZERO_NORM = "zero_norm"
 UNPAIRED = "unpaired"
 WRONG_FRAME = "wrong_frame"
+IMU_REASONS = (*(r for r in REASONS if r not in ANGLE_MESSAGE_ONLY), ZERO_NORM, UNPAIRED, WRONG_FRAME)
+"""Every reason four-IMU input can be rejected for."""
 MAX_RATE_RPS = 350.0
 """Largest angular rate (rad/s, about 20000 deg/s) taken from a message: beyond any IMU's range,
 so a raw message with more is dropped (``out_of_range``) and an orientation message is used

@@ -60,9 +60,10 @@ def _resample_mode(value: Any) -> str:
     return v
 
 
-def _check_number(name: str, value: Any, low: float = 0.0, high: float = math.inf) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (low <= value <= high):
-        bound = f"in [{low:g}, {high:g}]" if math.isfinite(high) else f">= {low:g}"
+def _check_number(name: str, value: Any, low: float = 0.0, high: float = math.inf, open_high: bool = False) -> None:
+    number = not isinstance(value, bool) and isinstance(value, (int, float))
+    if not number or not (low <= value <= high) or (open_high and value == high):
+        bound = f"in [{low:g}, {high:g}{')' if open_high else ']'}" if math.isfinite(high) else f">= {low:g}"
         raise ValueError(f"{name} must be a number {bound}, got {value!r}")
 
 
@@ -132,9 +133,7 @@ class EstimatorConfig:
             _check_number(name, getattr(self, name))
         for name in ("offset_calibration_rate", "cadence_calibration_rate", "adapt_rate"):
             _check_number(name, getattr(self, name), 0.0, 1.0)
-        margin = self.switch_back_margin
-        if isinstance(margin, bool) or not (isinstance(margin, (int, float)) and 0.0 <= margin < 1.0):
-            raise ValueError(f"switch_back_margin must be a number in [0, 1), got {self.switch_back_margin!r}")
+        _check_number("switch_back_margin", self.switch_back_margin, 0.0, 1.0, open_high=True)
         if not (self.phase_rate_tau_s > 0 and math.isfinite(self.phase_rate_tau_s)):
             raise ValueError(f"phase_rate_tau_s must be > 0, got {self.phase_rate_tau_s!r}")
         if not (self.adapt_max_step_deg > 0 and math.isfinite(self.adapt_max_step_deg)):

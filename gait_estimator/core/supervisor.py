@@ -57,7 +57,7 @@ class Estimate:
         confidence: Margin of the candidate over the best other mode, relative to its SSE (>= 0
             when the candidate is the argmin; inf with a single mode).
         fit_rms_deg: RMS error per sample and channel of the reported mode, degrees.
-        held: True while the reported mode is held (low confidence or dwell pending).
+        held: True while the reported mode is held (low confidence, dwell pending, switch-back margin).
         phase_rate: Smoothed phase velocity, strides per second; nan until known.
         cadence_ratio: Wearer cadence / kernel cadence of the reported mode: 1 / the time scale
             of its best kernel variant; nan when the matcher has one scale.
@@ -226,7 +226,7 @@ class Supervisor:
         return self.min_confidence == 0 and self.min_dwell_s == 0 and self.switch_back_margin == 0 and self.allowed is None
 
     def reset(self) -> None:
-        self._mem: list[float] = [-1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan, math.nan, 0.0, -1.0]  # supervise_step's
+        self._mem: list[float] = list(INITIAL_MEMORY)
 
     def decide(self, time_s: float, result: StepResult) -> Estimate:
         """The reported mode and phase for one matcher result at ``time_s`` (seconds): the
@@ -275,8 +275,8 @@ class Supervisor:
         }
 
 
-MEMORY = 11
-"""supervise_step's memory: the current mode (-1: none yet), the pending mode (-1: none) and since
+INITIAL_MEMORY = (-1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan, math.nan, 0.0, -1.0)
+"""supervise_step's memory, as it starts: the current mode (-1: none yet), the pending mode (-1: none) and since
 when; the last ready step (known, time, mode, phase); the phase rate; the last interval between
 ready steps and its smoothing weight; the mode reported before the current one (-1: none)."""
 
@@ -288,10 +288,11 @@ def supervise_step(mem: Any, time_s: float, values: Any, sse: np.ndarray, argmin
     (``values``: the same as a list, or the array), their ``argmin`` and ``second`` smallest
     (inf with one mode), the argmin's phase ``best_phase``, every mode's ``phases`` and
     ``window``; ``allowed`` (M, M) the transitions (None: any); ``settings`` = (min_confidence,
-    min_dwell_s, phase_rate_tau_s, normalized, active channels, switch_back_margin); ``mem`` (MEMORY,) updated in
-    place. Returns the reported mode, held, confidence, fit (deg RMS), phase and phase rate: moved
-    by 1 - exp(-dt / tau) towards the phase change over the dt since the last ready step if that
-    reported the same mode (the first such reading sets it), else unchanged."""
+    min_dwell_s, phase_rate_tau_s, normalized, active channels, switch_back_margin); ``mem`` (laid
+    out as INITIAL_MEMORY) updated in place. Returns the reported mode, held, confidence, fit (deg
+    RMS), phase and phase rate: moved by 1 - exp(-dt / tau) towards the phase change over the dt
+    since the last ready step if that reported the same mode (the first such reading sets it),
+    else unchanged."""
     min_confidence, min_dwell_s, tau, normalized, channels, margin = settings
     candidate = argmin
     if allowed is not None and mem[0] >= 0.0:

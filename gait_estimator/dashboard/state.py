@@ -74,7 +74,7 @@ TEACH_KEYS = ("teach_mode", "teach_progress", "teach_last_event", "teach_complet
 def diagnostics_view(level: str, message: str, values: Mapping[str, str]) -> dict[str, Any]:
     """Level, message, input rate, rejected samples by reason (non-zero ones), IMU calibration."""
     rejected = {k.split("_", 1)[1]: v for k, v in values.items()
-                if k.startswith(("rejected_", "imu_rejected_")) and v not in ("", "0")}
+                if k.startswith("rejected_") and v not in ("", "0")}
     return {"level": level, "message": message, **{k: values.get(k, "") for k in DIAGNOSTIC_KEYS},
             "rejected": rejected, "teach": {k[len("teach_"):] if k.startswith("teach_") else k: values.get(k, "")
                                             for k in TEACH_KEYS}}

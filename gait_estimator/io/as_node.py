@@ -26,7 +26,7 @@ from ..core.kernels import KernelLibrary
 from ..core.rejections import MALFORMED, SampleRejected
 from ..core.supervisor import Estimate
 from .bag import JOINT_STATE, BagRecording, bag_samples, bag_topics, is_bag_path, open_bag
-from .cdr import CdrError, read_imu
+from .cdr import CdrError, read_imu, stamp_to_ns
 from .imu_bag import ImuBagRecording, imu_topics_of, is_imu_bag
 from .imu_stream import load_calibration
 from .outputs import Predictions
@@ -159,9 +159,9 @@ def _imu_samples(p: Path, reader: Any, stream: Any, o: ReadOptions) -> Iterator[
         except CdrError as exc:
             stream.reject(SampleRejected(MALFORMED, f"cannot decode the Imu ({exc})"))
             continue
-        stamp_ns = stamp.sec * NANO + stamp.nanosec or int(log_ns)
+        stamp_ns = stamp_to_ns(stamp) or int(log_ns)
         for out in stream.push_imu(index[conn.topic], stamp_ns, orientation, cov0, gyro, acc, frame_id):
             if isinstance(out, tuple):
-                ns = out[0].sec * NANO + out[0].nanosec
+                ns = stamp_to_ns(out[0])
                 yield NodeSample(n, int(log_ns), ns, ns, out[1], out[2])
                 n += 1

@@ -33,6 +33,7 @@ from ..io.cdr import CdrError, read_joint_state
 from ..io.library_io import load_library
 from ..io.outputs import ESTIMATE_TOPIC
 from .angles_output import ANGLES_TOPIC
+from .diagnostics import DIAGNOSTICS_TOPIC
 from .node_client import drained_subscription
 from .teach_client import TeachClient
 
@@ -130,7 +131,7 @@ class DashboardLink:
                                           (Float64MultiArray, self.target + ANGLES_TOPIC[1:], self._on_angles)):
             # serialised estimate: parsed only for a frame (io/cdr.py)
             drained_subscription(n, msg_type, topic, callback, DISPLAY_QOS, raw=msg_type is JointState)
-        n.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        n.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diagnostics, 10)
         self.client.on_log = self._on_log
         self._thread = threading.Thread(target=self._run, name="dashboard-ros", daemon=True)
 

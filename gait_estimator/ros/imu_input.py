@@ -43,7 +43,7 @@ from ..core.imu_learn import STILL_S, WALK_S
 from ..core.imu_pairing import DEFAULT_TOLERANCE_S
 from ..core.rejections import MALFORMED, SampleRejected
 from ..core.teach import TAUGHT_LIBRARY
-from ..io.cdr import CdrError, read_imu
+from ..io.cdr import CdrError, read_imu, stamp_to_ns
 from ..io.imu_bag import DEFAULT_IMU_TOPICS
 from ..io.imu_stream import calibration_path_for, load_calibration, save_calibration
 
@@ -136,7 +136,7 @@ class ImuInput:
             stamp, frame_id, cov0 = msg.header.stamp, msg.header.frame_id, msg.orientation_covariance[0]
             orientation, gyro, acc = (o.x, o.y, o.z, o.w), (w.x, w.y, w.z), (a.x, a.y, a.z)
         self.last_arrival[sensor] = time.monotonic()  # decodable: the sensor is talking
-        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        stamp_ns = stamp_to_ns(stamp)
         if stamp_ns == 0:
             stamp_ns = node.get_clock().now().nanoseconds
         node.publish_outputs(node.stream.push_imu(sensor, stamp_ns, orientation, cov0, gyro, acc, frame_id), t0)
@@ -234,7 +234,6 @@ class ImuInput:
             "imu_calibration_path": str(self.path),
             "imu_messages": ",".join(str(n) for n in self.received),
             "imu_silent": ", ".join(silent),
-            **{f"imu_rejected_{r}": str(n) for r, n in self.node.stream.rejected().items()},
         }
         problems = []
         if silent:

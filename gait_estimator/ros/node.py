@@ -40,8 +40,9 @@ from ..core.channels import Sample
 from ..core.errors import GaitEstimatorError
 from ..core.estimator import EstimatorConfig
 from ..core.gait_stream import GaitStream, Output
+from ..core.imu_pairing import IMU_REASONS
 from ..core.kernels import KernelLibrary
-from ..core.rejections import ANGLE_MESSAGE_ONLY, MALFORMED, REASONS, SampleRejected
+from ..core.rejections import MALFORMED, REASONS, SampleRejected
 from ..core.supervisor import Estimate
 from ..io.cdr import CdrError, Stamp, read_joint_state
 from ..io.outputs import INPUT_TOPIC
@@ -234,9 +235,9 @@ class EstimatorNode(Node):
         if self.stream.events:
             self.log_events()
 
-    def reject(self, exc: SampleRejected, received: bool = True) -> None:
-        """Count a dropped input (``received``: as a received one too) and warn (throttled)."""
-        self.stream.reject(exc, received)
+    def reject(self, exc: SampleRejected) -> None:
+        """Count a dropped input and warn (throttled)."""
+        self.stream.reject(exc)
         self._log.rejected(exc)
 
     def log_events(self) -> None:
@@ -269,18 +270,18 @@ class EstimatorNode(Node):
 
     @property
     def samples_received(self) -> int:
-        """Input messages seen so far (accepted + rejected)."""
+        """Inputs seen so far, accepted + rejected (IMU input: paired samples and dropped messages)."""
         return self.stream.received
 
     @property
     def samples_accepted(self) -> int:
-        """Input messages that went into the estimator."""
+        """Inputs that went into the estimator (IMU input: paired samples, the calibration's too)."""
         return self.stream.accepted
 
     @property
     def rejected(self) -> dict[str, int]:
         """Dropped samples so far, by reason (every reason the input type can give listed)."""
-        return self.stream.rejected(REASONS if self.imu is None else [r for r in REASONS if r not in ANGLE_MESSAGE_ONLY])
+        return self.stream.rejected(REASONS if self.imu is None else IMU_REASONS)
 
     @property
     def window_resets(self) -> int:

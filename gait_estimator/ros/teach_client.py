@@ -20,6 +20,8 @@ from std_srvs.srv import Trigger
 
 from ..core.errors import GaitEstimatorError
 from ..core.teach import TeachOptions
+from ..io.cdr import stamp_to_ns
+from .diagnostics import DIAGNOSTICS_TOPIC
 from .teach import LOG_PREFIX
 from .tool_node import ToolNode
 
@@ -86,7 +88,7 @@ class TeachClient(ToolNode):
         self._started = self.node.get_clock().now().nanoseconds
         self._logger_name = self.target.lstrip("/").replace("/", ".")
         self.node.create_subscription(Log, "/rosout", self._on_log, 1000)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self.node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diagnostics, 10)
         self.params = AsyncParameterClient(self.node, self.target)
         self._save_client: Any = None
         if timeout_s is not None and not self.params.wait_for_services(timeout_s):
@@ -95,7 +97,7 @@ class TeachClient(ToolNode):
     # -- callbacks
 
     def _on_log(self, msg: Log) -> None:
-        stamp = msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec
+        stamp = stamp_to_ns(msg.stamp)
         if msg.name == self._logger_name and msg.msg.startswith(LOG_PREFIX) and stamp >= self._started:
             if self.on_log is not None:
                 self.on_log(msg.msg[len(LOG_PREFIX):])

@@ -13,6 +13,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, String
 
 from ..core.errors import GaitEstimatorError
+from .diagnostics import DIAGNOSTICS_TOPIC
 from .tool_node import TargetStatus, ToolNode
 
 
@@ -54,7 +55,7 @@ class WatchClient(ToolNode):
         except NameValidationException as exc:
             self.close()
             raise GaitEstimatorError(f"--node {node}: not a valid node name ({str(exc).splitlines()[0]})") from None
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self.node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diagnostics, 10)
         if not self.spin_until(lambda: self.target in self.node.get_fully_qualified_node_names(), timeout_s):
             raise self.not_found(timeout_s)
 
