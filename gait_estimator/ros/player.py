@@ -22,7 +22,7 @@ from ..core.channels import CHANNELS
 from ..core.errors import GaitEstimatorError, RecordingError
 from ..io.bag import format_topics, is_bag_path, normalize_topic, open_bag, typestore
 from ..io.bag_write import serialize_inputs
-from ..io.cdr import read_stamp, stamp_to_ns, with_stamp
+from ..io.cdr import CdrError, read_stamp, stamp_to_ns, with_stamp
 from ..io.outputs import ESTIMATE_TOPIC, INPUT_TOPIC, OUTPUT_TOPICS
 from ..io.recording import Recording
 
@@ -299,7 +299,10 @@ def _publish_loop(playlist: Playlist, pubs: list[Any], clock_pub: Any, clock_cls
                 clock_msg.clock.sec, clock_msg.clock.nanosec = sec, nanosec
                 clock_pub.publish(clock_msg)
             if shift and has_header[tr]:
-                raw = with_stamp(raw, stamp_to_ns(read_stamp(raw)) + shift)
+                try:
+                    raw = with_stamp(raw, stamp_to_ns(read_stamp(raw)) + shift)
+                except CdrError:  # not plain CDR (e.g. XCDR2): looped with its recorded stamp
+                    pass
             published[0] += 1  # counted first: a Ctrl-C inside publish() still counts this message
             pubs[tr].publish(raw)
         if not loop:
