@@ -83,10 +83,7 @@ def cmd_process(args: argparse.Namespace) -> int:
 
     lib = load_library(args.kernels)
     options = {"rate_hz": lib.sample_rate_hz, **reader_options(args, BAG_READING_OPTIONS)}
-    try:
-        config = config_from_args(args, max_gap_s=options.get("max_gap_s"))
-    except ValueError as exc:
-        raise GaitEstimatorError(str(exc)) from None
+    config = config_from_args(args, max_gap_s=options.get("max_gap_s"))
     if args.as_node:
         from .as_node import process_as_node
 

@@ -58,10 +58,7 @@ def process_as_node(args: argparse.Namespace, lib: KernelLibrary, config: Estima
 def _config(args: argparse.Namespace) -> EstimatorConfig:
     from .estimator_args import config_from_args
 
-    try:
-        return config_from_args(args, max_gap_s=getattr(args, "max_gap_s", None))
-    except ValueError as exc:
-        raise GaitEstimatorError(str(exc)) from None
+    return config_from_args(args, max_gap_s=getattr(args, "max_gap_s", None))
 
 
 def convert_as_node(args: argparse.Namespace, options: dict[str, Any]) -> Any:

@@ -7,6 +7,7 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
+from ..core.errors import GaitEstimatorError
 from ..core.options import OPTIONS, PRESETS, RESAMPLE_MODES, EstimatorConfig, Option
 
 
@@ -39,11 +40,14 @@ def add_estimator_arguments(parser: argparse.ArgumentParser, skip: Sequence[str]
 
 def config_from_args(args: Any, **overrides: Any) -> EstimatorConfig:
     """EstimatorConfig from parsed flags: the ``--preset``'s values, then the flags given, then
-    ``overrides`` (None values ignored); raises ValueError."""
+    ``overrides`` (None values ignored); a bad value: GaitEstimatorError naming the option."""
     values: dict[str, Any] = {}
     for opt in OPTIONS:
         v = getattr(args, opt.name, None)
         if v is not None:
             values[opt.name] = tuple(v) if isinstance(v, list) else v
     values.update({k: v for k, v in overrides.items() if v is not None})
-    return EstimatorConfig.preset(getattr(args, "preset", None) or "default", **values)
+    try:
+        return EstimatorConfig.preset(getattr(args, "preset", None) or "default", **values)
+    except ValueError as exc:
+        raise GaitEstimatorError(str(exc)) from None
