@@ -121,8 +121,6 @@ def plot_timeseries(al: Aligned, path: str | Path, title: str = "", window: tupl
         ax_sse.plot(t, np.maximum(al.sse[keep, i], 1e-3), lw=0.9, color=colors[m], label=m)
     ax_sse.set_yscale("log")
     ax_sse.set_ylabel("min SSE (deg²)")
-    ax_sse.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0))
-    ax_sse.grid(alpha=0.3)
 
     names = list(al.sse_modes)
     for m in [*al.pred[keep].tolist(), *al.truth[keep].tolist()]:
@@ -144,8 +142,6 @@ def plot_timeseries(al: Aligned, path: str | Path, title: str = "", window: tupl
     ax_mode.set_ylim(-0.6, len(names) - 0.4)
     ax_mode.invert_yaxis()
     ax_mode.set_ylabel("mode")
-    ax_mode.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0))
-    ax_mode.grid(alpha=0.3)
 
     tt, yt = _break_wraps(t, 100 * al.phase_true[keep])
     ax_ph.plot(tt, yt, color="0.3", lw=3, alpha=0.4, label="true phase")
@@ -154,8 +150,9 @@ def plot_timeseries(al: Aligned, path: str | Path, title: str = "", window: tupl
     ax_ph.set_ylim(-3, 103)
     ax_ph.set_ylabel("gait phase (%)")
     ax_ph.set_xlabel("time (s)")
-    ax_ph.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0))
-    ax_ph.grid(alpha=0.3)
+    for ax in (ax_sse, ax_mode, ax_ph):
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0))
+        ax.grid(alpha=0.3)
     if t.size:
         ax_ph.set_xlim(float(t[0]), float(t[-1]))
     fig.suptitle(title or "mode and phase over time")

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -18,7 +17,7 @@ from typing import NoReturn
 from ..core.errors import GaitEstimatorError, missing_extra
 from ..io.library_io import load_library, save_library
 from ..io.resources import DEFAULT_LIBRARY
-from .args import choice_list, int_list, positive_int, prepare_output, read_recording_args, reader_options
+from .args import choice_list, int_list, positive_int, prepare_output, read_recording_args, reader_options, save_report
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gait_estimator.cli.node_commands",
@@ -181,9 +180,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         ref = report["reference"]
         print(f"reference command: {ref['us_per_sample_best']:.2f} us per sample (best of {ref['runs']} runs of "
               f"{ref['samples']} samples, process start-up included)")
-    if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
+    save_report(args.json, report)
     return 0
 
 

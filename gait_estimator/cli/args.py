@@ -1,9 +1,10 @@
-"""argparse value types, the output-path check and the IMU reading options (with
+"""argparse value types, the output-path check, the JSON report and the IMU reading options (with
 ``--save-imu-calibration``) shared by the CLI modules (bad values: one-line usage errors)."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -61,6 +62,13 @@ def prepare_output(path: str, option: str) -> None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise GaitEstimatorError(f"{option} {path}: {exc.strerror or exc}") from None
+
+
+def save_report(path: str | None, report: dict[str, Any]) -> None:
+    """``--json PATH``: ``report`` written there as JSON, and a line saying so (nothing without a path)."""
+    if path:
+        Path(path).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {path}")
 
 
 def port_number(text: str) -> int:

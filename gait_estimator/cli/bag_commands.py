@@ -8,7 +8,6 @@ Importing this module imports neither rclpy nor rosbags (``play`` imports rclpy 
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import statistics
 import sys
@@ -43,6 +42,7 @@ from .args import (
     positive_float,
     reader_options,
     save_imu_calibration,
+    save_report,
     seconds,
 )
 
@@ -272,9 +272,7 @@ def cmd_bench_bag(args: argparse.Namespace) -> int:
         print(f"  {label:<28} {sec[key]:8.3f} s  {sps[key]:10.0f} samples/s")
     m = report["machine"]
     print(f"machine: {m['processor']}, {m['cpus']} cpus, Python {m['python']}, numpy {m['numpy']}")
-    if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
+    save_report(args.json, report)
     return 0
 
 

@@ -5,7 +5,6 @@ the highest input rate it sustains. rclpy is imported only when the command runs
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import signal
@@ -21,7 +20,7 @@ from ..analysis.imu_sagittal import BENCH_LATERAL_AXES, BENCH_PROXIMAL_AXES, imu
 from ..core.errors import GaitEstimatorError
 from ..io.resources import DEFAULT_LIBRARY
 from ..ros import EXECUTORS, require_ros
-from .args import checked_number, choice_list, domain_id, positive_float, positive_int, positive_list, prepare_output
+from .args import checked_number, choice_list, domain_id, positive_float, positive_int, positive_list, prepare_output, save_report
 from .bench_profile import PROFILE_LABELS, clock_offset_ns, profile_stages
 from .node_commands import percentiles, running_node
 
@@ -322,9 +321,7 @@ def cmd_bench_node(args: argparse.Namespace) -> int:
             f"{lt.get('dds_p50_ms', math.nan):6.3f} / {lt.get('dds_p99_ms', math.nan):6.3f}"
             + (f"; {tp['max_sustained_rate_hz']:g} Hz" if tp else "")
         )
-    if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
+    save_report(args.json, report)
     return 0 if report.get("node_exit_code") == 0 else 1
 
 

@@ -17,6 +17,7 @@ from .channels import N_CHANNELS
 from .kernels import KernelLibrary
 from .match_results import MatchTrace, StepBlock, StepResult
 from .matching import (
+    ROW_TABLES,
     _MatcherBase,
     check_channel_weights,
     check_offset_tolerance,
@@ -96,6 +97,8 @@ class IncrementalMatcher(_MatcherBase):
         backend: ``auto`` (numba if installed), ``numba`` or ``numpy``.
     """
 
+    _TABLES = (*ROW_TABLES, "_ksq", "_e", "_wsums")  # every array indexed by slot
+
     def __init__(
         self,
         library: KernelLibrary,
@@ -128,10 +131,8 @@ class IncrementalMatcher(_MatcherBase):
         self._ring_sq = np.zeros(self.max_window)
         self._psum_ring = np.zeros((self.max_window, N_CHANNELS))
         self._psum = np.zeros(N_CHANNELS)
-        self._allocate_state(r)
         if self.backend == "numpy":
             self._next = np.empty((r, 1, n))  # matmul output; becomes e after the update
-        self._update_row_constants(self._rows)
         # The compiled step with a scale band keeps only the rows in use in the row tables
         # (``_claim``); the numpy step updates every row.
         self._pooled = self.backend == "numba" and self.n_scales > 1
@@ -171,28 +172,18 @@ class IncrementalMatcher(_MatcherBase):
         score = self._scores(self._e[p].astype(np.float64), sums, rows)
         return np.where(self._valid[rows], score, np.inf).min(axis=1)
 
-    def _table_arrays(self) -> tuple[str, ...]:
-        return (*super()._table_arrays(), "_ksq", "_e", "_wsums")
-
     def _allocate_state(self, slots: int) -> None:
         """Empty running state for ``slots`` rows of the row tables."""
         self._ksq = np.zeros((slots, self.max_length))  # ||k_j||^2
         self._wsums = np.zeros((slots, N_CHANNELS))  # recency-weighted window sums (recency_half_life)
         self._e = np.full((slots, self.max_length), np.inf)
-        self._state = None
-
-    def _build(self, rows: np.ndarray) -> None:
-        super()._build(rows)
-        if hasattr(self, "_ksq"):  # not while the base class builds the first tables
-            self._update_row_constants(rows)
 
     def _resize(self, keep: np.ndarray, slots: int) -> None:
         """Row tables with room for ``slots`` rows, holding the rows ``keep`` (which have slots) in
         the first ones; every other row loses its slot."""
-        old = {name: getattr(self, name) for name in self._table_arrays()}
+        old = {name: getattr(self, name) for name in self._TABLES}
         src = self._slots.slot[keep]
         self._allocate(slots, self._kernels.dtype)
-        self._allocate_state(slots)
         for name, a in old.items():
             getattr(self, name)[: keep.size] = a[src]
         self._slots.repack(keep, slots)
@@ -266,7 +257,7 @@ class IncrementalMatcher(_MatcherBase):
         self._wsums[p] = self.age_weighted_sums(rows)
         self._synced[rows] = self._count
 
-    def _update_row_constants(self, rows: np.ndarray) -> None:
+    def _rows_built(self, rows: np.ndarray) -> None:
         """||k_j||^2 of ``rows`` after their kernels changed."""
         p = self._slots.at(rows)
         k = self._kernels[p].astype(np.float64)
@@ -525,7 +516,7 @@ class IncrementalMatcher(_MatcherBase):
     def state_bytes(self) -> int:
         """Bytes of numpy state this matcher keeps between steps."""
         arrays = [self._ring, self._ring_sq, self._psum_ring, self._slots.slot, self._slots.owner, self._synced,
-                  *(getattr(self, name) for name in self._table_arrays()), *self._samples.values()]
+                  *(getattr(self, name) for name in self._TABLES), *self._samples.values()]
         if self.backend == "numpy":
             arrays.append(self._next)
         return int(sum(a.nbytes for a in arrays))

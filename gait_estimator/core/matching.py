@@ -62,6 +62,9 @@ from .scale_band import ScaleBand
 from .shift_means import SHIFT_BLOCK, expand_shift_means, weighted_shift_means
 
 _CHUNK = 2048  # columns per naive recomputation, bounds its temporary memory
+ROW_TABLES = ("_kernels", "_mu", "_mu_seg", "_mu_anchor", "_mu_seg_range", "_mu_seg_blocks")  # arrays indexed by slot
+
+
 def check_channel_weights(value: Sequence[float] | None) -> np.ndarray:
     """Validate ``channel_weights``: 4 finite numbers >= 0, not all 0 (None = all 1)."""
     if value is None:
@@ -172,10 +175,6 @@ class _MatcherBase:
     # -----------------------------------------------------------------------------------------
     # Rows
 
-    def _table_arrays(self) -> tuple[str, ...]:
-        """The row tables: arrays indexed by slot."""
-        return "_kernels", "_mu", "_mu_seg", "_mu_anchor", "_mu_seg_range", "_mu_seg_blocks"
-
     def _allocate(self, slots: int, dtype: type = np.float64) -> None:
         """Empty row tables with room for ``slots`` rows (``dtype``: the kernels')."""
         self._kernels = np.zeros((slots, N_CHANNELS, self.max_length), dtype=dtype)  # channel-major rows
@@ -190,16 +189,21 @@ class _MatcherBase:
         self._mu_seg_range = np.zeros((slots, 2, N_CHANNELS))  # per row: min and max of mu_seg over shifts
         self._mu_seg_blocks = np.zeros((slots, 2, N_CHANNELS, blocks))  # the same per block of shifts
         self._state = None  # the compiled step's state refers to the arrays replaced
+        self._allocate_state(slots)
 
-    def _kernel_samples(self, mode: int) -> np.ndarray:
-        return self._samples.get(mode, self.library.modes[mode].samples)
+    def _allocate_state(self, slots: int) -> None:
+        """Empty running state for ``slots`` rows of the row tables (the naive matcher keeps none)."""
+
+    def _rows_built(self, rows: np.ndarray) -> None:
+        """The kernels of ``rows`` were (re)built in the row tables (nothing to do for the naive matcher)."""
 
     def _row_kernel_values(self, rows: np.ndarray) -> np.ndarray:
         """The kernels of ``rows`` (one length, of modes of one length) (g, n, 4), weighted:
         float32-representable values (the compiled step streams a float32 copy, half the memory
         traffic); every path computes with exactly these values, in float64."""
         n = int(self.lengths[rows[0]])
-        stacked = np.concatenate([self._kernel_samples(int(m)) for m in rows % self.n_modes], axis=1)  # (N, 4g)
+        modes = [int(m) for m in rows % self.n_modes]
+        stacked = np.concatenate([self._samples.get(m, self.library.modes[m].samples) for m in modes], axis=1)  # (N, 4g)
         k = resample_stride(stacked, n).reshape(n, rows.size, N_CHANNELS).transpose(1, 0, 2) * self._scale
         return np.ascontiguousarray(k.astype(np.float32).astype(np.float64))
 
@@ -220,6 +224,7 @@ class _MatcherBase:
             self._mu[p] = k.mean(axis=1)
             if self._per_shift:
                 self._set_shift_means(p, self._shift_means(k, group, weights))
+        self._rows_built(rows)
 
     def _set_rows(self, mode: int, samples: np.ndarray) -> None:
         """Use ``samples`` (N_m, 4), degrees, as the kernel of ``mode``: rebuild its rows in the tables."""
@@ -267,12 +272,8 @@ class _MatcherBase:
         self._set_weights(h)
         if h > 0 and h != self._means_half_life:  # mu_seg: the means of the weights in use
             self._means_half_life = h
-            weights = self._weights(h)
-            self._means_lam = weights[0]
-            for group in self._length_groups(self._slots.held()):
-                p, n = self._slots.slot[group], int(self.lengths[group[0]])
-                self._set_shift_means(p, self._shift_means(self._kernels[p, :, :n].transpose(0, 2, 1).astype(np.float64),
-                                                           group, weights))
+            self._means_lam = self._lam
+            self._build(self._slots.held())
         self._reweighted()
 
     def start_uniform(self) -> None:

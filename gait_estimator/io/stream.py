@@ -28,6 +28,8 @@ below values whose squares would swamp the matcher's running sums (or overflow t
 
 
 def _to_degrees(values: np.ndarray, units: str) -> np.ndarray:
+    if not np.isfinite(values).all():
+        raise SampleRejected(NON_FINITE, f"non-finite angle(s) {values.tolist()}")
     if units == "rad":
         deg = np.degrees(values)
     elif units == "deg":
@@ -53,20 +55,14 @@ def angles_from_named(
     missing = [j for j in joint_names if j not in index]
     if missing:
         raise SampleRejected(MISSING_JOINT, f"missing joint(s) {', '.join(missing)} (got {', '.join(names) or 'none'})")
-    values = np.array([positions[index[j]] for j in joint_names], dtype=np.float64)
-    if not np.isfinite(values).all():
-        raise SampleRejected(NON_FINITE, f"non-finite angle(s) {values.tolist()}")
-    return _to_degrees(values, units)
+    return _to_degrees(np.array([positions[index[j]] for j in joint_names], dtype=np.float64), units)
 
 
 def angles_from_array(data: Sequence[float], units: str = "rad") -> np.ndarray:
     """Angles (4,), degrees, from ``[right_thigh, left_thigh, right_shank, left_shank]``."""
     if len(data) != N_CHANNELS:
         raise SampleRejected(WRONG_LENGTH, f"expected {N_CHANNELS} values, got {len(data)}")
-    values = np.array(data, dtype=np.float64)
-    if not np.isfinite(values).all():
-        raise SampleRejected(NON_FINITE, f"non-finite angle(s) {values.tolist()}")
-    return _to_degrees(values, units)
+    return _to_degrees(np.array(data, dtype=np.float64), units)
 
 
 _DEG_PER_RAD = 180.0 / math.pi

@@ -130,6 +130,9 @@ def check_kernels(value: Any) -> tuple[str, KernelLibrary | None]:
         return one_line(exc), None
 
 
+CHOICES = {"input_units": UNITS, "input_type": INPUT_TYPES, "executor": EXECUTORS, "preset": PRESETS}
+
+
 def check_input_parameter(name: str, v: Any) -> str:
     """Why the value ``v`` of a non-estimator parameter is invalid, or '' (also for parameters not ours)."""
     if name == "joint_names":
@@ -140,16 +143,10 @@ def check_input_parameter(name: str, v: Any) -> str:
             return "names must not be empty"
         if len(set(names)) != len(names):
             return f"names must be distinct, got {names}"
-    elif name == "input_units" and v not in UNITS:
-        return f"must be one of {', '.join(UNITS)}, got {v!r}"
-    elif name == "input_type" and v not in INPUT_TYPES:
-        return f"must be one of {', '.join(INPUT_TYPES)}, got {v!r}"
+    elif name in CHOICES and v not in CHOICES[name]:
+        return f"must be one of {', '.join(CHOICES[name])}, got {v!r}"
     elif name == "thread_priority" and not 0 <= v <= MAX_PRIORITY:
         return f"must be in 0..{MAX_PRIORITY} (0 = the scheduling the process started with), got {v}"
-    elif name == "executor" and v not in EXECUTORS:
-        return f"must be one of {', '.join(EXECUTORS)}, got {v!r}"
-    elif name == "preset" and v not in PRESETS:
-        return f"must be one of {', '.join(PRESETS)}, got {v!r}"
     elif name == "adapted_library_path" and v and Path(v).suffix.lower() not in (".yaml", ".yml", ".npz"):
         return f"must end in .yaml or .npz (or be empty for the default), got {v!r}"
     return ""
