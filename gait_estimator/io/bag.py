@@ -64,7 +64,7 @@ def since_time_zero(stamp_ns: np.ndarray | int, first_ns: int | None = None) -> 
     """Stamps (int ns) -> ns since a bag's time 0: the stamp of its first sample taken (``first_ns``,
     default the first of ``stamp_ns``): an angle message, or four Imu messages paired, also while the
     IMU calibration is learnt (``--as-node``: ``GaitStream.first_stamp_ns``). ``time_s`` is this * 1e-9."""
-    return stamp_ns - (stamp_ns[0] if first_ns is None else first_ns)  # type: ignore[index]
+    return stamp_ns - (stamp_ns[0] if first_ns is None else first_ns)
 
 
 # ---------------------------------------------------------------------------------------------
