@@ -98,16 +98,16 @@ def test_convert_as_node_angles_equal_convert_without_restarts(tmp_path: Path, m
     assert np.allclose(np.diff(again.time_s), 1 / 230.0, atol=1e-6)  # the log time steps over the restart
 
 
-def _restarted_imu_bag(path: Path) -> Path:
-    """Four raw Imu topics: standing 2 s then walking 6 s, recorded twice, the second time with the
-    stamps from the start again (a restarted driver); log times go on."""
+def _imu_bag(path: Path, recordings: int = 2) -> Path:
+    """Four raw Imu topics: standing 2 s then walking 6 s, recorded ``recordings`` times, each time
+    with the stamps from the start again (a restarted driver); log times go on."""
     rng = np.random.default_rng(5)
     s = synthesize(gait_angles(RATE, walk_s=6.0), RATE, random_mounts(rng), rng, acc_noise_g=0.01, gyro_noise_dps=0.3)
     ts = typestore()
     n = len(s.time_s)
     with staged_writer(path, "mcap") as writer:
         conns = [writer.add_connection(f"/imu/{c}", IMU, typestore=ts) for c in CHANNELS]
-        for k in range(2 * n):
+        for k in range(recordings * n):
             stamp = BASE_NS + round(float(s.time_s[k % n]) * 1e9)
             for c in range(4):
                 raw = write_imu(stamp + 100_000 * c, CHANNELS[c], (0.0, 0.0, 0.0, 1.0), -1.0,
@@ -116,11 +116,23 @@ def _restarted_imu_bag(path: Path) -> Path:
     return path
 
 
+def test_imu_bag_times_count_from_the_same_0_with_and_without_as_node(tmp_path: Path) -> None:
+    """The node's angles come only once the mounting is learnt (standing), ``convert``'s from the
+    first paired sample on; both count time from that sample, so label ranges (``train --labels``)
+    mean the same seconds both ways."""
+    bag = _imu_bag(tmp_path / "imu", recordings=1)
+    assert main(["convert", str(bag), "-o", str(tmp_path / "plain.csv")]) == 0
+    assert main(["convert", str(bag), "--as-node", "-o", str(tmp_path / "node.csv")]) == 0
+    plain, node = read_recording(tmp_path / "plain.csv"), read_recording(tmp_path / "node.csv")
+    assert plain.time_s[0] == 0.0 and node.time_s[0] > 2.0 and len(node) > 500
+    np.testing.assert_allclose(node.time_s, plain.time_s[-len(node):], atol=1e-6)  # the same samples, the same times
+
+
 def test_imu_bag_as_node_rows_and_calibration(tmp_path: Path, capsys) -> None:
     """Through a restarted stream ``process --as-node`` rows have unique increasing indices and
     times, one per row of ``convert --as-node`` (the same times); the calibration learnt on the way
     is saved and taken by the next run."""
-    bag = _restarted_imu_bag(tmp_path / "imu")
+    bag = _imu_bag(tmp_path / "imu")
     cal = tmp_path / "cal.imu.yaml"
     assert main(["convert", str(bag), "--as-node", "-o", str(tmp_path / "angles.csv"),
                  "--save-imu-calibration", str(cal)]) == 0

@@ -109,6 +109,8 @@ class GaitStream:
         self.accepted = 0
         """Inputs taken: samples past the stamp check and the estimator; with four IMUs also the
         paired samples the IMU calibration takes while it is learnt (no angles yet)."""
+        self.first_stamp_ns: int | None = None
+        """Stamp of the first input taken (``accepted``), ns; ``--as-node``'s time 0 (io/as_node.py)."""
         self._resets_before = 0  # window restarts of estimators swapped out
         self._epoch_sec: int | None = None
         self._period_received = self._period_rejected = self._period_accepted = 0
@@ -181,7 +183,7 @@ class GaitStream:
                 self._first = t
             self._last = t
             self._period_accepted += 1
-        self.accepted += 1
+        self._took(stamp.sec * 1_000_000_000 + stamp.nanosec)
         # the samples a new library's estimator is filled from (``swap``), with or without a library
         recent = self._recent
         recent.append((t, angles_deg))
@@ -195,6 +197,11 @@ class GaitStream:
         if self.teaching is not None:
             self._collect(t, angles_deg)  # may swap the library and the estimator
         return estimate
+
+    def _took(self, stamp_ns: int) -> None:
+        self.accepted += 1
+        if self.first_stamp_ns is None:
+            self.first_stamp_ns = stamp_ns
 
     def _gap_events(self, gap_s: float, restart: bool, recalibrate: bool) -> None:
         c = self.config
@@ -265,7 +272,7 @@ class GaitStream:
         out = self._imu_out = []
         flow.sample(stamp_ns, items, self._emit)
         if not out:  # taken by the IMU calibration
-            self.accepted += 1
+            self._took(stamp_ns)
         if flow.not_fit:  # the window and learnt offsets came from wrong angles, the strides too
             flow.not_fit = False
             self.reset_calibration("the IMU calibration did not fit")

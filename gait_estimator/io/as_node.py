@@ -4,9 +4,10 @@ decoded by the node's CDR reader (``io/cdr.py``) and paired, converted and calib
 node's ``ImuFlow`` (the calibration learnt on the way, or ``imu_calibration``). ``process``,
 ``convert`` and ``train`` with ``--as-node`` all read a bag through ``bag_as_node``.
 
-Samples keep bag order. Their time (``NodeSample.time_ns``, from the first sample) follows the
-node's stamps; where these jump back (a restarted stream: a window restart for the node) it goes
-on from the sample before by the log-time step between the two, so it increases through the bag."""
+Samples keep bag order. Their time (``NodeSample.time_ns``, from the bag's time 0 as without
+``--as-node``: ``bag.since_time_zero``) follows the node's stamps; where these jump back (a restarted
+stream: a window restart for the node) it goes on from the sample before by the log-time step
+between the two, so it increases through the bag."""
 
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from ..core.imu_pairing import DEFAULT_TOLERANCE_S
 from ..core.kernels import KernelLibrary
 from ..core.rejections import MALFORMED, SampleRejected
 from ..core.supervisor import Estimate
-from .bag import JOINT_STATE, BagRecording, bag_samples, bag_topics, is_bag_path, open_bag
+from .bag import JOINT_STATE, BagRecording, bag_samples, bag_topics, is_bag_path, open_bag, since_time_zero
 from .cdr import CdrError, read_imu, stamp_to_ns
 from .imu_bag import ImuBagRecording, imu_topics_of, is_imu_bag
 from .imu_stream import load_calibration
@@ -65,11 +66,11 @@ def bag_as_node(path: str | Path, library: KernelLibrary | None, config: Estimat
     if o.imu_topics or is_imu_bag(p):
         with open_bag(p, "imu") as reader:
             stream = GaitStream(library, cfg, stamped=True, units=None)
-            yield stream, _in_bag_order(_imu_samples(p, reader, stream, o))
+            yield stream, _in_bag_order(_imu_samples(p, reader, stream, o), stream)
     else:
         with bag_samples(p, o) as (msgtype, samples):
             stream = GaitStream(library, cfg, stamped=msgtype == JOINT_STATE, units=o.input_units)
-            yield stream, _in_bag_order(_angle_samples(samples, stream))
+            yield stream, _in_bag_order(_angle_samples(samples, stream), stream)
 
 
 def predict_as_node(path: str | Path, library: KernelLibrary, config: EstimatorConfig | None = None,
@@ -92,7 +93,7 @@ def read_as_node(path: str | Path, config: EstimatorConfig | None = None,
     index, logs, stamps, times, angles, _ = (np.array(c) for c in zip(*rows, strict=True))
     imu = {} if stream.imu is None else {"calibration": stream.imu.calibrator.calibration}
     return (ImuBagRecording if imu else BagRecording)(times * 1e-9, angles.astype(np.float64), source=str(path),
-                                                      index=index, stamp_ns=stamps[0] + times, log_time_ns=logs,
+                                                      index=index, stamp_ns=stamps[0] - times[0] + times, log_time_ns=logs,
                                                       **imu), stream
 
 
@@ -106,17 +107,18 @@ def _accepted(path: str | Path, library: KernelLibrary | None, config: Estimator
     return rows, stream
 
 
-def _in_bag_order(samples: Iterator[NodeSample]) -> Iterator[NodeSample]:
+def _in_bag_order(samples: Iterator[NodeSample], stream: Any) -> Iterator[NodeSample]:
     """``samples`` with ``time_ns`` set (module docstring)."""
     prev: NodeSample | None = None
-    shift = 0
+    first = shift = 0
     for s in samples:
-        if prev is None:
-            shift = -s.stamp_ns
+        if prev is None:  # (Imu: paired samples the calibration took came before)
+            first = min(stream.first_stamp_ns or s.stamp_ns, s.stamp_ns)
         elif s.stamp_ns < prev.stamp_ns:  # accepted going back: a restarted stream
             shift += prev.stamp_ns - s.stamp_ns + max(s.log_ns - prev.log_ns, 1)
         prev = s
-        yield NodeSample(s.index, s.log_ns, s.stamp_ns, s.stamp_ns + shift, s.angles_deg, s.estimate)
+        yield NodeSample(s.index, s.log_ns, s.stamp_ns, since_time_zero(s.stamp_ns + shift, first), s.angles_deg,
+                         s.estimate)
 
 
 def _angle_samples(samples: Iterator[tuple[int, int, int, bool, Any]], stream: Any) -> Iterator[NodeSample]:

@@ -60,6 +60,13 @@ def normalize_topic(topic: str) -> str:
     return topic if topic.startswith("/") else "/" + topic
 
 
+def since_time_zero(stamp_ns: np.ndarray | int, first_ns: int | None = None) -> np.ndarray | int:
+    """Stamps (int ns) -> ns since a bag's time 0: the stamp of its first sample taken (``first_ns``,
+    default the first of ``stamp_ns``): an angle message, or four Imu messages paired, also while the
+    IMU calibration is learnt (``--as-node``: ``GaitStream.first_stamp_ns``). ``time_s`` is this * 1e-9."""
+    return stamp_ns - (stamp_ns[0] if first_ns is None else first_ns)
+
+
 # ---------------------------------------------------------------------------------------------
 # The recording
 
@@ -360,7 +367,7 @@ def _read_samples(bag: Path, topic: str, msgtype: str, samples: Iterator[tuple[i
         raise RecordingError(f"{bag}: topic {topic}: no usable samples in {n} message(s){why}")
     stamp_arr = np.array(stamps, dtype=np.int64)
     return BagRecording(
-        time_s=(stamp_arr - stamp_arr[0]) * 1e-9,
+        time_s=since_time_zero(stamp_arr) * 1e-9,
         angles_deg=np.array(angles, dtype=np.float64).reshape(-1, N_CHANNELS),
         source=f"{bag} {topic}",
         index=np.array(index, dtype=np.int64),

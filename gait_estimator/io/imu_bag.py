@@ -35,7 +35,7 @@ from ..core.imu_learn import (
 )
 from ..core.imu_pairing import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s
 from ..core.rejections import SampleRejected
-from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, typestore
+from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, since_time_zero, typestore
 from .cdr import stamp_to_ns, write_imu
 from .imu_stream import load_calibration
 from .read_options import ReadOptions
@@ -182,7 +182,7 @@ def read_imu_bag(path: str | Path, options: ReadOptions | None = None, /, **valu
     stamp_ns = np.array([s[0] for s in paired], dtype=np.int64)
     angles = np.array([cal.angles_deg(s[2]) for s in paired], dtype=np.float64)
     return ImuBagRecording(
-        time_s=(stamp_ns - stamp_ns[0]) * 1e-9,
+        time_s=since_time_zero(stamp_ns) * 1e-9,
         angles_deg=angles,
         source=f"{p} {','.join(names)}",
         skipped={k: int(v) for k, v in rejected.items() if v},
