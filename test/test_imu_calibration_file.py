@@ -154,7 +154,7 @@ def test_the_nodes_file_is_used_offline_and_the_offline_file_by_the_node(ros, ba
     node = h.estimator(input_type="imu", imu_calibration_path=str(live_file))
     client = h.client(node)
     stream(client, publishers(client), _messages(slice(None)), rate_hz=400.0)
-    assert client.spin_until(live_file.is_file, 5.0), "the node saves the calibration it learnt"
+    assert client.spin_until(live_file.is_file, 30.0), "the node saves the calibration it learnt"
     from_node = read_imu_bag(bags["cut"], imu_calibration=live_file)
     assert "checked on the walking: lateral axes within" in from_node.calibration_note
     assert main(["convert", str(bags["whole"]), "--out", str(tmp_path / "w.csv"),

@@ -109,9 +109,12 @@ def test_watch_says_why_samples_are_rejected(multispeed_csv: Path, monkeypatch) 
             while not client.wait_for_node(0.5, outputs=False, settle_s=0.5):
                 assert node.poll() is None and time.monotonic() < deadline, node.output()
             watch = _cli("--duration", "5", "--rate", "2", domain_id=domain)
-            n = round(4 * RATE_HZ)
-            stamps = BASE_NS + np.round(rec.time_s[:n] * 1e9).astype(np.int64)
-            client.stream(np.radians(rec.angles_deg[:n]), stamps, RATE_HZ)
+            n = round(RATE_HZ)
+            for second in range(60):  # a second at a time until watch has seen 5 s of them (however late it starts)
+                if watch.poll() is not None:
+                    break
+                stamps = BASE_NS + np.round((rec.time_s[:n] + second) * 1e9).astype(np.int64)
+                client.stream(np.radians(rec.angles_deg[:n]), stamps, RATE_HZ)
             out, err = watch.communicate(timeout=30)
         finally:
             client.close()
