@@ -1,4 +1,4 @@
-"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 74, 85-89):
+"""estimator_node with ``input_type: imu`` over real DDS (loopback, ROS_DOMAIN_ID 58-69, 74, 85-89, 170):
 four sensor_msgs/Imu topics in, estimates equal to offline processing of the same angles (raw
 IMUs: of the same messages read from a bag); learning the calibration live (also without a
 library, then teaching a mode), saving it (also beside a saved library) and forgetting it; checking a saved calibration
@@ -56,6 +56,11 @@ def ros(monkeypatch):
 @pytest.fixture
 def ros_cdr(monkeypatch):
     yield from in_process_factory(monkeypatch, [85, 89])
+
+
+@pytest.fixture
+def ros_silent(monkeypatch):
+    yield from in_process_factory(monkeypatch, [170])
 
 
 def imu_msg(stamp_ns: int, q: np.ndarray | None, gyro_dps: np.ndarray, acc_g: np.ndarray, frame: str = "") -> Imu:
@@ -612,6 +617,35 @@ def test_undecodable_imu_bytes_are_dropped_and_counted(ros_cdr, tmp_path):
         client.spin_for(0.05)
     diag = client.received.diagnostics[-1]
     assert CHANNELS[1] in diag["imu_silent"], diag["imu_silent"]
+
+
+def test_a_silent_sensor_is_the_diagnostics_main_message(ros_silent, tmp_path):
+    """The right shank's topic stops while the three others keep publishing: the diagnostics say
+    so first (no IMU sample from it, with its topic, for how long), not the others' messages
+    dropped unpaired for want of it. Once it is back the problem goes; when the stream ends, no
+    sensor sends."""
+    h = ros_silent(170)
+    node = h.estimator(input_type="imu", imu_lateral_axes=["+z"] * 4, imu_proximal_axes=["-x"] * 4,
+                       imu_calibration_path=str(tmp_path / "never.imu.yaml"))
+    client = h.client(node)
+    pubs = publishers(client)
+    msgs = [[imu_msg(BASE_NS + k * 5_000_000 + OFFSETS_NS[c], [0.0, 0.0, 0.0, 1.0], np.zeros(3), np.array([0.0, 0.0, 1.0]))
+             for c in range(4)] for k in range(1200)]
+    stream(client, pubs, msgs, skip=lambda k, c: c == 2 and 200 <= k < 900)  # 3.5 s without the right shank
+    client.spin_for(1.5)
+    reports = list(zip(client.received.diagnostics, client.received.diagnostics_level,
+                       client.received.diagnostics_message, strict=True))
+    shank = f"no IMU sample from right_shank ({h.namespace}/imu/right_shank) for "
+    seen = [i for i, (_, _, m) in enumerate(reports) if m.startswith(shank)]
+    assert seen, "\n".join(client.received.diagnostics_message)
+    for diag, level, message in (reports[i] for i in seen):
+        assert level == 1 and message.split("; ")[0].endswith("s: the estimate waits"), (level, message)
+        assert "rejected" not in message and diag["imu_silent"].startswith("right_shank (")
+    assert int(reports[seen[-1]][0]["rejected_unpaired"]) > 0, "the others' messages are still counted"
+    assert any("no IMU sample" not in m for _, _, m in reports[seen[-1] + 1:]), "back: the problem goes"
+    diag, level, message = reports[-1]  # the stream ended: every sensor silent
+    assert level == 1 and message.startswith("no IMU sample from any sensor for "), message
+    assert int(diag["samples_received"]) == int(diag["samples_accepted"]) + int(diag["samples_rejected"])
 
 
 def test_a_wearer_with_four_raw_imus_is_taught_live(ros, tmp_path, monkeypatch):

@@ -14,6 +14,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidHandle
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from ..core.imu_pairing import UNPAIRED
 from .outputs import OUTPUT_QOS, QUIET, double_array
 from .priority import process_priority
 
@@ -117,11 +118,12 @@ class NodeDiagnostics:
             "adapted_strides": str(int(est.adapter.accepted.sum())) if est.adapter else "",
             **stream.teach_values(),
         }
+        silent = imu is not None and bool(imu[0]["imu_silent"])  # said first; the others' messages go unpaired
         problems: list[str] = []
-        if period.received == 0:  # IMU input: no sample paired, nor message rejected
+        if period.received == 0 and not silent:  # IMU input: no sample paired, nor message rejected
             problems.append(f"no input on {node.input_topics}" if imu is None else "no IMU sample")
         values["rejected_main"] = stream.guard.main_rejection()
-        if period.rejected:
+        if period.rejected and not (silent and values["rejected_main"].startswith(UNPAIRED)):
             problems.append(f"{period.rejected} {'sample' if imu is None else 'IMU input'}(s) rejected"
                             + (f" ({values['rejected_main']})" if values["rejected_main"] else ""))
         if not math.isnan(stamp_rate) and est.resampler is None and abs(stamp_rate / lib.sample_rate_hz - 1.0) > RATE_TOLERANCE:
@@ -131,7 +133,7 @@ class NodeDiagnostics:
             problems.append(f"input_units {node.units}: {stream.units_check.problem}")
         if imu is not None:
             values.update(imu[0])
-            problems += imu[1]
+            problems = imu[1] + problems if silent else problems + imu[1]
         if problems:
             level, message = DiagnosticStatus.WARN, "; ".join(problems)
         elif shown and e is not None:

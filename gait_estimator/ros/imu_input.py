@@ -222,10 +222,10 @@ class ImuInput:
         """Key/values and problems for the node's diagnostics status."""
         now = time.monotonic()
         silent = []
-        for c, last in zip(CHANNELS, self.last_arrival, strict=True):
+        for c, sub, last in zip(CHANNELS, self.subscriptions, self.last_arrival, strict=True):
             since = (now - self.started) if math.isnan(last) else now - last
             if since > self.timeout_s:
-                silent.append(f"{c} ({since:.1f} s)")
+                silent.append((c, sub.topic_name, since))
         calibrator = self.flow.calibrator
         cal = calibrator.calibration
         values = {
@@ -233,11 +233,14 @@ class ImuInput:
             "imu_calibration_status": calibrator.status,
             "imu_calibration_path": str(self.path),
             "imu_messages": ",".join(str(n) for n in self.received),
-            "imu_silent": ", ".join(silent),
+            "imu_silent": ", ".join(f"{c} ({since:.1f} s)" for c, _, since in silent),
         }
         problems = []
-        if silent:
-            problems.append("IMU silent: " + ", ".join(silent) + " (estimate waits)")
+        if len(silent) == N_CHANNELS:
+            problems.append(f"no IMU sample from any sensor for {min(since for *_, since in silent):.1f} s")
+        elif silent:
+            problems.append("no IMU sample from " + ", ".join(f"{c} ({topic}) for {since:.1f} s" for c, topic, since in silent)
+                            + ": the estimate waits")
         if cal is None:
             problems.append(f"IMU calibration: {calibrator.status}")
         if self.flow.check_problem:
