@@ -181,6 +181,13 @@ def auto_tolerance_s(stamps_ns: Sequence[Any]) -> float:
     return AUTO_TOLERANCE_PERIODS * float(np.median(periods))
 
 
+def check_tolerance_s(tolerance_s: float) -> float:
+    """``tolerance_s`` if it can be a pairing tolerance (s), else ValueError (one line)."""
+    if not (math.isfinite(tolerance_s) and tolerance_s >= 0):
+        raise ValueError(f"IMU pairing tolerance must be a finite number of seconds >= 0, got {tolerance_s!r}")
+    return tolerance_s
+
+
 class ImuPairer:
     """Pairs the four sensors' messages by stamp.
 
@@ -191,9 +198,7 @@ class ImuPairer:
     """
 
     def __init__(self, tolerance_s: float = DEFAULT_TOLERANCE_S, max_queue: int = MAX_QUEUE) -> None:
-        if not (math.isfinite(tolerance_s) and tolerance_s >= 0):
-            raise ValueError(f"IMU pairing tolerance must be a finite number of seconds >= 0, got {tolerance_s!r}")
-        self.tolerance_ns = round(tolerance_s * 1e9)
+        self.tolerance_ns = round(check_tolerance_s(tolerance_s) * 1e9)
         self.max_queue = max_queue
         self.queues: list[deque] = [deque() for _ in range(N_CHANNELS)]
         self.dropped: Counter = Counter()  # unpaired messages per sensor name

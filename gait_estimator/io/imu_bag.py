@@ -12,7 +12,6 @@ Topics: ``imu_topics``, else ``/imu/<channel>``, else the four Imu topics named 
 
 from __future__ import annotations
 
-import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -33,7 +32,7 @@ from ..core.imu_learn import (
     find_standing,
     learn_calibration,
 )
-from ..core.imu_pairing import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s
+from ..core.imu_pairing import UNPAIRED, ImuPairer, SensorInput, auto_tolerance_s, check_tolerance_s
 from ..core.rejections import SampleRejected
 from .bag import BagRecording, bag_topics, format_topics, is_bag_path, open_bag, since_time_zero, typestore
 from .cdr import stamp_to_ns, write_imu
@@ -135,15 +134,15 @@ def read_imu_bag(path: str | Path, options: ReadOptions | None = None, /, **valu
     o = ReadOptions.of(options, values)
     imu_calibration, imu_tolerance_s, learn_params = o.imu_calibration, o.imu_tolerance_s, o.learn_params
     imu_lateral_axes, imu_proximal_axes, fusion_params = o.imu_lateral_axes, o.imu_proximal_axes, o.fusion_params
-    if imu_tolerance_s is not None and not (math.isfinite(imu_tolerance_s) and imu_tolerance_s >= 0):
-        raise RecordingError(f"IMU pairing tolerance must be a finite number of seconds >= 0, got {imu_tolerance_s!r}")
     try:
+        if imu_tolerance_s is not None:
+            check_tolerance_s(imu_tolerance_s)
         lateral, proximal = check_configured(imu_lateral_axes or [""] * N_CHANNELS, imu_proximal_axes or [""] * N_CHANNELS)
         cal = imu_calibration or None
         given_as = f"the IMU calibration {cal}" if isinstance(cal, (str, Path)) else "the IMU calibration given"
         if isinstance(cal, (str, Path)):
             cal = load_calibration(cal)
-    except CalibrationError as exc:
+    except (CalibrationError, ValueError) as exc:
         raise RecordingError(str(exc)) from None
     standing_deg = list(o.imu_standing_deg or [0.0] * N_CHANNELS)
     names, messages, undecodable = _read_messages(p, o.imu_topics)
