@@ -2,9 +2,7 @@
 
 Every test that starts ROS uses its own ROS_DOMAIN_ID (11..38, 47..49, 58..76, 79, 80, 85..89; one per test) and
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, and a namespace/node name unique to this test run, so
-concurrent runs (or other engineers' tests) cannot cross-talk. The IDs written in the tests are
-nominal: each goes through ``actual_domain`` (+ ``$GAIT_TEST_DOMAIN_OFFSET``), so two runs on one
-machine keep apart.
+concurrent runs (or other engineers' tests) cannot cross-talk.
 """
 
 from __future__ import annotations
@@ -33,23 +31,6 @@ REPO = Path(__file__).resolve().parents[1]
 RATE_HZ = 230.0
 PERIOD_NS = round(1e9 / RATE_HZ)
 BASE_NS = 1_700_000_000 * 1_000_000_000  # first stamp: a realistic wall-clock time
-
-
-DOMAIN_OFFSET_ENV = "GAIT_TEST_DOMAIN_OFFSET"
-
-
-def actual_domain(nominal: int) -> int:
-    """The ROS domain ID a test uses for the ID written in it: ``nominal`` + ``$GAIT_TEST_DOMAIN_OFFSET``
-    (default 0). Every in-process context and every child process's environment takes it from here."""
-    text = os.environ.get(DOMAIN_OFFSET_ENV, "").strip() or "0"
-    try:
-        offset = int(text)
-    except ValueError:
-        raise ValueError(f"{DOMAIN_OFFSET_ENV}={text!r}: not an integer") from None
-    if not 0 <= nominal + offset <= 232:
-        raise ValueError(f"{DOMAIN_OFFSET_ENV}={offset} moves the test's ROS domain ID {nominal} to "
-                         f"{nominal + offset}, outside ROS's 0..232")
-    return nominal + offset
 
 
 def unique_suffix() -> str:
@@ -180,8 +161,7 @@ def lockstep(client: EstimatorClient, angles: np.ndarray, rate_hz: float, stamps
 
 
 class InProcess:
-    """A private rclpy Context on ``domain_id`` (an actual ID: ``actual_domain``) holding an EstimatorNode
-    and its clients."""
+    """A private rclpy Context on ``domain_id`` holding an EstimatorNode and its clients."""
 
     def __init__(self, domain_id: int) -> None:
         self.domain_id = domain_id
@@ -231,11 +211,10 @@ def in_process_factory(monkeypatch, domains: Container[int]) -> Iterator[Callabl
 
     def make(domain_id: int) -> InProcess:
         assert domain_id in domains, f"domain {domain_id} outside this file's {domains}"
-        actual = actual_domain(domain_id)
         monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        monkeypatch.setenv("ROS_DOMAIN_ID", str(actual))
+        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
         monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
-        h = InProcess(actual)
+        h = InProcess(domain_id)
         made.append(h)
         return h
 

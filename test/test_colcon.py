@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ros_helpers import REPO, actual_domain, lockstep, unique_suffix
+from ros_helpers import REPO, lockstep, unique_suffix
 
 from gait_estimator import load_library
 from gait_estimator.core.estimator import Estimator
 from gait_estimator.ros.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command
 
-DOMAIN_ID = actual_domain(29)
+DOMAIN_ID = 29
 FIND_DEMO_RECORDING = "from gait_estimator.io.resources import DEMO_RECORDING, data_path; print(data_path(DEMO_RECORDING))"
 IGNORED = shutil.ignore_patterns(
     ".git", ".venv*", "build", "install", "log", "out", "test", "benchmarks", "__pycache__", "*.egg-info",

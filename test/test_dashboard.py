@@ -165,16 +165,13 @@ def test_page_follows_the_node_and_teaches_it(multispeed_csv, tmp_path):
 
 
 def _check_page(driver, multispeed_csv, tmp_path) -> None:
-    from ros_helpers import actual_domain
-
     from gait_estimator.dashboard.process import start_dashboard
     from gait_estimator.io.readers import read_recording
     from gait_estimator.ros.node_client import EstimatorClient, NodeProcess, local_ros_environment, node_command, use_local_ros
 
-    domain = actual_domain(DOMAIN)
-    env = local_ros_environment(domain)
-    use_local_ros(domain)
-    dash, url = start_dashboard(["--port", "0", "--domain-id", str(domain), "--token", TOKEN], env)
+    env = local_ros_environment(DOMAIN)
+    use_local_ros(DOMAIN)
+    dash, url = start_dashboard(["--port", "0", "--domain-id", str(DOMAIN), "--token", TOKEN], env)
     node = client = None
     try:
         assert f"?token={TOKEN}" in url
@@ -195,7 +192,7 @@ def _check_page(driver, multispeed_csv, tmp_path) -> None:
 
         library = tmp_path / "wearer.yaml"
         node = NodeProcess(node_command(["-p", "kernels:=able_bodied", "-p", f"adapted_library_path:={library}"]), env)
-        client = EstimatorClient(domain, outputs=("estimate", "mode"), reliable=True)
+        client = EstimatorClient(DOMAIN, outputs=("estimate", "mode"), reliable=True)
         assert client.wait_for_node(timeout_s=30.0), node.output()
         _until(lambda: "no estimates" in _text(driver, "link"), 15, "the page: node up, no input yet")
         assert _text(driver, "state") == "not ready"
@@ -269,14 +266,13 @@ def test_socket_refusals_never_reach_a_node_nor_stop_the_dashboard():
     """--read-only refuses teaching; a flood is refused; an oversized message closes that socket
     only; the dashboard answers the next page, and logs each refusal."""
     import aiohttp
-    from ros_helpers import actual_domain
 
     from gait_estimator.dashboard.process import start_dashboard
     from gait_estimator.dashboard.server import MAX_SOCKETS
     from gait_estimator.ros.node_client import local_ros_environment
 
-    domain = actual_domain(DOMAIN_REFUSALS)
-    dash, url = start_dashboard(["--port", "0", "--domain-id", str(domain), "--read-only"], local_ros_environment(domain))
+    dash, url = start_dashboard(["--port", "0", "--domain-id", str(DOMAIN_REFUSALS), "--read-only"],
+                                local_ros_environment(DOMAIN_REFUSALS))
     ws_url = url.replace("http", "ws") + "ws"
 
     async def replies(messages: list[str]) -> tuple[dict, list[str]]:

@@ -9,8 +9,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ros_helpers import actual_domain
-
 from gait_estimator.ros.node_client import local_ros_environment
 
 REPO = Path(__file__).resolve().parents[1]
@@ -23,10 +21,10 @@ def _gait_estimator(*args: str, env: dict[str, str] | None = None, timeout: floa
 
 
 def test_demo_uses_the_environments_domain() -> None:
-    env = local_ros_environment(actual_domain(100))  # as `ROS_DOMAIN_ID=100 make demo`
+    env = local_ros_environment(100)  # as `ROS_DOMAIN_ID=100 make demo`
     proc = _gait_estimator("demo", "--stop", "400", "--speed", "4", "--echo-every", "100", env=env)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} (from the environment)" in proc.stdout.splitlines()[0], proc.stdout
+    assert "ROS_DOMAIN_ID=100 (from the environment)" in proc.stdout.splitlines()[0], proc.stdout
     line = next(line for line in proc.stdout.splitlines() if line.startswith("same mode as offline"))
     same, total = line.rsplit(" ", 1)[1].split("/")
     assert same == total and int(total) >= 390
@@ -57,7 +55,7 @@ def test_node_names_a_parameter_of_the_wrong_type() -> None:
     node = shutil.which("estimator_node", path=str(Path(sys.executable).parent))
     assert node is not None
     proc = subprocess.run([node, "--ros-args", "-p", "teach_strides:=ten"], capture_output=True, text=True,
-                          timeout=60, check=False, env=local_ros_environment(actual_domain(101)))
+                          timeout=60, check=False, env=local_ros_environment(101))
     line = _one_error_line(proc)
     assert line.startswith("estimator_node: error: invalid parameter teach_strides: "), line
     assert "'ten'" in line and "INTEGER" in line, line
@@ -67,7 +65,7 @@ def test_play_refuses_an_output_bag_unless_topics_are_chosen(tmp_path: Path, swg
     ramp = str(swge / "recordings" / "LG_2_Ramp_AB_Sample.csv")
     made = _gait_estimator("process", ramp, "--stop", "500", "--out-bag", str(tmp_path / "est"), "-q")
     assert made.returncode == 0, made.stderr
-    env = local_ros_environment(actual_domain(102))
+    env = local_ros_environment(102)
     line = _one_error_line(_gait_estimator("play", str(tmp_path / "est"), env=env))
     assert "holds estimator output (/estimate, /mode, /phase, /sse)" in line and "--topic" in line, line
     chosen = _gait_estimator("play", str(tmp_path / "est"), "--topic", "/estimate", "--rate", "20", env=env)
@@ -124,7 +122,7 @@ def test_docs_sample_output_is_what_the_command_prints_now() -> None:
 def test_demo_summary_counts_the_states() -> None:
     """Multispeed's first 4 s are standing: the demo's summary says ``stand``, as the node published."""
     proc = _gait_estimator("demo", "--stop", "900", "--speed", "4", "--echo-every", "1000", "--reliable",
-                           env=local_ros_environment(actual_domain(180)))
+                           env=local_ros_environment(180))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = proc.stdout.splitlines()
     assert "predicted modes (ready samples): stand 100.0%" in lines, proc.stdout

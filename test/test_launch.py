@@ -13,14 +13,13 @@ from pathlib import Path
 import pytest
 import rclpy
 from rclpy.context import Context
-from ros_helpers import actual_domain
 
 from gait_estimator.ros.node import EstimatorNode
 from gait_estimator.ros.parameters import StartupError
 
 REPO = Path(__file__).resolve().parents[1]
 LAUNCH = REPO / "launch" / "estimator.launch.xml"
-DOMAIN = actual_domain(112)
+DOMAIN = 112
 
 
 def _launch() -> ET.Element:

@@ -13,7 +13,6 @@ import sys
 from pathlib import Path
 
 import pytest
-from ros_helpers import actual_domain
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -62,7 +61,6 @@ sys.meta_path.insert(0, Blocker())
 @pytest.mark.parametrize(("domain", "numba"), [(130, False), (131, True)])
 def test_a_teaching_node_imports_no_scipy(domain: int, numba: bool) -> None:
     pytest.importorskip("scipy")  # installed, so that importing it would show
-    domain = actual_domain(domain)
     code = TEACH.format(block="" if numba else BLOCK_NUMBA, test_dir=str(REPO / "test"), domain=domain,
                         recording=str(REPO / "data" / "swge" / "recordings" / "Multispeed_Walk_AB.csv"))
     env = {k: v for k, v in os.environ.items() if k != "ROS_STATIC_PEERS"}

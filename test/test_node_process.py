@@ -20,7 +20,6 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from ros_helpers import (
     REPO,
-    actual_domain,
     as_node_sees,
     assert_same_trace,
     check_against_offline,
@@ -54,11 +53,9 @@ def local_ros(monkeypatch):
 
 
 class Running:
-    """estimator_node in a child process under a unique namespace, plus a client for it (on the
-    actual domain of the nominal ``domain_id``)."""
+    """estimator_node in a child process under a unique namespace, plus a client for it."""
 
     def __init__(self, domain_id: int, exe: str | None, ros_args: list[str], **client_kwargs: object) -> None:
-        domain_id = actual_domain(domain_id)
         self.namespace = f"/gait_proc_{unique_suffix()}"
         args = ["-r", f"__ns:={self.namespace}", "-r", "__node:=estimator", *ros_args]
         self.node = NodeProcess(node_command(args, exe), local_ros_environment(domain_id))
@@ -229,9 +226,8 @@ def test_thread_priority_refused_is_a_warning(entry_point, local_ros) -> None:
         pytest.skip("needs root and setpriv to drop CAP_SYS_NICE (the test above covers this case when not root)")
     namespace = f"/gait_proc_{unique_suffix()}"
     cmd = node_command(["-r", f"__ns:={namespace}", "-r", "__node:=estimator", "-p", "thread_priority:=3"], entry_point)
-    domain = actual_domain(49)
-    node = NodeProcess([setpriv, "--bounding-set=-sys_nice", "--inh-caps=-sys_nice", *cmd], local_ros_environment(domain))
-    client = EstimatorClient(domain, namespace=namespace, estimator_name=f"{namespace}/estimator")
+    node = NodeProcess([setpriv, "--bounding-set=-sys_nice", "--inh-caps=-sys_nice", *cmd], local_ros_environment(49))
+    client = EstimatorClient(49, namespace=namespace, estimator_name=f"{namespace}/estimator")
     try:
         assert client.wait_for_node(timeout_s=30.0, settle_s=0.5), node.output()
         diag = client.latest_diagnostics(3.0)
@@ -248,7 +244,7 @@ def test_thread_priority_refused_is_a_warning(entry_point, local_ros) -> None:
 def test_unusable_parameters_exit_nonzero_with_one_line(entry_point, tmp_path: Path) -> None:
     broken = tmp_path / "broken.yaml"
     broken.write_text("format: gait_estimator/kernel_library\nformat_version: 1\nname: [\n", encoding="utf-8")
-    env = local_ros_environment(actual_domain(25))
+    env = local_ros_environment(25)
     cases = [
         (["-p", f"kernels:={tmp_path / 'missing.yaml'}"], "missing.yaml: no such file or directory"),
         (["-p", f"kernels:={broken}"], "broken.yaml: invalid YAML"),
@@ -272,13 +268,13 @@ def _gait_estimator(*args: str, timeout: float = 120) -> subprocess.CompletedPro
         text=True,
         timeout=timeout,
         check=False,
-        env=local_ros_environment(actual_domain(0)),  # the commands set their own domain and LOCALHOST discovery
+        env=local_ros_environment(0),  # the commands set their own domain and LOCALHOST discovery
     )
 
 
 def test_demo_command_streams_the_bundled_recording() -> None:
     """Samples 4500-5300: walking (the recording starts standing, which reads stand)."""
-    proc = _gait_estimator("demo", "--start", "4500", "--stop", "5300", "--speed", "4", "--domain-id", str(actual_domain(27)),
+    proc = _gait_estimator("demo", "--start", "4500", "--stop", "5300", "--speed", "4", "--domain-id", "27",
                            "--echo-every", "40")
     out = proc.stdout
     assert proc.returncode == 0, out + proc.stderr
@@ -295,7 +291,7 @@ def test_bench_node_command(tmp_path: Path) -> None:
     report = tmp_path / "bench.json"
     proc = _gait_estimator("bench-node", "--samples", "200", "--rates", "400", "--seconds", "0.5",
                            "--executor", "events", "--outputs", "estimate,all", "--profile",
-                           "--domain-id", str(actual_domain(28)), "--json", str(report))
+                           "--domain-id", "28", "--json", str(report))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "latency at 230 Hz" in proc.stdout and "highest input rate sustained without drops" in proc.stdout
     data = json.loads(report.read_text(encoding="utf-8"))
@@ -323,7 +319,7 @@ def test_bench_node_with_more_modes(tmp_path: Path) -> None:
     priority = 2 if _rt_permitted() else 0
     proc = _gait_estimator("bench-node", "--modes", "14", "--preset", "paper", "--samples", "150", "--rates", "300",
                            "--seconds", "0.5", "--executor", "events", "--outputs", "estimate",
-                           "--thread-priority", str(priority), "--domain-id", str(actual_domain(37)), "--json", str(report))
+                           "--thread-priority", str(priority), "--domain-id", "37", "--json", str(report))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     data = json.loads(report.read_text(encoding="utf-8"))
     assert data["modes"] == 14 and data["preset"] == "paper" and data["node_exit_code"] == 0
@@ -341,8 +337,7 @@ def test_bench_node_with_raw_imu_input(tmp_path: Path) -> None:
     (gyro + accelerometer only) per sample after a standing second; the samples are answered (best effort under load)."""
     report = tmp_path / "bench.json"
     proc = _gait_estimator("bench-node", "--input", "imu-raw", "--samples", "150", "--rates", "300", "--seconds", "0.5",
-                           "--executor", "events", "--outputs", "estimate", "--domain-id", str(actual_domain(38)),
-                           "--json", str(report))
+                           "--executor", "events", "--outputs", "estimate", "--domain-id", "38", "--json", str(report))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "input imu-raw" in proc.stdout
     data = json.loads(report.read_text(encoding="utf-8"))

@@ -150,13 +150,11 @@ def _stamp_ns(msg) -> int:
 
 @pytest.fixture
 def ros_domain(monkeypatch):
-    """Set the DDS environment of this process (before rclpy.init) and return a setter (a nominal
-    domain ID in, the environment with the actual one out)."""
+    """Set the DDS environment of this process (before rclpy.init) and return a setter."""
     pytest.importorskip("rclpy")
-    from ros_helpers import actual_domain
 
     def use(domain: int) -> dict[str, str]:
-        env = _ros_env(actual_domain(domain))
+        env = _ros_env(domain)
         for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
             monkeypatch.setenv(key, env[key])
         monkeypatch.delenv("ROS_STATIC_PEERS", raising=False)
@@ -181,7 +179,7 @@ def test_play_csv_into_live_node_equals_offline(ramp, able_bodied, tmp_path, ros
         [sys.executable, "-m", "gait_estimator.ros.node"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
         text=True, start_new_session=True,
     )
-    collector = Collector(int(env["ROS_DOMAIN_ID"]), {"estimate": JointState, "mode": String})
+    collector = Collector(PLAY_NODE_DOMAIN, {"estimate": JointState, "mode": String})
     player = None
     try:
         ok = collector.spin_until(lambda: all(s.get_publisher_count() > 0 for s in collector.subs), 60)
@@ -237,7 +235,7 @@ def test_play_bag_with_clock_and_loop(ramp, tmp_path, ros_domain):
     n = 200
     bag = write_input_bag(ramp.slice(0, n), tmp_path / "bag", start_ns=START_NS)
     pl = playlist_from_bag(bag)
-    collector = Collector(int(env["ROS_DOMAIN_ID"]), {"/segment_angles": JointState, "/clock": Clock})
+    collector = Collector(PLAY_LOOP_DOMAIN, {"/segment_angles": JointState, "/clock": Clock})
     ignored = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the player
     try:
         player = _player([str(bag), "--clock", "--loop", "--rate", "4", "--wait-for-subscribers", "30"], env)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ros_helpers import BASE_NS, actual_domain
+from ros_helpers import BASE_NS
 
 from gait_estimator import load_library
 from gait_estimator.io.readers import read_recording
@@ -33,7 +33,7 @@ def _cli(*args: str, domain_id: int, **kwargs) -> subprocess.Popen:
 
 
 def test_no_node_answers_exit_2_one_line() -> None:
-    proc = _cli("--mode", "Slow", "--timeout", "1", domain_id=actual_domain(72))
+    proc = _cli("--mode", "Slow", "--timeout", "1", domain_id=72)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 2, (out, err)
     lines = err.strip().splitlines()
@@ -41,16 +41,16 @@ def test_no_node_answers_exit_2_one_line() -> None:
 
 
 def test_usage_errors_exit_2() -> None:
-    proc = _cli("--mode", "Slow", "--strides", "2", domain_id=actual_domain(72))
+    proc = _cli("--mode", "Slow", "--strides", "2", domain_id=72)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 2 and "teach strides must be an integer 3..100" in err
-    proc = _cli(domain_id=actual_domain(72))
+    proc = _cli(domain_id=72)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 2 and "give --mode NAME" in err
 
 
 def test_teach_a_running_node_then_save(multispeed_csv: Path, tmp_path: Path, monkeypatch) -> None:
-    domain = actual_domain(73)
+    domain = 73
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     rec = read_recording(multispeed_csv, rate_hz=RATE_HZ)
@@ -114,7 +114,7 @@ def test_teach_on_a_camargo_bag_as_docs_teach_md_shows(tmp_path: Path) -> None:
             "--rate", "2"]
     node_args = shlex.split(node_line.removesuffix(" &"))
     assert node_args[:2] == ["estimator_node", "--ros-args"]
-    domain = actual_domain(104)
+    domain = 104
     env = {**local_ros_environment(domain), "HOME": str(tmp_path)}  # the learnt IMU mounting is saved in ~/.ros
     with NodeProcess(node_command(node_args[2:]), env) as node:
         teach = _cli(*teach_args, "--timeout", "30", domain_id=domain)
