@@ -261,6 +261,19 @@ def test_unusable_parameters_exit_nonzero_with_one_line(entry_point, tmp_path: P
         assert len(lines) == 1 and lines[0].startswith("estimator_node: error: ") and text in lines[0], lines
 
 
+def _bench_node(report: Path, *args: str) -> tuple[subprocess.CompletedProcess, dict]:
+    """``gait-estimator bench-node ... --json report`` and its report; run a second time when the
+    latency probe (best effort) lost more than a tenth of its samples, as a loaded machine can."""
+    for _ in range(2):
+        proc = _gait_estimator("bench-node", *args, "--json", str(report))
+        if proc.returncode != 0:
+            break
+        data = json.loads(report.read_text(encoding="utf-8"))
+        if data["latency"]["answered"] >= 0.9 * data["latency"]["samples"]:
+            break
+    return proc, (data if proc.returncode == 0 else {})
+
+
 def _gait_estimator(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", "gait_estimator.cli", *args],
@@ -289,14 +302,12 @@ def test_demo_command_streams_the_bundled_recording() -> None:
 
 def test_bench_node_command(tmp_path: Path) -> None:
     report = tmp_path / "bench.json"
-    proc = _gait_estimator("bench-node", "--samples", "200", "--rates", "400", "--seconds", "0.5",
-                           "--executor", "events", "--outputs", "estimate,all", "--profile",
-                           "--domain-id", "28", "--json", str(report))
+    proc, data = _bench_node(report, "--samples", "200", "--rates", "400", "--seconds", "0.5", "--executor", "events",
+                             "--outputs", "estimate,all", "--profile", "--domain-id", "28")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "latency at 230 Hz" in proc.stdout and "highest input rate sustained without drops" in proc.stdout
-    data = json.loads(report.read_text(encoding="utf-8"))
     lat = data["latency"]
-    assert lat["samples"] == 200 and lat["answered"] >= 100 and 0 < lat["p50_ms"] <= lat["p99_ms"]
+    assert lat["samples"] == 200 and lat["answered"] >= 180 and 0 < lat["p50_ms"] <= lat["p99_ms"]
     assert 0 < lat["dds_p50_ms"] <= lat["p50_ms"]
     assert data["modes"] == 7 and data["node_exit_code"] == 0
     assert data["throughput"]["steps"][0]["rate_hz"] == 400
@@ -317,14 +328,13 @@ def test_bench_node_with_more_modes(tmp_path: Path) -> None:
     With --thread-priority (where permitted) the node and the bench run under SCHED_FIFO."""
     report = tmp_path / "bench.json"
     priority = 2 if _rt_permitted() else 0
-    proc = _gait_estimator("bench-node", "--modes", "14", "--preset", "paper", "--samples", "150", "--rates", "300",
-                           "--seconds", "0.5", "--executor", "events", "--outputs", "estimate",
-                           "--thread-priority", str(priority), "--domain-id", "37", "--json", str(report))
+    proc, data = _bench_node(report, "--modes", "14", "--preset", "paper", "--samples", "150", "--rates", "300",
+                             "--seconds", "0.5", "--executor", "events", "--outputs", "estimate",
+                             "--thread-priority", str(priority), "--domain-id", "37")
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    data = json.loads(report.read_text(encoding="utf-8"))
     assert data["modes"] == 14 and data["preset"] == "paper" and data["node_exit_code"] == 0
     assert data["thread_priority"] == priority
-    assert data["latency"]["answered"] >= 75
+    assert data["latency"]["answered"] >= 135
     assert "(14 modes)" in proc.stdout
     bad = _gait_estimator("bench-node", "--modes", "0")
     assert bad.returncode == 2 and "--modes" in bad.stderr
@@ -334,13 +344,12 @@ def test_bench_node_with_more_modes(tmp_path: Path) -> None:
 
 def test_bench_node_with_raw_imu_input(tmp_path: Path) -> None:
     """--input imu-raw: the node runs input_type imu with configured mounting, four Imu messages
-    (gyro + accelerometer only) per sample after a standing second; the samples are answered (best effort under load)."""
+    (gyro + accelerometer only) per sample after a standing second; the samples are answered."""
     report = tmp_path / "bench.json"
-    proc = _gait_estimator("bench-node", "--input", "imu-raw", "--samples", "150", "--rates", "300", "--seconds", "0.5",
-                           "--executor", "events", "--outputs", "estimate", "--domain-id", "38", "--json", str(report))
+    proc, data = _bench_node(report, "--input", "imu-raw", "--samples", "150", "--rates", "300", "--seconds", "0.5",
+                             "--executor", "events", "--outputs", "estimate", "--domain-id", "38")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "input imu-raw" in proc.stdout
-    data = json.loads(report.read_text(encoding="utf-8"))
     assert data["input"] == "imu-raw" and data["node_exit_code"] == 0
-    assert data["latency"]["samples"] == 150 and data["latency"]["answered"] >= 75
+    assert data["latency"]["samples"] == 150 and data["latency"]["answered"] >= 135
     assert data["throughput"]["steps"][0]["rate_hz"] == 300 and data["throughput"]["steps"][0]["answered"] > 0

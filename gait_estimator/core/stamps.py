@@ -78,15 +78,16 @@ class StreamGuard:
         self.rejected[exc.reason] += 1
         self.last_detail[exc.reason] = str(exc)
 
-    def main_rejection(self) -> str:
-        """``reason: its latest detail`` of the most frequent rejection since the previous call
-        ('' when none)."""
+    def main_rejection(self, ignore: str = "") -> tuple[int, str]:
+        """The rejections since the previous call, but those for ``ignore``: how many, and
+        ``reason: its latest detail`` of the most frequent ('' when none)."""
         new = self.rejected - self._reported
         self._reported = Counter(self.rejected)
+        new.pop(ignore, None)
         if not new:
-            return ""
+            return 0, ""
         reason = new.most_common(1)[0][0]
-        return f"{reason}: {self.last_detail[reason]}"
+        return sum(new.values()), f"{reason}: {self.last_detail[reason]}"
 
     @property
     def rejected_total(self) -> int:

@@ -113,7 +113,7 @@ def _in_bag_order(samples: Iterator[NodeSample], stream: Any) -> Iterator[NodeSa
     first = shift = 0
     for s in samples:
         if prev is None:  # (Imu: paired samples the calibration took came before)
-            first = min(stream.first_stamp_ns or s.stamp_ns, s.stamp_ns)
+            first = s.stamp_ns if stream.first_stamp_ns is None else min(stream.first_stamp_ns, s.stamp_ns)
         elif s.stamp_ns < prev.stamp_ns:  # accepted going back: a restarted stream
             shift += prev.stamp_ns - s.stamp_ns + max(s.log_ns - prev.log_ns, 1)
         prev = s

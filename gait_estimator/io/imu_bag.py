@@ -137,12 +137,15 @@ def read_imu_bag(path: str | Path, options: ReadOptions | None = None, /, **valu
     try:
         if imu_tolerance_s is not None:
             check_tolerance_s(imu_tolerance_s)
+    except ValueError as exc:
+        raise RecordingError(str(exc)) from None
+    try:
         lateral, proximal = check_configured(imu_lateral_axes or [""] * N_CHANNELS, imu_proximal_axes or [""] * N_CHANNELS)
         cal = imu_calibration or None
         given_as = f"the IMU calibration {cal}" if isinstance(cal, (str, Path)) else "the IMU calibration given"
         if isinstance(cal, (str, Path)):
             cal = load_calibration(cal)
-    except (CalibrationError, ValueError) as exc:
+    except CalibrationError as exc:
         raise RecordingError(str(exc)) from None
     standing_deg = list(o.imu_standing_deg or [0.0] * N_CHANNELS)
     names, messages, undecodable = _read_messages(p, o.imu_topics)

@@ -122,10 +122,9 @@ class NodeDiagnostics:
         problems: list[str] = []
         if period.received == 0 and not silent:  # IMU input: no sample paired, nor message rejected
             problems.append(f"no input on {node.input_topics}" if imu is None else "no IMU sample")
-        values["rejected_main"] = stream.guard.main_rejection()
-        if period.rejected and not (silent and values["rejected_main"].startswith(UNPAIRED)):
-            problems.append(f"{period.rejected} {'sample' if imu is None else 'IMU input'}(s) rejected"
-                            + (f" ({values['rejected_main']})" if values["rejected_main"] else ""))
+        rejected, values["rejected_main"] = stream.guard.main_rejection(ignore=UNPAIRED if silent else "")
+        if rejected:
+            problems.append(f"{rejected} {'sample' if imu is None else 'IMU input'}(s) rejected ({values['rejected_main']})")
         if not math.isnan(stamp_rate) and est.resampler is None and abs(stamp_rate / lib.sample_rate_hz - 1.0) > RATE_TOLERANCE:
             problems.append(f"input stamp rate {stamp_rate:.0f} Hz differs from the library's {lib.sample_rate_hz:g} Hz "
                             "(set resample: on)")
