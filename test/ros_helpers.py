@@ -1,6 +1,6 @@
 """Helpers for the node tests: real rclpy over real DDS, confined to this machine.
 
-Every test that starts ROS uses its own ROS_DOMAIN_ID (11..38, 47..49, 58..76, 79, 80, 85..89; one per test) and
+Every test that starts ROS uses a ROS_DOMAIN_ID of its file's (11..180, named in each file's docstring) and
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, and a namespace/node name unique to this test run, so
 concurrent runs (or other engineers' tests) cannot cross-talk.
 """
