@@ -12,6 +12,7 @@ import pytest
 from gait_estimator.core import batch, compiled
 from gait_estimator.core.batch import batch_supported
 from gait_estimator.core.estimator import EstimateTrace, Estimator, EstimatorConfig, run_estimator, trace_from_estimates
+from gait_estimator.core.supervisor import SUPERVISED_STEPS
 from gait_estimator.io.readers import read_recording
 
 pytestmark = pytest.mark.skipif(not compiled.AVAILABLE or bool(os.environ.get("GAIT_ESTIMATOR_NO_NUMBA")),
@@ -90,6 +91,63 @@ def test_bulk_equals_streaming_under_every_supervisor_option(multispeed_csv: Pat
     assert_same_state(a, b)
 
 
+TABLE = "Med: [Slow, RA]\n  RD: [Fast]"
+"""Allowed transitions that change the reported mode of both recordings and leave confident strides."""
+SUPERVISED = {
+    "dwell": {"min_dwell_s": 0.3},
+    "confidence": {"min_confidence": 0.05},
+    "switch-back": {"switch_back_margin": 0.3},
+    "transitions": {"transitions": TABLE},
+    "all": {"min_confidence": 0.02, "min_dwell_s": 0.08, "switch_back_margin": 0.1, "transitions": TABLE},
+}
+
+
+@pytest.mark.parametrize("setting", SUPERVISED)
+@pytest.mark.parametrize("stamped", [True, False], ids=["resampled", "not-resampled"])
+@pytest.mark.parametrize("name", ["Multispeed_Walk_AB.csv", "LG_2_Ramp_AB_Sample.csv"])
+def test_bulk_equals_streaming_with_the_supervisor_and_the_walking_calibrations(swge: Path, able_bodied, tmp_path: Path,
+                                                                               setting, stamped, name) -> None:
+    """Each supervisor option with the walking calibrations acting (default preset): the supervisor
+    decides inside the compiled steps and the calibrations follow its reported mode and phase, bit
+    for bit as sample by sample."""
+    options = dict(SUPERVISED[setting])
+    if "transitions" in options:
+        table = tmp_path / "transitions.yaml"
+        table.write_text(f"allowed_transitions:\n  {options['transitions']}")
+        options["transitions"] = str(table)
+    cfg = EstimatorConfig.preset("default", **options)
+    rec = read_recording(swge / "recordings" / name)
+    a, b = Estimator(able_bodied, cfg, stamped=stamped), Estimator(able_bodied, cfg, stamped=stamped)
+    assert batch_supported(b) and b.calibration.active and not b.supervisor.passes_through
+    ref = streamed(a, rec.time_s, rec.angles_deg, rec.index)
+    got = run_batch(b, rec.time_s, rec.angles_deg, rec.index)
+    assert got is not None
+    assert_identical(ref, got)
+    assert_same_state(a, b)
+    assert b.calibration.strides >= 3  # the calibrations acted
+    assert (got.mode_index != got.raw_mode_index).any()  # and the supervisor
+
+
+def test_bulk_reads_the_reported_near_copy_at_stride_ends(multispeed_csv: Path, able_bodied, tmp_path: Path) -> None:
+    """Transitions that allow only the near copies of the library's modes (``replicated``): the
+    calibrations read strides of a reported mode that is not the matcher's best (its near copy),
+    at the reported mode's kernel column, in bulk as sample by sample."""
+    lib = able_bodied.replicated(2 * len(able_bodied))
+    copies = [m for m in lib.mode_names if m not in able_bodied.mode_names]
+    table = tmp_path / "transitions.yaml"
+    table.write_text("allowed_transitions:\n" + "".join(f"  {m}: [{', '.join(copies)}]\n" for m in lib.mode_names))
+    cfg = EstimatorConfig.preset("default", transitions=str(table))
+    rec = read_recording(multispeed_csv)
+    a, b = Estimator(lib, cfg), Estimator(lib, cfg)
+    assert a.calibration.near_copies is not None
+    ref = streamed(a, rec.time_s, rec.angles_deg, rec.index)
+    got = run_batch(b, rec.time_s, rec.angles_deg, rec.index)
+    assert got is not None
+    assert_identical(ref, got)
+    assert_same_state(a, b)
+    assert b.calibration.strides >= 3 and (got.mode_index != got.raw_mode_index).mean() > 0.3
+
+
 def test_bulk_continues_a_stream_and_restarts_at_gaps(multispeed_csv: Path, able_bodied) -> None:
     """A stream in pieces, with a gap that restarts the window (> max_gap_s) and one that also
     forgets the calibrations (> calibration_reset_gap_s), at an irregular rate: the same as
@@ -112,13 +170,13 @@ def test_bulk_continues_a_stream_and_restarts_at_gaps(multispeed_csv: Path, able
 
 
 def test_bulk_hands_back_what_it_cannot_do(multispeed_csv: Path, able_bodied) -> None:
-    """Options the bulk path does not cover (supervisor holds with the walking calibrations on) and
-    bad input take the streaming path: same results, the same error at the same sample."""
+    """Options the bulk path does not cover (personalisation) and bad input take the streaming
+    path: same results, the same error at the same sample."""
     rec = read_recording(multispeed_csv)
     t, x = rec.time_s[:1500], rec.angles_deg[:1500].copy()
-    held = EstimatorConfig.preset("default", min_confidence=0.1)
-    assert not batch_supported(Estimator(able_bodied, held))
-    assert run_batch(Estimator(able_bodied, held), t, x, rec.index[:1500]) is None
+    adapting = EstimatorConfig.preset("default", adapt_rate=0.1)
+    assert not batch_supported(Estimator(able_bodied, adapting))
+    assert run_batch(Estimator(able_bodied, adapting), t, x, rec.index[:1500]) is None
     x[1200, 2] = np.nan
     assert run_batch(Estimator(able_bodied), t, x, rec.index[:1500]) is None
     est = Estimator(able_bodied)
@@ -127,13 +185,16 @@ def test_bulk_hands_back_what_it_cannot_do(multispeed_csv: Path, able_bodied) ->
     assert est.matcher.steps > 1000  # streamed up to the bad sample
 
 
-def test_bulk_equals_the_threaded_float32_step_of_large_libraries(multispeed_csv: Path, able_bodied) -> None:
+@pytest.mark.parametrize("options", [{}, {"min_dwell_s": 0.3}], ids=["matcher-reports", "supervisor-reports"])
+def test_bulk_equals_the_threaded_float32_step_of_large_libraries(multispeed_csv: Path, able_bodied, options) -> None:
     """From PARALLEL_MIN_ROWS rows on, both paths read float32 kernels and spread the rows over
-    threads (when the process has more than one CPU): the same results as on one thread."""
+    threads (when the process has more than one CPU): the same results as on one thread, with the
+    supervisor's step inside the compiled steps or after them."""
     lib = able_bodied.replicated(70)  # >= PARALLEL_MIN_ROWS rows at one time scale
     rec = read_recording(multispeed_csv)
     t, x, idx = rec.time_s[:1600], rec.angles_deg[:1600], rec.index[:1600]
-    a, b, one = Estimator(lib), Estimator(lib), Estimator(lib)
+    cfg = EstimatorConfig.preset("default", **options)
+    a, b, one = Estimator(lib, cfg), Estimator(lib, cfg), Estimator(lib, cfg)
     assert a.matcher._kernels.dtype == np.float32
     one.matcher.parallel = False
     one.matcher.set_scale_band(one.matcher.scale_band, one.calibration.params.scale_search_modes)  # the same band,
@@ -142,5 +203,5 @@ def test_bulk_equals_the_threaded_float32_step_of_large_libraries(multispeed_csv
     bulk = run_batch(b, t, x, idx)
     assert_identical(streamed(a, t, x, idx), bulk)
     assert_identical(run_batch(one, t, x, idx), bulk)
-    if b.matcher.parallel:
-        assert compiled.run_steps_parallel.signatures  # the bulk path ran the threaded steps
+    if b.matcher.parallel:  # the bulk path ran the threaded steps
+        assert (SUPERVISED_STEPS[1] if options else compiled.run_steps_parallel).signatures

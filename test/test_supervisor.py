@@ -1,5 +1,5 @@
-"""Supervisor.decide and Supervisor.decide_many (supervise_step on Python floats and compiled): the same
-decision, field by field, under every option."""
+"""Supervisor.decide, Supervisor.decide_many and Supervisor.step_hook (supervise_step on Python floats, compiled,
+and inside the compiled matcher steps): the same decision, field by field, under every option."""
 
 from __future__ import annotations
 
@@ -10,12 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gait_estimator.core import compiled
 from gait_estimator.core.matcher import IncrementalMatcher, StepBlock, StepResult
 from gait_estimator.core.supervisor import (
     Estimate,
     Supervisor,
     SupervisorParams,
     carry_forward,
+    second_smallest,
     switch_candidate,
     transitions_matrix,
 )
@@ -43,11 +45,30 @@ SETTINGS = {
 }
 
 
+def decided_inside_steps(sup: Supervisor, matcher: IncrementalMatcher, t: np.ndarray, x: np.ndarray,
+                         cuts: list[int]) -> list[dict[str, np.ndarray]]:
+    """``sup``'s columns decided inside the compiled matcher steps (``Supervisor.step_hook``), in
+    runs between ``cuts``."""
+    d, sq = matcher.weighted_samples(x)
+    block = StepBlock.empty(matcher.mode_names, matcher.n_scales, t.size)
+    hook, parts = sup.step_hook(t), []
+    for a, b in itertools.pairwise(cuts):
+        g = a
+        while g < b:  # the steps stop at resynchronisations
+            g, _ = matcher.run_steps(d, sq, g, b, block, hook=hook)
+        parts.append(sup.columns(hook, a, b, block.rows(a, b)))
+    return parts
+
+
+@pytest.mark.parametrize("where", ["after", "inside"], ids=["after-the-steps", "inside-the-steps"])
 @pytest.mark.parametrize("setting", SETTINGS)
 @pytest.mark.parametrize("scales", [(1.0,), (0.9, 1.0, 1.1)], ids=["one-scale", "three-scales"])
-def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales, setting) -> None:
+def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales, setting, where) -> None:
     """In runs of any length (the state carried from one to the next), every field of every
-    estimate and the state left behind equal decide's, sample by sample, under each option."""
+    estimate and the state left behind equal decide's, sample by sample, under each option:
+    decided after the compiled matcher steps (``decide_many``) or inside them (``step_hook``)."""
+    if where == "inside" and not compiled.AVAILABLE:
+        pytest.skip("the compiled steps need numba")
     rec = read_recording(multispeed_csv)
     matcher = IncrementalMatcher(able_bodied, time_scales=scales)
     results = [matcher.step(rec.angles_deg[i]) for i in range(5200)]
@@ -62,7 +83,10 @@ def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales, se
     ref = [one.decide(float(t[g]), r) for g, r in enumerate(results)]
     block = block_of(results, able_bodied.mode_names, matcher.n_scales)
     cuts = [0, 1, 700, 700, 1501, 3333, 5200]
-    parts = [many.decide_many(t[a:b], block.rows(a, b)) for a, b in itertools.pairwise(cuts)]
+    if where == "inside":
+        parts = decided_inside_steps(many, IncrementalMatcher(able_bodied, time_scales=scales), t, rec.angles_deg[:5200], cuts)
+    else:
+        parts = [many.decide_many(t[a:b], block.rows(a, b)) for a, b in itertools.pairwise(cuts)]
     got = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     assert np.isfinite(got["phase_rate"][-1]) and np.isfinite(got["cadence_ratio"]).all() == (len(scales) > 1)
     supervised = got["mode_index"] != got["raw_mode_index"]
@@ -77,6 +101,15 @@ def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales, se
         want = np.array([getattr(e, f.name) for e in ref])
         np.testing.assert_array_equal(got[f.name], want, err_msg=f.name)
     np.testing.assert_array_equal(np.array(many._mem), np.array(one._mem))  # nan == nan here
+
+
+def test_second_smallest_is_what_a_partition_finds() -> None:
+    rng = np.random.default_rng(3)
+    cases = [rng.integers(0, 4, 7).astype(float) for _ in range(50)] + [
+        np.array(v) for v in ([np.inf, np.inf], [np.nan, 1.0, 2.0], [1.0, np.nan], [np.nan, np.nan, 3.0], [-0.0, 0.0, 2.0])]
+    for v in cases:
+        np.testing.assert_array_equal(second_smallest(v), np.partition(v, 1)[1], err_msg=str(v))
+    assert second_smallest(np.array([2.0])) == np.inf
 
 
 def test_carry_forward_is_estimate_at(multispeed_csv: Path, able_bodied) -> None:

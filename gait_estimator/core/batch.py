@@ -4,12 +4,13 @@
 The streaming path hands every sample through Python (gap check, resampler, matcher step,
 supervisor, calibrations, an ``Estimate`` object). Here each stage runs its bulk form, in the
 order of ``update``: ``GapCheck.admit_many`` and ``UniformResampler.push_many`` for the whole
-recording, ``IncrementalMatcher.run_steps`` for many steps per compiled call, then
-``Supervisor.decide_many`` (``decide``'s step, compiled) for those steps and
-``StateTracker.decide_many`` (``step``'s rule, compiled) for the states. A run of steps ends
-where the streaming path would do more than that: at a heel strike that ends a whole stride
-(``WalkingCalibration.observe`` reads it), at the matcher's resynchronisation steps, and at gaps
-(``Estimator.on_gap``). Used by ``run_estimator`` when the options allow it
+recording, ``IncrementalMatcher.run_steps`` for many steps per compiled call, ``decide``'s step
+compiled (``Supervisor.decide_many`` after those steps, or inside them with a supervisor option
+on: ``Supervisor.step_hook``, so that the walking calibrations' stride tracker follows the
+reported mode) and ``StateTracker.decide_many`` (``step``'s rule, compiled) for the states. A
+run of steps ends where the streaming path would do more than that: at a heel strike that ends
+a whole stride (``WalkingCalibration.observe`` reads it), at the matcher's resynchronisation
+steps, and at gaps (``Estimator.on_gap``). Used by ``run_estimator`` when the options allow it
 (``batch_supported``); the streaming ``Estimator.update`` stays the reference
 (test/test_batch.py compares every field).
 """
@@ -35,15 +36,9 @@ SHARED = ("sse", "phases")
 
 
 def batch_supported(estimator: Estimator) -> bool:
-    """True when ``estimator``'s options allow bulk processing: the compiled matcher, no
-    personalisation, and no supervisor holds, dwell or transitions while the walking calibrations
-    act (the compiled steps' stride tracker follows the matcher's choice)."""
-    return (
-        compiled.AVAILABLE
-        and estimator.matcher.backend == "numba"
-        and (estimator.supervisor.passes_through or not estimator.calibration.active)
-        and estimator.personaliser is None
-    )
+    """True when ``estimator``'s options allow bulk processing: the compiled matcher and no
+    personalisation."""
+    return compiled.AVAILABLE and estimator.matcher.backend == "numba" and estimator.personaliser is None
 
 
 def run_batch(estimator: Estimator, time_s: np.ndarray, angles_deg: np.ndarray) -> dict[str, np.ndarray] | None:
@@ -95,24 +90,28 @@ def _column_of(est: Estimate, name: str, like: np.ndarray) -> np.ndarray:
 
 def _match(estimator: Estimator, grid_t: np.ndarray, grid_x: np.ndarray) -> dict[str, np.ndarray]:
     """Matcher and supervisor over the grid samples, the walking calibrations at the ends of
-    whole strides; the decided columns."""
-    mt, cal = estimator.matcher, estimator.calibration
+    whole strides; the decided columns. The supervisor decides inside the compiled steps unless it
+    passes the matcher's choice through (then after them)."""
+    mt, cal, sup = estimator.matcher, estimator.calibration, estimator.supervisor
     d, sq = mt.weighted_samples(grid_x)
     steps = StepBlock.empty(estimator.mode_names, mt.n_scales, grid_t.size)
     if grid_t.size == 0:
-        return estimator.states.decide_many(grid_t, grid_x, estimator.supervisor.decide_many(grid_t, steps))
+        return estimator.states.decide_many(grid_t, grid_x, sup.decide_many(grid_t, steps))
+    hook = compiled.MATCHER_REPORTS if sup.passes_through else sup.step_hook(grid_t)
     chunk = max(1, CHUNK_VALUES // max(mt.n_modes, 1))
     parts = []
     g = 0
     while g < grid_t.size:
         track = cal.stride_state() if cal.active else None
         done, ended = mt.run_steps(d, sq, g, min(grid_t.size, g + chunk), steps, track, cal.near_copies,
-                                   cal.params.mid_stride)
+                                   cal.params.mid_stride, hook)
         if track is not None:  # the tracker's state after the last step (before it, when that one ended a stride)
             cal.set_stride_state(track)
-        parts.append(estimator.supervisor.decide_many(grid_t[g:done], steps.rows(g, done)))
+        rows = steps.rows(g, done)
+        parts.append(sup.decide_many(grid_t[g:done], rows) if sup.passes_through else sup.columns(hook, g, done, rows))
         if ended:
-            cal.observe(Estimate.from_columns(parts[-1], -1, estimator.mode_names), steps.result(done - 1))
+            est = Estimate.from_columns(parts[-1], -1, estimator.mode_names)
+            cal.observe(est, steps.result(done - 1, est.mode_index))
         g = done
     columns = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k not in SHARED}
     return estimator.states.decide_many(grid_t, grid_x, {**columns, "sse": steps.sse, "phases": steps.phases})

@@ -220,10 +220,11 @@ def step_rows(
 
 
 def compiled_copy(fn: Callable[..., Any], name: str, parallel: bool = False, **callees: Any) -> Any:
-    """A compiled copy of ``fn`` as a function of its own ``name`` (so that its cache does not
-    collide with ``fn``'s), ``parallel``: prange over numba's threads; ``callees``: global names
-    that refer to other functions in the copy (then a snapshot of the module's globals, else the
-    module's own, which later definitions still enter)."""
+    """A compiled copy of ``fn`` (or of a compiled function's source) as a function of its own
+    ``name`` (so that its cache does not collide with ``fn``'s), ``parallel``: prange over numba's
+    threads; ``callees``: global names that refer to other functions in the copy (then a snapshot
+    of the module's globals, else the module's own, which later definitions still enter)."""
+    fn = getattr(fn, "py_func", fn)  # a compiled function: its Python source
     twin = types.FunctionType(fn.__code__, {**fn.__globals__, **callees} if callees else fn.__globals__, name)
     twin.__qualname__ = name
     return njit(cache=True, nogil=True, parallel=parallel)(twin)
@@ -386,19 +387,28 @@ def _row_sums(decay, wsums, r, p0, p1, p2, p3, psum_ring, i, w):  # pragma: no c
 _stride_step = njit(cache=True, nogil=True, inline="always")(stride_step)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def report_step(hook, g, best, sse, phases, window, ready):  # pragma: no cover - compiled
+    """The mode and phase reported at step ``g`` of ``run_steps``: the ``best`` mode and its phase
+    (``hook`` unused). A copy of ``run_steps`` with another function here (``StepHook``) decides
+    there from ``hook`` and the step's per-mode ``sse``, ``phases``, ``window`` and ``ready``."""
+    return best, phases[best]
+
+
 def run_steps(  # pragma: no cover - compiled
     state, count, samples, squares, start, stop,
     out_sse, out_phase, out_variant, out_window, best, best_column, column, track, near, mid_lo, mid_hi, ready_from,
+    hook,
 ):
     """Matcher steps ``start`` .. ``stop`` - 1 of ``samples`` (G, 4) (weighted; ``squares`` their
     squared norms) through step_rows (``run_steps_parallel``: step_rows_parallel, the rows of each
     step over numba's threads), the matcher's ``state`` (``step_rows``) in place from ``count`` samples on. Per step:
     every mode's score, phase, variant and window into out_sse/out_phase/out_variant/out_window
-    (G, M), the best mode and its column.
+    (G, M), the best mode, and the column of the reported mode (``report_step`` with ``hook``).
 
     The walking calibrations' stride tracker (``stride_track.stride_step``, as
     ``WalkingCalibration._confident_stride_end`` runs it, without its confidence test) runs
-    along on the best mode and its phase: ``track`` = (valid, mode, phase,
+    along on the reported mode and its phase: ``track`` = (valid, mode, phase,
     passed_mid, began_in_mode) as floats, ``near`` (M, M) the near copies; the steps stop after a
     heel strike that ends a whole stride, where the calibrations may act, with ``track`` as it was
     before that step. Returns the step after the last done and whether it ended such a stride."""
@@ -406,16 +416,16 @@ def run_steps(  # pragma: no cover - compiled
         i = count + g - start
         d0, d1, d2, d3, dsq = samples[g, 0], samples[g, 1], samples[g, 2], samples[g, 3], squares[g]
         b = step_rows(state, i, d0, d1, d2, d3, dsq, out_sse[g], out_phase[g], out_variant[g], column, out_window[g])
-        best[g], best_column[g] = b, column[b]
+        m, phase = report_step(hook, g, b, out_sse[g], out_phase[g], out_window[g], i + 1 >= ready_from)
+        best[g], best_column[g] = b, column[m]
         if track.shape[0] == 0:
             continue
-        phase = out_phase[g, b]
-        same = track[0] > 0.0 and (int(track[1]) == b or near[int(track[1]), b])
+        same = track[0] > 0.0 and (int(track[1]) == m or near[int(track[1]), m])
         ends, midway, began = _stride_step(same, track[2], track[3] > 0.0, track[4] > 0.0, phase, (mid_lo, mid_hi))
         if ends:  # the tracker's state stays the one before this step
             return g + 1, True
         if i + 1 >= ready_from:
-            track[0], track[1], track[2] = 1.0, b, phase
+            track[0], track[1], track[2] = 1.0, m, phase
             track[3] = 1.0 if midway else 0.0
             track[4] = 1.0 if began else 0.0
         else:
@@ -428,3 +438,21 @@ run_steps, run_steps_parallel = (
     compiled_copy(run_steps, "run_steps_parallel", step_rows=step_rows_parallel),
 )
 
+
+def step_loops(report: Any, name: str) -> tuple[Any, Any]:
+    """Copies of ``run_steps`` named after ``name`` (rows on one thread, over threads) that call
+    ``report`` (compiled, ``report_step``'s arguments and results) in ``report_step``'s place."""
+    return (compiled_copy(run_steps, name, report_step=report),
+            compiled_copy(run_steps, f"{name}_parallel", step_rows=step_rows_parallel, report_step=report))
+
+
+class StepHook(NamedTuple):
+    """A decision inside the compiled steps (``IncrementalMatcher.run_steps``): ``loops`` the copies
+    of ``run_steps`` (``step_loops``) that make it, ``args`` their ``hook`` argument."""
+
+    loops: tuple[Any, Any]
+    args: tuple
+
+
+MATCHER_REPORTS = StepHook((run_steps, run_steps_parallel), ())
+"""No decision inside the steps: the best mode is reported."""

@@ -58,7 +58,7 @@ class MatchTrace:
 @dataclass(frozen=True)
 class StepBlock:
     """The results of a run of matcher steps in bulk (``IncrementalMatcher.run_steps``; G steps,
-    M modes): what ``StepResult`` holds per step, with the column of the best mode only."""
+    M modes): what ``StepResult`` holds per step, with the column of one mode only."""
 
     mode_names: list[str]
     n_scales: int
@@ -67,7 +67,7 @@ class StepBlock:
     variant: np.ndarray  # (G, M) int64: every mode's best time scale (index)
     window: np.ndarray  # (G, M) int64: every mode's window's samples so far
     best: np.ndarray  # (G,) int64: the best mode
-    column: np.ndarray  # (G,) int64: its best kernel column
+    column: np.ndarray  # (G,) int64: the reported mode's best kernel column (``run_steps``; default the best mode)
     ready: np.ndarray  # (G,) bool
 
     @classmethod
@@ -84,10 +84,11 @@ class StepBlock:
         return replace(self, sse=self.sse[s], phases=self.phases[s], variant=self.variant[s], window=self.window[s],
                        best=self.best[s], column=self.column[s], ready=self.ready[s])
 
-    def result(self, g: int) -> StepResult:
-        """Step ``g`` as a ``StepResult`` (the other modes' column is 0)."""
+    def result(self, g: int, reported: int | None = None) -> StepResult:
+        """Step ``g`` as a ``StepResult``, ``column`` that of the ``reported`` mode (default the best;
+        the other modes' column is 0)."""
         b = int(self.best[g])
         column = np.zeros(len(self.mode_names), dtype=np.int64)
-        column[b] = self.column[g]
+        column[b if reported is None else reported] = self.column[g]
         return StepResult(b, self.mode_names[b], float(self.phases[g, b]), self.sse[g], self.phases[g],
                           bool(self.ready[g]), self.window[g], self.variant[g] if self.n_scales > 1 else None, column)

@@ -295,14 +295,16 @@ class IncrementalMatcher(_MatcherBase):
     def run_steps(
         self, samples: np.ndarray, squares: np.ndarray, start: int, stop: int, out: StepBlock,
         tracker: np.ndarray | None = None, near: np.ndarray | None = None, mid_stride: tuple[float, float] = (0.25, 0.75),
+        hook: compiled.StepHook = compiled.MATCHER_REPORTS,
     ) -> tuple[int, bool]:
         """Steps ``start`` .. at most ``stop`` - 1 of ``samples`` (``weighted_samples``) in one
         compiled call (numba backend), each step's result into that row of ``out``: the state and
         results of ``step`` sample by sample. Stops after a step that resynchronises (done, as in
         ``step``) and, with a stride ``tracker`` (``WalkingCalibration.stride_state``, advanced in
         place; ``near`` (M, M) its near copies), after a step that ends a whole stride, the tracker
-        then as before that step (``compiled.run_steps``). Returns the step after the last done
-        and whether it ended a stride."""
+        then as before that step (``compiled.run_steps``). The tracker follows the mode ``hook``
+        reports (the best one by default; ``out.column`` is that mode's column). Returns the step
+        after the last done and whether it ended a stride."""
         if self.backend != "numba":
             raise ValueError("run_steps needs the numba backend")
         if self._resync_every:
@@ -314,9 +316,9 @@ class IncrementalMatcher(_MatcherBase):
         column = np.empty(self.n_modes, dtype=np.int64)
         count = self._count
         threaded = self._compiled_step is compiled.step_rows_parallel  # the rows' results do not depend on it
-        done, ended = (compiled.run_steps_parallel if threaded else compiled.run_steps)(
+        done, ended = hook.loops[1 if threaded else 0](
             self._step_state(), count, samples, squares, start, stop, out.sse, out.phases, out.variant, out.window,
-            out.best, out.column, column, track, near, mid_stride[0], mid_stride[1], self.max_window,
+            out.best, out.column, column, track, near, mid_stride[0], mid_stride[1], self.max_window, hook.args,
         )
         self._count = count + done - start
         out.ready[start:done] = count + 1 + np.arange(done - start) >= self.max_window

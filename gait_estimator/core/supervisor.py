@@ -16,8 +16,9 @@ estimate:
 6. phase rate: exponentially smoothed d(phase)/dt of the reported mode, strides per second.
 
 ``supervise_step`` is the decision, on Python floats for ``Supervisor.decide`` (one matcher
-result) and compiled for ``Supervisor.decide_many`` (a run of them, offline: ``batch.py``); the
-hold and dwell rule is ``choose_mode``. Every option off (the defaults) reports the matcher's
+result) and compiled for ``Supervisor.decide_many`` (a run of them, offline: ``batch.py``) and
+inside the compiled matcher steps (``Supervisor.step_hook``); the hold and dwell rule is
+``choose_mode``. Every option off (the defaults) reports the matcher's
 choice unchanged.
 """
 
@@ -258,20 +259,35 @@ class Supervisor:
         """``decide`` for a run of matcher steps at ``time_s`` (G,), seconds, in one compiled loop:
         the fields of their estimates as columns (G,) or (G, M), the state left as ``decide``
         leaves it."""
-        n, m = steps.sse.shape
-        second = np.partition(steps.sse, 1, axis=1)[:, 1] if m > 1 else np.full(n, math.inf)
+        hook = self.step_hook(time_s)
+        _supervised_rows(hook.args, steps.sse, steps.best, steps.phases, steps.window, steps.ready)
+        return self.columns(hook, 0, time_s.shape[0], steps)
+
+    def step_hook(self, time_s: np.ndarray) -> compiled.StepHook:
+        """``decide`` inside compiled matcher steps at ``time_s`` (G,), seconds
+        (``IncrementalMatcher.run_steps``), from the supervisor's state on; ``columns`` reads
+        the results."""
+        n = time_s.shape[0]
         reported, held = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool)
         confidence, fit, phase, rate = np.empty((4, n))
         mem = np.asarray(self._mem, dtype=np.float64)
-        _supervised_rows(mem, time_s, steps.sse, second, steps.best, steps.phases, steps.window, steps.ready, self.allowed,
-                         self._settings, reported, held, confidence, fit, phase, rate)
+        return compiled.StepHook(SUPERVISED_STEPS, (mem, time_s, self.allowed, self._settings, reported, held, confidence,
+                                                    fit, phase, rate))
+
+    def columns(self, hook: compiled.StepHook, start: int, stop: int, steps: StepBlock) -> dict[str, np.ndarray]:
+        """``decide_many``'s columns of the steps ``start`` .. ``stop`` - 1 decided in ``hook``
+        (``step_hook``), ``steps`` their matcher results; the state left as ``decide`` leaves it
+        after the last step decided."""
+        mem, time_s, _, _, reported, held, confidence, fit, phase, rate = hook.args
         self._mem = mem.tolist()
+        s = slice(start, stop)
+        reported = reported[s]
         variant = np.take_along_axis(steps.variant, reported[:, None], axis=1)[:, 0]
-        cadence = np.asarray(self._inverse_scales)[variant] if steps.n_scales > 1 else np.full(n, math.nan)
+        cadence = np.asarray(self._inverse_scales)[variant] if steps.n_scales > 1 else np.full(stop - start, math.nan)
         return {
-            "time_s": time_s, "mode_index": reported, "phase": phase, "ready": steps.ready, "sse": steps.sse,
-            "phases": steps.phases, "raw_mode_index": steps.best, "confidence": confidence, "fit_rms_deg": fit,
-            "held": held, "phase_rate": rate, "cadence_ratio": cadence,
+            "time_s": time_s[s], "mode_index": reported, "phase": phase[s], "ready": steps.ready, "sse": steps.sse,
+            "phases": steps.phases, "raw_mode_index": steps.best, "confidence": confidence[s], "fit_rms_deg": fit[s],
+            "held": held[s], "phase_rate": rate[s], "cadence_ratio": cadence,
         }
 
 
@@ -363,6 +379,20 @@ def relative_margin(own: float, best_other: float) -> float:
     return (best_other - own) / own
 
 
+def second_smallest(values: np.ndarray) -> float:
+    """The second smallest of ``values`` as ``np.partition(values, 1)[1]`` finds it (nan sorts
+    last), inf with fewer than two."""
+    lo = hi = math.inf
+    known = 0
+    for v in values:
+        if v < lo:
+            lo, hi = v, lo
+        elif v < hi:
+            hi = v
+        known += 0 if math.isnan(v) else 1
+    return hi if known >= 2 or values.shape[0] < 2 else math.nan
+
+
 def advanced_phase(phase: float, rate: float, dt: float) -> float:
     """``phase`` advanced at ``rate`` (strides/s) over ``dt`` seconds, wrapped to [0, 1)."""
     phase = (phase + rate * dt) % 1.0
@@ -371,20 +401,33 @@ def advanced_phase(phase: float, rate: float, dt: float) -> float:
 
 _compile = compiled.njit(cache=True, nogil=True)
 _advanced_phase = _compile(advanced_phase)
+_second_smallest = _compile(second_smallest)
 _choose_mode = compiled.compiled_copy(choose_mode, "_choose_mode")
 _supervise_step = compiled.compiled_copy(supervise_step, "_supervise_step", choose_mode=_choose_mode,
                                          relative_margin=_compile(relative_margin),
                                          switch_candidate=_compile(switch_candidate))
 
 
+@compiled.njit(cache=True, nogil=True, inline="always")
+def _report_supervised(hook, g, best, sse, phases, window, ready):  # pragma: no cover - compiled
+    """``supervise_step`` on matcher step ``g`` (``compiled.report_step``'s arguments), its results
+    into row g of the outputs in ``hook`` (``Supervisor.step_hook``); the reported mode and phase."""
+    mem, time_s, allowed, settings, reported, held, confidence, fit, phase, rate = hook
+    m, held[g], confidence[g], fit[g], p, rate[g] = _supervise_step(
+        mem, time_s[g], sse, sse, best, _second_smallest(sse), phases[best], phases, window, ready, allowed, settings)
+    reported[g], phase[g] = m, p
+    return m, p
+
+
+SUPERVISED_STEPS = compiled.step_loops(_report_supervised, "run_supervised_steps")
+"""The compiled matcher steps with the supervisor's decision at each step (``Supervisor.step_hook``)."""
+
+
 @_compile
-def _supervised_rows(mem, time_s, sse, second, best, phases, window, ready, allowed, settings, reported, held,
-                     confidence, fit, phase, rate):  # pragma: no cover - compiled
-    """``supervise_step`` of each step g, its results into row g of the outputs (G,)."""
-    for g in range(time_s.shape[0]):
-        b = best[g]
-        reported[g], held[g], confidence[g], fit[g], phase[g], rate[g] = _supervise_step(
-            mem, time_s[g], sse[g], sse[g], b, second[g], phases[g, b], phases[g], window[g], ready[g], allowed, settings)
+def _supervised_rows(hook, sse, best, phases, window, ready):  # pragma: no cover - compiled
+    """``supervise_step`` of each step g (``Supervisor.step_hook``'s outputs) of the matcher results (G, M)."""
+    for g in range(sse.shape[0]):
+        _report_supervised(hook, g, best[g], sse[g], phases[g], window[g], ready[g])
 
 
 @_compile
