@@ -6,8 +6,8 @@
     python benchmarks/cross_session.py --add 'mine={"offset_tolerance_deg": 4.0}'
     python benchmarks/cross_session.py --tables-only  # rewrite tables.md from summary.json
 
-Every data set is fed to ``Estimator.update`` sample by sample (``run_estimator``, the code behind
-``gait-estimator process``) under every *setting*: a named dict of options on top of the preset its
+Every data set goes through ``run_estimator`` (the code behind ``gait-estimator process``: in bulk
+where the options allow, else ``Estimator.update`` sample by sample, with the same results) under every *setting*: a named dict of options on top of the preset its
 ``preset`` key names (``default`` if none), as ``gait-estimator process --preset P`` with option
 flags does (``SETTINGS``; ``--add NAME=JSON`` adds one). ``"<table>"`` as the ``transitions`` value
 stands for the data set's allowed-transitions file. Settings naming an option this build does not
