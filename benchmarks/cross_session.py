@@ -7,10 +7,11 @@
     python benchmarks/cross_session.py --tables-only  # rewrite tables.md from summary.json
 
 Every data set goes through ``run_estimator`` (the code behind ``gait-estimator process``: in bulk
-where the options allow, else ``Estimator.update`` sample by sample, with the same results) under every *setting*: a named dict of options on top of the preset its
-``preset`` key names (``default`` if none), as ``gait-estimator process --preset P`` with option
-flags does (``SETTINGS``; ``--add NAME=JSON`` adds one). ``"<table>"`` as the ``transitions`` value
-stands for the data set's allowed-transitions file. Settings naming an option this build does not
+where the options allow, else ``Estimator.update`` sample by sample, with the same results) under
+every *setting*: a named dict of options on top of the preset its ``preset`` key names (``default``
+if none), as ``gait-estimator process --preset P`` with option flags does (``SETTINGS``; ``--add
+NAME=JSON`` adds one). ``"<table>"`` as the ``transitions`` value stands for the data set's
+allowed-transitions file. Settings naming an option this build does not
 have are skipped (listed in summary.json); settings that resolve to the same configuration run once.
 Metrics come from ``gait_estimator.analysis.evaluate.evaluate`` via common.part_stats/pool.
 

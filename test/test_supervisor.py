@@ -46,9 +46,9 @@ SETTINGS = {
 
 
 def decided_inside_steps(sup: Supervisor, matcher: IncrementalMatcher, t: np.ndarray, x: np.ndarray,
-                         cuts: list[int]) -> list[dict[str, np.ndarray]]:
+                         cuts: list[int]) -> tuple[list[dict[str, np.ndarray]], np.ndarray]:
     """``sup``'s columns decided inside the compiled matcher steps (``Supervisor.step_hook``), in
-    runs between ``cuts``."""
+    runs between ``cuts``; and the kernel column the steps kept per step."""
     d, sq = matcher.weighted_samples(x)
     block = StepBlock.empty(matcher.mode_names, matcher.n_scales, t.size)
     hook, parts = sup.step_hook(t), []
@@ -57,7 +57,7 @@ def decided_inside_steps(sup: Supervisor, matcher: IncrementalMatcher, t: np.nda
         while g < b:  # the steps stop at resynchronisations
             g, _ = matcher.run_steps(d, sq, g, b, block, hook=hook)
         parts.append(sup.columns(hook, a, b, block.rows(a, b)))
-    return parts
+    return parts, block.column
 
 
 @pytest.mark.parametrize("where", ["after", "inside"], ids=["after-the-steps", "inside-the-steps"])
@@ -84,7 +84,8 @@ def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales, se
     block = block_of(results, able_bodied.mode_names, matcher.n_scales)
     cuts = [0, 1, 700, 700, 1501, 3333, 5200]
     if where == "inside":
-        parts = decided_inside_steps(many, IncrementalMatcher(able_bodied, time_scales=scales), t, rec.angles_deg[:5200], cuts)
+        parts, kept = decided_inside_steps(many, IncrementalMatcher(able_bodied, time_scales=scales), t, rec.angles_deg[:5200],
+                                           cuts)
     else:
         parts = [many.decide_many(t[a:b], block.rows(a, b)) for a, b in itertools.pairwise(cuts)]
     got = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
@@ -101,6 +102,8 @@ def test_decide_many_equals_decide(multispeed_csv: Path, able_bodied, scales, se
         want = np.array([getattr(e, f.name) for e in ref])
         np.testing.assert_array_equal(got[f.name], want, err_msg=f.name)
     np.testing.assert_array_equal(np.array(many._mem), np.array(one._mem))  # nan == nan here
+    if where == "inside":  # the column kept is the reported mode's: the one the walking calibrations read
+        np.testing.assert_array_equal(kept, [r.column[m] for r, m in zip(results, got["mode_index"], strict=True)])
 
 
 def test_second_smallest_is_what_a_partition_finds() -> None:

@@ -12,9 +12,11 @@ first use compiles (about 2 s) and caches the machine code next to this file or 
 
 from __future__ import annotations
 
+import hashlib
 import os
 import types
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -226,8 +228,27 @@ def compiled_copy(fn: Callable[..., Any], name: str, parallel: bool = False, **c
     of the module's globals, else the module's own, which later definitions still enter)."""
     fn = getattr(fn, "py_func", fn)  # a compiled function: its Python source
     twin = types.FunctionType(fn.__code__, {**fn.__globals__, **callees} if callees else fn.__globals__, name)
-    twin.__qualname__ = name
+    twin.__qualname__ = f"{name}_{_source_tag(twin)}"
     return njit(cache=True, nogil=True, parallel=parallel)(twin)
+
+
+def _source_tag(fn: Callable[..., Any]) -> str:
+    """A hash of the files that define ``fn`` and the compiled functions it calls, at any depth:
+    numba's cache checks only the file of the function compiled, so a copy is cached under a name
+    that changes with every file its code comes from."""
+    files, seen, todo = set(), set(), [fn]
+    while todo:
+        f = todo.pop()
+        f = getattr(f, "py_func", f)
+        if f in seen:
+            continue
+        seen.add(f)
+        files.add(f.__code__.co_filename)
+        todo += [g for n in f.__code__.co_names if hasattr(g := f.__globals__.get(n), "py_func")]
+    digest = hashlib.blake2s(digest_size=4)
+    for path in sorted(files):
+        digest.update(Path(path).read_bytes())
+    return digest.hexdigest()
 
 
 step_rows, step_rows_parallel = (  # serial (prange runs as range) and with the rows over threads
@@ -434,7 +455,7 @@ def run_steps(  # pragma: no cover - compiled
 
 
 run_steps, run_steps_parallel = (
-    njit(cache=True, nogil=True)(run_steps),
+    compiled_copy(run_steps, "run_steps"),
     compiled_copy(run_steps, "run_steps_parallel", step_rows=step_rows_parallel),
 )
 
