@@ -128,6 +128,25 @@ def test_bulk_equals_streaming_with_the_supervisor_and_the_walking_calibrations(
     assert (got.mode_index != got.raw_mode_index).any()  # and the supervisor
 
 
+def test_bulk_in_short_chunks_carries_the_supervisor_and_the_tracker(multispeed_csv: Path, able_bodied, tmp_path: Path,
+                                                                      monkeypatch) -> None:
+    """Every option on and the steps cut every 37 (``CHUNK_VALUES``): the supervisor's memory and
+    the stride tracker go on from one compiled call to the next as sample by sample."""
+    monkeypatch.setattr(batch, "CHUNK_VALUES", 37 * len(able_bodied))
+    options = dict(SUPERVISED["all"])
+    table = tmp_path / "transitions.yaml"
+    table.write_text(f"allowed_transitions:\n  {options['transitions']}")
+    cfg = EstimatorConfig.preset("default", **{**options, "transitions": str(table)})
+    rec = read_recording(multispeed_csv)
+    a, b = Estimator(able_bodied, cfg), Estimator(able_bodied, cfg)
+    ref = streamed(a, rec.time_s, rec.angles_deg, rec.index)
+    got = run_batch(b, rec.time_s, rec.angles_deg, rec.index)
+    assert got is not None
+    assert_identical(ref, got)
+    assert_same_state(a, b)
+    assert b.calibration.strides >= 3 and (got.mode_index != got.raw_mode_index).any()
+
+
 def test_bulk_reads_the_reported_near_copy_at_stride_ends(multispeed_csv: Path, able_bodied, tmp_path: Path) -> None:
     """Transitions that allow only the near copies of the library's modes (``replicated``): the
     calibrations read strides of a reported mode that is not the matcher's best (its near copy),
