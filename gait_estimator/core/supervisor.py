@@ -28,7 +28,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import yaml
@@ -268,27 +268,42 @@ class Supervisor:
         (``IncrementalMatcher.run_steps``), from the supervisor's state on; ``columns`` reads
         the results."""
         n = time_s.shape[0]
-        reported, held = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool)
         confidence, fit, phase, rate = np.empty((4, n))
-        mem = np.asarray(self._mem, dtype=np.float64)
-        return compiled.StepHook(SUPERVISED_STEPS, (mem, time_s, self.allowed, self._settings, reported, held, confidence,
-                                                    fit, phase, rate))
+        rows = SupervisedRows(np.asarray(self._mem, dtype=np.float64), time_s, self.allowed, self._settings,
+                              np.empty(n, dtype=np.int64), np.empty(n, dtype=bool), confidence, fit, phase, rate)
+        return compiled.StepHook(SUPERVISED_STEPS, rows)
 
     def columns(self, hook: compiled.StepHook, start: int, stop: int, steps: StepBlock) -> dict[str, np.ndarray]:
         """``decide_many``'s columns of the steps ``start`` .. ``stop`` - 1 decided in ``hook``
         (``step_hook``), ``steps`` their matcher results; the state left as ``decide`` leaves it
         after the last step decided."""
-        mem, time_s, _, _, reported, held, confidence, fit, phase, rate = hook.args
-        self._mem = mem.tolist()
+        rows: SupervisedRows = hook.args
+        self._mem = rows.mem.tolist()
         s = slice(start, stop)
-        reported = reported[s]
+        reported = rows.reported[s]
         variant = np.take_along_axis(steps.variant, reported[:, None], axis=1)[:, 0]
         cadence = np.asarray(self._inverse_scales)[variant] if steps.n_scales > 1 else np.full(stop - start, math.nan)
         return {
-            "time_s": time_s[s], "mode_index": reported, "phase": phase[s], "ready": steps.ready, "sse": steps.sse,
-            "phases": steps.phases, "raw_mode_index": steps.best, "confidence": confidence[s], "fit_rms_deg": fit[s],
-            "held": held[s], "phase_rate": rate[s], "cadence_ratio": cadence,
+            "time_s": rows.time_s[s], "mode_index": reported, "phase": rows.phase[s], "ready": steps.ready,
+            "sse": steps.sse, "phases": steps.phases, "raw_mode_index": steps.best, "confidence": rows.confidence[s],
+            "fit_rms_deg": rows.fit[s], "held": rows.held[s], "phase_rate": rows.rate[s], "cadence_ratio": cadence,
         }
+
+
+class SupervisedRows(NamedTuple):
+    """``supervise_step`` run inside the compiled matcher steps (``Supervisor.step_hook``): its
+    memory (laid out as INITIAL_MEMORY), the steps' times (s), its options, and per step its results."""
+
+    mem: np.ndarray
+    time_s: np.ndarray
+    allowed: np.ndarray | None
+    settings: tuple[float, float, float, bool, int, float]
+    reported: np.ndarray
+    held: np.ndarray
+    confidence: np.ndarray
+    fit: np.ndarray
+    phase: np.ndarray
+    rate: np.ndarray
 
 
 INITIAL_MEMORY = (-1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.nan, math.nan, 0.0, -1.0)
@@ -412,10 +427,10 @@ _supervise_step = compiled.compiled_copy(supervise_step, "_supervise_step", choo
 def _report_supervised(hook, g, best, sse, phases, window, ready):  # pragma: no cover - compiled
     """``supervise_step`` on matcher step ``g`` (``compiled.report_step``'s arguments), its results
     into row g of the outputs in ``hook`` (``Supervisor.step_hook``); the reported mode and phase."""
-    mem, time_s, allowed, settings, reported, held, confidence, fit, phase, rate = hook
-    m, held[g], confidence[g], fit[g], p, rate[g] = _supervise_step(
-        mem, time_s[g], sse, sse, best, _second_smallest(sse), phases[best], phases, window, ready, allowed, settings)
-    reported[g], phase[g] = m, p
+    m, hook.held[g], hook.confidence[g], hook.fit[g], p, hook.rate[g] = _supervise_step(
+        hook.mem, hook.time_s[g], sse, sse, best, _second_smallest(sse), phases[best], phases, window, ready, hook.allowed,
+        hook.settings)
+    hook.reported[g], hook.phase[g] = m, p
     return m, p
 
 
